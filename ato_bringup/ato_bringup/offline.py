@@ -1,0 +1,78 @@
+"""The closed loop on the same cores as the nodes, without ROS: fast, for unit tests, law
+reproduction and benchmarks. Same order of operations as the lockstep graph: at each control
+instant the plant's measurement and the reference at that time go to the controller, whose
+command is held while the plant advances one period."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ato_common.metrics import RunMetrics, StopSample, compute_metrics
+from ato_common.scenario import Scenario
+from ato_common.types import nanoseconds, seconds
+from ato_controller_node.host import ControllerHost
+from ato_controller_node.laws.base import Measurement, TrainKnowledge
+from profile_node.planner import Plan, plan_reference
+from train_plant_node.simulation import SensorSettings, TrainSimulation
+
+
+@dataclass
+class OfflineRun:
+    scenario: Scenario
+    plan: Plan
+    times_s: np.ndarray
+    positions: np.ndarray
+    speeds: np.ndarray
+    forces: np.ndarray
+    ref_positions: np.ndarray
+    ref_speeds: np.ndarray
+    laws: list[str] = field(default_factory=list)
+    estimates: list[dict] = field(default_factory=list)
+
+    def metrics(self) -> RunMetrics:
+        return compute_metrics(self.times_s, self.positions, self.speeds, self.forces,
+                               self.ref_positions, self.ref_speeds, stop_samples(self.plan))
+
+
+def stop_samples(plan: Plan) -> list[StopSample]:
+    return [StopSample(s.station.name, s.station.position_m, s.departure_s) for s in plan.stops]
+
+
+def run_end_time_s(scenario: Scenario, plan: Plan) -> float:
+    if scenario.run.end_time_s > 0.0:
+        return scenario.run.end_time_s
+    return plan.trajectory.end_time + scenario.run.settle_time_s
+
+
+def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
+                switches: dict[float, str] | None = None,
+                sensors: SensorSettings = SensorSettings()) -> OfflineRun:
+    plan = plan_reference(scenario)
+    period_ns = nanoseconds(1.0 / scenario.run.controller_rate_hz)
+    sim = TrainSimulation(scenario, sensors=sensors)
+    host = ControllerHost(TrainKnowledge.of(scenario.train), seconds(period_ns), controller,
+                          settings)
+    steps = int(run_end_time_s(scenario, plan) * 1e9 // period_ns)
+    pending = sorted((switches or {}).items())
+    rows = []
+    laws, estimates = [], []
+    for _ in range(steps + 1):
+        t = sim.time_s
+        while pending and pending[0][0] <= t:
+            host.select(pending.pop(0)[1])
+        truth = sim.truth()
+        measured = sim.measured(truth)
+        reference = plan.trajectory.at(t)
+        result = host.step(Measurement(t, measured.positions[0], measured.speeds[0]), reference)
+        sim.apply_command(result.forces_n)
+        applied = sim.truth()
+        rows.append((t, truth.positions[0], truth.speeds[0], sum(applied.forces),
+                     reference.position, reference.speed))
+        laws.append(result.law)
+        estimates.append(dict(result.estimates))
+        sim.advance(period_ns)
+    data = np.array(rows)
+    return OfflineRun(scenario, plan, data[:, 0], data[:, 1], data[:, 2], data[:, 3], data[:, 4],
+                      data[:, 5], laws, estimates)

@@ -1,0 +1,29 @@
+import os
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE_NAME = 'ato_bringup'
+
+setup(
+    name=PACKAGE_NAME,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
+        ('share/' + PACKAGE_NAME, ['package.xml']),
+        (os.path.join('share', PACKAGE_NAME, 'launch'), glob('launch/*.launch.py')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='ATO emulator maintainers',
+    maintainer_email='ato-emulator@example.org',
+    description='Bring-up of the ATO emulator: launch file and the scenario runner that starts the stack, drives it to the end of a scenario and prints the run summary.',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'run_scenario = ato_bringup.run_scenario:main'
+        ],
+    },
+)

@@ -1,0 +1,79 @@
+"""Topic names and QoS of the suite: the one place they are defined.
+
+Names of the suite's own topics are relative, so a whole stack can be pushed into a namespace
+(``--ros-args -r __ns:=/train1``); ``/clock`` and ``/diagnostics`` are global by ROS convention.
+The QoS is described here as plain data (no rclpy import) and turned into rclpy profiles by
+:func:`ato_common.ros.qos_profile`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class QosSpec:
+    reliable: bool
+    transient_local: bool
+    depth: int
+
+    def describe(self) -> str:
+        return (f"{'reliable' if self.reliable else 'best effort'}, "
+                f"{'transient local' if self.transient_local else 'volatile'}, "
+                f"keep last {self.depth}")
+
+
+# Lockstep streams: every message matters (a lost one stalls or skews a step), and a monitor or
+# recorder may lag a little behind the loop, hence reliable with a deep history.
+STREAM = QosSpec(reliable=True, transient_local=False, depth=100)
+# Data a late joiner needs (the whole target curve): latched.
+LATCHED = QosSpec(reliable=True, transient_local=True, depth=1)
+CLOCK = QosSpec(reliable=True, transient_local=False, depth=10)
+DIAGNOSTICS = QosSpec(reliable=True, transient_local=False, depth=10)
+
+
+@dataclass(frozen=True)
+class Topic:
+    name: str
+    type_name: str
+    qos: QosSpec
+    units: str
+    publisher: str
+    subscribers: str
+    description: str
+
+
+TOPICS = {
+    'clock': Topic('/clock', 'rosgraph_msgs/msg/Clock', CLOCK, 's',
+                   'train_plant_node (lockstep)', 'every node with use_sim_time',
+                   'simulated time; advances one control period per command'),
+    'state': Topic('train/state', 'trajectory_msgs/msg/JointTrajectory', STREAM,
+                   'm, m/s, m/s^2, N', 'train_plant_node', 'run_scenario, recorder',
+                   'true state of every car: one point, positions/velocities/accelerations/'
+                   'effort per car (joint_names = car names, lead car first)'),
+    'state_measured': Topic('train/state/measured', 'trajectory_msgs/msg/JointTrajectory', STREAM,
+                            'm, m/s, m/s^2, N', 'train_plant_node', 'ato_controller_node',
+                            'what the on-board sensors report, same layout as train/state'),
+    'reference': Topic('ato/reference', 'trajectory_msgs/msg/JointTrajectory', STREAM,
+                       'm, m/s, m/s^2', 'profile_node', 'ato_controller_node, run_scenario',
+                       'target position/speed/acceleration now (points[0]) and a preview '
+                       '(time_from_start); joint_names = ["train"]'),
+    'curve': Topic('ato/reference/curve', 'trajectory_msgs/msg/JointTrajectory', LATCHED,
+                   'm, m/s, m/s^2', 'profile_node', 'visualisers, late joiners',
+                   'the whole time-parameterised target curve, sampled'),
+    'distance_to_go': Topic('ato/distance_to_go', 'std_msgs/msg/Float64', STREAM, 'm',
+                            'profile_node', 'visualisers',
+                            'distance from the reference position to the next stop'),
+    'permitted_speed': Topic('ato/permitted_speed', 'std_msgs/msg/Float64', STREAM, 'm/s',
+                             'profile_node', 'visualisers',
+                             'static speed limit at the reference position'),
+    'command': Topic('ato/command', 'sensor_msgs/msg/JointState', STREAM, 'N',
+                     'ato_controller_node', 'train_plant_node, run_scenario',
+                     'force per actuated unit in effort (name = actuator names); '
+                     'header.frame_id = registry name of the law that produced it'),
+    'diagnostics': Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', DIAGNOSTICS, '-',
+                         'all nodes', 'run_scenario, rqt_robot_monitor',
+                         'active law, tracking errors, parameter estimates, rejected input'),
+}
+
+REFERENCE_JOINT = 'train'

@@ -1,0 +1,142 @@
+"""Line description: stations, static speed limits, gradients, curves and tunnels, in SI.
+
+One schema, one loader, shared by the plant (line forces at each car's position) and the profile
+(speed limits and stations). Piecewise quantities are given by their start position and hold
+until the next entry starts.
+"""
+
+from __future__ import annotations
+
+from bisect import bisect_right
+from dataclasses import dataclass
+from ato_common import units
+from ato_common.validation import ConfigError, Fields
+
+
+CURVE_RESISTANCE_N_PER_KN_M = 600.0        # w_c = 600 / R  [N/kN], R in m
+TUNNEL_RESISTANCE_N_PER_KN_PER_M = 0.00013  # w_t = 0.00013 L_t  [N/kN], L_t in m
+
+
+@dataclass(frozen=True)
+class Station:
+    name: str
+    position_m: float
+    dwell_s: float
+
+
+@dataclass(frozen=True)
+class Curve:
+    start_m: float
+    length_m: float
+    radius_m: float
+
+
+@dataclass(frozen=True)
+class Tunnel:
+    start_m: float
+    length_m: float
+
+
+class PiecewiseConstant:
+    """value(s) = values[i] for starts[i] <= s < starts[i+1]; before the first start: values[0]."""
+
+    def __init__(self, starts: list[float], values: list[float]):
+        self.starts = list(starts)
+        self.values = list(values)
+
+    def __call__(self, position: float) -> float:
+        i = bisect_right(self.starts, position) - 1
+        return self.values[max(i, 0)]
+
+    def segments(self, end: float) -> list[tuple[float, float, float]]:
+        """[(start, end, value)] up to ``end``."""
+        bounds = self.starts[1:] + [end]
+        return [(s, min(e, end), v) for s, e, v in zip(self.starts, bounds, self.values) if s < end]
+
+
+@dataclass(frozen=True)
+class Line:
+    name: str
+    length_m: float
+    stations: tuple[Station, ...]
+    speed_limit_mps: PiecewiseConstant
+    grade_sine: PiecewiseConstant      # sin(track angle), positive uphill in the running direction
+    curves: tuple[Curve, ...] = ()
+    tunnels: tuple[Tunnel, ...] = ()
+
+    def line_force_per_kg(self, position: float, gravity: float = units.STANDARD_GRAVITY) -> float:
+        """Specific force of the line opposing motion at a position, m/s^2 (negative downhill).
+
+        Grade: g sin(theta). Curve: 600/R N/kN, tunnel without limiting gradient: 0.00013 L_t
+        N/kN (the Chinese traction-calculation rules, as reconstructed for Liu & Li eqs 3-4).
+        """
+        per_kn = 0.0
+        for curve in self.curves:
+            if curve.start_m <= position < curve.start_m + curve.length_m:
+                per_kn += CURVE_RESISTANCE_N_PER_KN_M / curve.radius_m
+        for tunnel in self.tunnels:
+            if tunnel.start_m <= position < tunnel.start_m + tunnel.length_m:
+                per_kn += TUNNEL_RESISTANCE_N_PER_KN_PER_M * tunnel.length_m
+        return gravity * (self.grade_sine(position) + per_kn / 1000.0)
+
+
+def _ascending(starts: list[float], where: str) -> None:
+    for previous, current in zip(starts, starts[1:]):
+        if current <= previous:
+            raise ConfigError(f'{where}: start_m must increase, got {previous:g} then {current:g}')
+
+
+def parse_line(data, where: str = 'line') -> Line:
+    f = Fields(data, where)
+    name = f.text('name')
+    length = f.number('length_m', minimum=0.0, exclusive_minimum=True)
+
+    stations = []
+    for item in f.items('stations', required=True):
+        position = item.number('position_m', minimum=0.0, maximum=length)
+        stations.append(Station(item.text('name'), position, item.number('dwell_s', 0.0, minimum=0.0)))
+        item.reject_unknown()
+    if len(stations) < 2:
+        raise ConfigError(f'{where}.stations: at least two stations (origin and destination) are needed')
+    for a, b in zip(stations, stations[1:]):
+        if b.position_m <= a.position_m:
+            raise ConfigError(f'{where}.stations: positions must increase ({a.name} at '
+                              f'{a.position_m:g} m, then {b.name} at {b.position_m:g} m)')
+
+    limit_starts, limits = [], []
+    for item in f.items('speed_limits', required=True):
+        limit_starts.append(item.number('start_m', minimum=0.0, maximum=length))
+        limits.append(units.kmh_to_mps(item.number('speed_kmh', minimum=0.0, exclusive_minimum=True)))
+        item.reject_unknown()
+    if not limits:
+        raise ConfigError(f'{where}.speed_limits: at least one speed limit is needed')
+    _ascending(limit_starts, f'{where}.speed_limits')
+    if limit_starts[0] != 0.0:
+        raise ConfigError(f'{where}.speed_limits[0].start_m: the first limit must start at 0 m')
+
+    grade_starts, grades = [0.0], [0.0]
+    for item in f.items('gradients'):
+        start = item.number('start_m', minimum=0.0, maximum=length)
+        grade = units.per_mille_to_sine(item.number('per_mille', minimum=-100.0, maximum=100.0))
+        if start == 0.0 and len(grade_starts) == 1:
+            grades[0] = grade
+        else:
+            grade_starts.append(start)
+            grades.append(grade)
+        item.reject_unknown()
+    _ascending(grade_starts, f'{where}.gradients')
+
+    curves = []
+    for item in f.items('curves'):
+        curves.append(Curve(item.number('start_m', minimum=0.0, maximum=length),
+                            item.number('length_m', minimum=0.0, exclusive_minimum=True),
+                            item.number('radius_m', minimum=0.0, exclusive_minimum=True)))
+        item.reject_unknown()
+    tunnels = []
+    for item in f.items('tunnels'):
+        tunnels.append(Tunnel(item.number('start_m', minimum=0.0, maximum=length),
+                              item.number('length_m', minimum=0.0, exclusive_minimum=True)))
+        item.reject_unknown()
+    f.reject_unknown()
+    return Line(name, length, tuple(stations), PiecewiseConstant(limit_starts, limits),
+                PiecewiseConstant(grade_starts, grades), tuple(curves), tuple(tunnels))

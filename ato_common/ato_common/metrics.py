@@ -1,0 +1,83 @@
+"""Tracking metrics of a run, from sampled truth, reference and applied force.
+
+The same definitions serve ``make demo``, the tests and reports from recordings:
+- speed and position errors are reference minus truth of the lead car at each control instant;
+- the stopping error at a stop is the lead car's position minus the station position at the end
+  of the dwell (or at the end of the run for the last stop);
+- traction energy is the integral of max(F v, 0) dt with the applied force held between samples.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ato_common import units
+
+
+@dataclass(frozen=True)
+class StopSample:
+    station: str
+    station_position_m: float
+    time_s: float       # when the stop error is read
+
+
+@dataclass(frozen=True)
+class RunMetrics:
+    samples: int
+    simulated_time_s: float
+    rms_speed_error_kmh: float
+    max_speed_error_kmh: float
+    rms_position_error_m: float
+    max_position_error_m: float
+    stop_errors_m: dict[str, float]
+    traction_energy_kwh: float
+
+
+def compute_metrics(times_s, positions, speeds, forces, ref_positions, ref_speeds,
+                    stops: list[StopSample]) -> RunMetrics:
+    t = np.asarray(times_s, dtype=float)
+    x = np.asarray(positions, dtype=float)
+    v = np.asarray(speeds, dtype=float)
+    f = np.asarray(forces, dtype=float)
+    ev = np.asarray(ref_speeds, dtype=float) - v
+    ex = np.asarray(ref_positions, dtype=float) - x
+    if t.size == 0:
+        raise ValueError('no samples to compute metrics from')
+    power = np.maximum(f * v, 0.0)
+    energy = float(np.sum(power[:-1] * np.diff(t))) if t.size > 1 else 0.0
+    stop_errors = {}
+    for stop in stops:
+        i = min(int(np.searchsorted(t, stop.time_s, side='right')) - 1, t.size - 1)
+        stop_errors[stop.station] = float(x[max(i, 0)] - stop.station_position_m)
+    return RunMetrics(
+        samples=int(t.size), simulated_time_s=float(t[-1] - t[0]),
+        rms_speed_error_kmh=units.mps_to_kmh(float(np.sqrt(np.mean(ev ** 2)))),
+        max_speed_error_kmh=units.mps_to_kmh(float(np.max(np.abs(ev)))),
+        rms_position_error_m=float(np.sqrt(np.mean(ex ** 2))),
+        max_position_error_m=float(np.max(np.abs(ex))),
+        stop_errors_m=stop_errors,
+        traction_energy_kwh=units.joules_to_kwh(energy))
+
+
+def format_summary(metrics: RunMetrics, scenario: str, controller: str, wall_time_s: float
+                   ) -> str:
+    lines = [
+        f'scenario              {scenario}',
+        f'controller            {controller}',
+        f'speed error           RMS {metrics.rms_speed_error_kmh:.4f} km/h, '
+        f'max {metrics.max_speed_error_kmh:.4f} km/h',
+        f'position error        RMS {metrics.rms_position_error_m:.4f} m, '
+        f'max {metrics.max_position_error_m:.4f} m',
+    ]
+    for station, error in metrics.stop_errors_m.items():
+        lines.append(f'stopping error        {station}: {error:+.4f} m')
+    rtf = metrics.simulated_time_s / wall_time_s if wall_time_s > 0 else float('inf')
+    lines += [
+        f'traction energy       {metrics.traction_energy_kwh:.2f} kWh',
+        f'simulated time        {metrics.simulated_time_s:.1f} s ({metrics.samples} steps)',
+        f'wall time             {wall_time_s:.2f} s',
+        f'real-time factor      {rtf:.0f}x',
+    ]
+    return '\n'.join(lines)

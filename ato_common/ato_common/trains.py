@@ -1,0 +1,159 @@
+"""Train parameter sets in SI units, each a named preset with its source.
+
+A preset carries two resistance laws: ``davis`` is what the plant simulates (the "true" train) and
+``davis_nominal`` is the prior that on-board software knows (a paper's nominal table). Conversions
+from the papers' units happen here, through :mod:`ato_common.units`, and nowhere else.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+import math
+from typing import Mapping
+
+from ato_common import units
+
+
+@dataclass(frozen=True)
+class DavisResistance:
+    """Running resistance R(v) = a + b v + c v^2 of the whole train, in N (v in m/s)."""
+
+    a_n: float
+    b_n_s_per_m: float
+    c_n_s2_per_m2: float
+
+    def force(self, speed: float) -> float:
+        """Resistance in N; it opposes motion, so it is applied with the sign of the speed."""
+        v = abs(speed)
+        return self.a_n + self.b_n_s_per_m * v + self.c_n_s2_per_m2 * v * v
+
+    @classmethod
+    def from_per_tonne(cls, mass_kg: float, a_n_per_t: float, b_n_per_t_kmh: float,
+                       c_n_per_t_kmh2: float) -> 'DavisResistance':
+        a, b, c = units.davis_per_tonne_to_per_kg(a_n_per_t, b_n_per_t_kmh, c_n_per_t_kmh2)
+        return cls(a * mass_kg, b * mass_kg, c * mass_kg)
+
+    def per_kg(self, mass_kg: float) -> tuple[float, float, float]:
+        """(a [m/s^2], b [1/s], c [1/m]): the specific resistance of the papers' laws."""
+        return (self.a_n / mass_kg, self.b_n_s_per_m / mass_kg, self.c_n_s2_per_m2 / mass_kg)
+
+
+@dataclass(frozen=True)
+class TractionCharacteristic:
+    """What the drive and brakes can deliver, for the whole train.
+
+    Maximum tractive effort is the lower of the starting effort and the power hyperbola P/v;
+    braking is limited by a force (service braking, the limit an ATO may use).
+    """
+
+    max_traction_force_n: float
+    max_traction_power_w: float
+    max_service_brake_force_n: float
+    max_emergency_brake_force_n: float
+
+    def max_traction_at(self, speed: float) -> float:
+        v = abs(speed)
+        if v <= 0.0:
+            return self.max_traction_force_n
+        return min(self.max_traction_force_n, self.max_traction_power_w / v)
+
+    def limits_at(self, speed: float) -> tuple[float, float]:
+        """(lowest, highest) total force an ATO may command at this speed, N."""
+        return (-self.max_service_brake_force_n, self.max_traction_at(speed))
+
+
+@dataclass(frozen=True)
+class TrainParameters:
+    name: str
+    description: str
+    mass_kg: float                 # equivalent mass (rotating masses included) that inertia sees
+    davis: DavisResistance         # the simulated ("true") running resistance
+    davis_nominal: DavisResistance  # the on-board prior
+    traction: TractionCharacteristic
+    actuator_names: tuple[str, ...] = ('traction',)
+    length_m: float = 200.0
+    sources: Mapping[str, str] = field(default_factory=dict)
+
+    def with_overrides(self, **changes) -> 'TrainParameters':
+        return replace(self, **changes)
+
+
+def _crh3_luo_xu() -> TrainParameters:
+    mass = units.tonnes_to_kg(510.0)
+    return TrainParameters(
+        name='crh3_luo_xu',
+        description='CRH3 (Velaro CN) 8-car EMU, 510 t, as simulated by Luo & Xu',
+        mass_kg=mass,
+        # Table 1 (true values), units N/t with V in km/h (see shared/papers/README.md).
+        davis=DavisResistance.from_per_tonne(mass, 7.75, 0.06327, 0.00128),
+        # Table 2 (nominal prior), cv corrected from the printed 0.6318 to 0.06318.
+        davis_nominal=DavisResistance.from_per_tonne(mass, 7.85, 0.06318, 0.00127),
+        traction=TractionCharacteristic(
+            max_traction_force_n=units.kn_to_n(300.0),
+            max_traction_power_w=units.kw_to_w(8800.0),
+            max_service_brake_force_n=mass * 0.9,
+            max_emergency_brake_force_n=mass * 1.2,
+        ),
+        actuator_names=('traction',),
+        length_m=200.0,
+        sources={
+            'mass, davis, davis_nominal': 'Luo & Xu, Tables 1 and 2 (510 t; N/t, V in km/h)',
+            'max_traction_force_n, max_traction_power_w':
+                'CRH3C (Velaro CN) data sheet figures: starting tractive effort 300 kN, '
+                'traction power 8.8 MW',
+            'service and emergency braking':
+                'suite assumption: 0.9 and 1.2 m/s^2 of the equivalent mass, typical of '
+                'high-speed EMU service/emergency brake design values; no paper gives them',
+        },
+    )
+
+
+def _crh380a_tan() -> TrainParameters:
+    mass = units.tonnes_to_kg(442.0)
+    davis = DavisResistance.from_per_tonne(mass, 5.6, 0.036, 0.00121)
+    return TrainParameters(
+        name='crh380a_tan',
+        description='CRH380A(L) 8-car 6M2T, 442 t, as simulated by Tan, Jiang & Chen',
+        mass_kg=mass,
+        davis=davis,
+        davis_nominal=davis,
+        traction=TractionCharacteristic(
+            max_traction_force_n=mass * 0.6,
+            max_traction_power_w=units.kw_to_w(9600.0),
+            max_service_brake_force_n=mass * 0.9,
+            max_emergency_brake_force_n=mass * 1.2,
+        ),
+        actuator_names=('traction',),
+        length_m=203.0,
+        sources={
+            'mass, davis': 'Tan, Jiang & Chen, Table 1 (442 t; 5.6 + 0.036 V + 0.00121 V^2 N/t)',
+            'max_traction_power_w': 'CRH380A 8-car traction power 9.6 MW (manufacturer figure)',
+            'max_traction_force_n': 'suite assumption: 0.6 m/s^2 starting acceleration',
+            'service and emergency braking': 'suite assumption: 0.9 and 1.2 m/s^2',
+        },
+    )
+
+
+TRAIN_PRESETS = {
+    'crh3_luo_xu': _crh3_luo_xu,
+    'crh380a_tan': _crh380a_tan,
+}
+
+
+def train_preset(name: str) -> TrainParameters:
+    try:
+        return TRAIN_PRESETS[name]()
+    except KeyError:
+        raise KeyError(f"unknown train preset '{name}'; valid: {', '.join(sorted(TRAIN_PRESETS))}"
+                       ) from None
+
+
+def steady_speed(train: TrainParameters, force_n: float, grade_sine: float = 0.0,
+                 gravity: float = units.STANDARD_GRAVITY) -> float:
+    """Speed at which a constant force balances resistance and grade (nan if none exists)."""
+    d = train.davis
+    rest = d.a_n + train.mass_kg * gravity * grade_sine - force_n
+    disc = d.b_n_s_per_m ** 2 - 4.0 * d.c_n_s2_per_m2 * rest
+    if disc < 0.0:
+        return math.nan
+    return (-d.b_n_s_per_m + math.sqrt(disc)) / (2.0 * d.c_n_s2_per_m2)

@@ -1,0 +1,65 @@
+"""SI units everywhere; the papers' units are converted here, once, by named functions.
+
+The Chinese traction-calculation literature writes Davis coefficients per tonne of train mass
+with the speed V in km/h (N/t, N/(t km/h), N/(t (km/h)^2)) or per kN of train weight (N/kN);
+grades in per mille; masses in t; forces in kN; speeds in km/h.
+"""
+
+from __future__ import annotations
+
+import math
+
+STANDARD_GRAVITY = 9.80665  # m/s^2, used unless a paper fixes another g
+KMH_PER_MPS = 3.6
+
+
+def kmh_to_mps(speed_kmh: float) -> float:
+    return speed_kmh / KMH_PER_MPS
+
+
+def mps_to_kmh(speed_mps: float) -> float:
+    return speed_mps * KMH_PER_MPS
+
+
+def tonnes_to_kg(mass_t: float) -> float:
+    return mass_t * 1000.0
+
+
+def kn_to_n(force_kn: float) -> float:
+    return force_kn * 1000.0
+
+
+def kw_to_w(power_kw: float) -> float:
+    return power_kw * 1000.0
+
+
+def km_to_m(length_km: float) -> float:
+    return length_km * 1000.0
+
+
+def joules_to_kwh(energy_j: float) -> float:
+    return energy_j / 3.6e6
+
+
+def per_mille_to_sine(grade_per_mille: float) -> float:
+    """Sine of the track angle for a grade given in per mille (rise per 1000 m of run)."""
+    return math.sin(math.atan(grade_per_mille / 1000.0))
+
+
+def davis_per_tonne_to_per_kg(a_n_per_t: float, b_n_per_t_kmh: float,
+                              c_n_per_t_kmh2: float) -> tuple[float, float, float]:
+    """Davis coefficients per tonne with V in km/h -> specific resistance per kg with v in m/s.
+
+    Returns (a [m/s^2], b [1/s], c [1/m]) so that the resistance per kg is a + b v + c v^2.
+    """
+    return (a_n_per_t / 1000.0,
+            b_n_per_t_kmh * KMH_PER_MPS / 1000.0,
+            c_n_per_t_kmh2 * KMH_PER_MPS ** 2 / 1000.0)
+
+
+def davis_per_kn_to_per_kg(a_n_per_kn: float, b_n_per_kn_kmh: float, c_n_per_kn_kmh2: float,
+                           gravity: float = STANDARD_GRAVITY) -> tuple[float, float, float]:
+    """Davis coefficients per kN of train weight with V in km/h -> per kg with v in m/s."""
+    per_tonne = gravity  # 1 t weighs g kN, so N/kN * g = N/t
+    return davis_per_tonne_to_per_kg(a_n_per_kn * per_tonne, b_n_per_kn_kmh * per_tonne,
+                                     c_n_per_kn_kmh2 * per_tonne)

@@ -1,0 +1,83 @@
+"""Reading untrusted mappings (YAML files, parameters) with errors that name the field at fault."""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+
+class ConfigError(ValueError):
+    """A configuration file or value is wrong; the message names where and what."""
+
+
+class Fields:
+    """Typed access to one mapping of a file, with the path of each field for error messages."""
+
+    def __init__(self, data: Any, where: str):
+        if not isinstance(data, Mapping):
+            raise ConfigError(f'{where}: expected a mapping, got {type(data).__name__}')
+        self._data = data
+        self.where = where
+        self._used: set[str] = set()
+
+    def _path(self, key: str) -> str:
+        return f'{self.where}.{key}'
+
+    def has(self, key: str) -> bool:
+        return key in self._data
+
+    def number(self, key: str, default: float | None = None, *, minimum: float | None = None,
+               maximum: float | None = None, exclusive_minimum: bool = False) -> float:
+        self._used.add(key)
+        if key not in self._data:
+            if default is None:
+                raise ConfigError(f'{self._path(key)}: required number is missing')
+            return float(default)
+        value = self._data[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f'{self._path(key)}: must be a number, got {value!r}')
+        value = float(value)
+        if not math.isfinite(value):
+            raise ConfigError(f'{self._path(key)}: must be finite, got {value!r}')
+        if minimum is not None and (value < minimum or (exclusive_minimum and value == minimum)):
+            relation = '>' if exclusive_minimum else '>='
+            raise ConfigError(f'{self._path(key)}: must be {relation} {minimum:g}, got {value:g}')
+        if maximum is not None and value > maximum:
+            raise ConfigError(f'{self._path(key)}: must be <= {maximum:g}, got {value:g}')
+        return value
+
+    def text(self, key: str, default: str | None = None) -> str:
+        self._used.add(key)
+        if key not in self._data:
+            if default is None:
+                raise ConfigError(f'{self._path(key)}: required text is missing')
+            return default
+        value = self._data[key]
+        if not isinstance(value, str) or not value:
+            raise ConfigError(f'{self._path(key)}: must be non-empty text, got {value!r}')
+        return value
+
+    def items(self, key: str, required: bool = False) -> list['Fields']:
+        self._used.add(key)
+        if key not in self._data or self._data[key] is None:
+            if required:
+                raise ConfigError(f'{self._path(key)}: required list is missing')
+            return []
+        value = self._data[key]
+        if not isinstance(value, list):
+            raise ConfigError(f'{self._path(key)}: must be a list, got {type(value).__name__}')
+        return [Fields(item, f'{self._path(key)}[{i}]') for i, item in enumerate(value)]
+
+    def section(self, key: str, required: bool = False) -> 'Fields':
+        self._used.add(key)
+        if key not in self._data or self._data[key] is None:
+            if required:
+                raise ConfigError(f'{self._path(key)}: required section is missing')
+            return Fields({}, self._path(key))
+        return Fields(self._data[key], self._path(key))
+
+    def reject_unknown(self) -> None:
+        """Typos in a line file must not pass silently as defaults."""
+        unknown = sorted(set(map(str, self._data)) - self._used)
+        if unknown:
+            raise ConfigError(f'{self.where}: unknown field(s) {", ".join(unknown)}')

@@ -1,0 +1,16 @@
+"""Registry of control laws: the ``controller`` parameter names one of these."""
+
+from __future__ import annotations
+
+from ato_controller_node.laws.base import ControlLaw
+from ato_controller_node.laws.luo_xu import LuoXuLaw
+from ato_controller_node.laws.pid import PidLaw
+
+LAWS: dict[str, type[ControlLaw]] = {law.name: law for law in (PidLaw, LuoXuLaw)}
+
+
+def law_class(name: str) -> type[ControlLaw]:
+    try:
+        return LAWS[name]
+    except KeyError:
+        raise KeyError(f"unknown controller '{name}'; valid: {', '.join(sorted(LAWS))}") from None

@@ -1,0 +1,81 @@
+"""PID with feedforward: the industrial ATO baseline.
+
+Feedforward of the nominal train model (mass times the reference acceleration plus the nominal
+Davis resistance at the measured speed) and PID feedback on the position error with the speed
+error as its derivative, all scaled by the nominal mass so that gains are train-independent:
+
+    e_x = x* - x,  e_v = v* - v,  I = integral of e_x
+    F = M_nom (a* + kp e_x + kd e_v + ki I) + R_nom(v)
+
+With the default gains the error dynamics s^3 + kd s^2 + kp s + ki have a triple pole at
+-0.4 rad/s (kd = 3w, kp = 3w^2, ki = w^3): well damped, far below the 10 Hz sampling and the
+actuator lag. The integral removes the steady error of grades and resistance mismatch.
+
+Anti-windup: conditional integration. While the command is saturated the integrator only moves
+in the direction that leaves saturation. Bumpless transfer: on take-over the integrator is set so
+that the first command equals the last one (within the integrator's limit).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ato_controller_node.laws.base import (ControlLaw, LawOutput, Measurement, setting)
+from ato_common.types import ReferencePoint
+
+
+@dataclass(frozen=True)
+class PidSettings:
+    kp_position: float = setting(0.48, minimum=0.0, maximum=100.0, units='1/s^2',
+                                 description='gain on the position error')
+    kd_speed: float = setting(1.2, minimum=0.0, maximum=100.0, units='1/s',
+                              description='gain on the speed error')
+    ki_position: float = setting(0.064, minimum=0.0, maximum=100.0, units='1/s^3',
+                                 description='gain on the integral of the position error')
+    integral_limit_mps2: float = setting(0.5, minimum=0.0, maximum=5.0, units='m/s^2',
+                                         description='bound of the integral action ki*I')
+
+
+class PidLaw(ControlLaw):
+    name = 'pid'
+    summary = 'PID on position/speed error with nominal-model feedforward (industrial baseline)'
+    Settings = PidSettings
+
+    def __init__(self, train, dt, settings=None):
+        super().__init__(train, dt, settings)
+        self.integral = 0.0
+        self._pending_error = 0.0
+
+    def _unbounded_parts(self, m: Measurement, r: ReferencePoint) -> tuple[float, float]:
+        """(force without the integral term, N per unit of integral action)."""
+        s = self.settings
+        mass = self.train.nominal_mass_kg
+        feedback = s.kp_position * (r.position - m.position) + s.kd_speed * (r.speed - m.speed)
+        return mass * (r.acceleration + feedback) + self.train.nominal_davis.force(m.speed), mass
+
+    def _clamp_integral(self) -> None:
+        s = self.settings
+        if s.ki_position > 0.0:
+            bound = s.integral_limit_mps2 / s.ki_position
+            self.integral = min(max(self.integral, -bound), bound)
+
+    def reset(self, measurement, reference, last_force_n):
+        base, per_action = self._unbounded_parts(measurement, reference)
+        ki = self.settings.ki_position
+        self.integral = (last_force_n - base) / per_action / ki if ki > 0.0 else 0.0
+        self._clamp_integral()
+
+    def step(self, measurement, reference):
+        base, per_action = self._unbounded_parts(measurement, reference)
+        force = base + per_action * self.settings.ki_position * self.integral
+        self._pending_error = reference.position - measurement.position
+        return LawOutput(force, {'integral_action_mps2': self.settings.ki_position * self.integral})
+
+    def after_saturation(self, wanted_n, commanded_n):
+        error = self._pending_error
+        saturated_high = commanded_n < wanted_n
+        saturated_low = commanded_n > wanted_n
+        if (saturated_high and error > 0.0) or (saturated_low and error < 0.0):
+            return  # integrating would push further into the limit
+        self.integral += error * self.dt
+        self._clamp_integral()

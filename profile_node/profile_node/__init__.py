@@ -1,0 +1,1 @@
+"""Target curve: jerk-limited, time-parameterised reference built from a line description."""

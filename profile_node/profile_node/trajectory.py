@@ -1,0 +1,129 @@
+"""Piecewise constant-jerk trajectories: exact, continuous in x, v and a, with bounded jerk.
+
+A trajectory is a list of segments, each starting at (t0, x0, v0, a0) with constant jerk j;
+within a segment x, v, a are the cubic, quadratic and linear polynomials of the elapsed time, so
+v is exactly the derivative of x and a of v.
+"""
+
+from __future__ import annotations
+
+from bisect import bisect_right
+from dataclasses import dataclass
+import math
+
+from ato_common.types import ReferencePoint
+
+
+@dataclass(frozen=True)
+class Segment:
+    t0: float
+    duration: float
+    x0: float
+    v0: float
+    a0: float
+    jerk: float
+
+    def at(self, t: float) -> tuple[float, float, float]:
+        tau = t - self.t0
+        j, a0, v0 = self.jerk, self.a0, self.v0
+        return (self.x0 + tau * (v0 + tau * (a0 / 2.0 + tau * j / 6.0)),
+                v0 + tau * (a0 + tau * j / 2.0),
+                a0 + tau * j)
+
+
+class TrajectoryBuilder:
+    """Appends constant-jerk segments, carrying the end state of the last one forward."""
+
+    def __init__(self, x0: float = 0.0, t0: float = 0.0):
+        self.segments: list[Segment] = []
+        self.t, self.x, self.v, self.a = t0, x0, 0.0, 0.0
+
+    def add(self, duration: float, jerk: float = 0.0) -> None:
+        if duration <= 0.0:
+            return
+        segment = Segment(self.t, duration, self.x, self.v, self.a, jerk)
+        self.segments.append(segment)
+        self.x, self.v, self.a = segment.at(self.t + duration)
+        self.t += duration
+
+    def snap(self, x: float, v: float = 0.0) -> None:
+        """Remove the rounding drift at an exact target (a station stop)."""
+        self.x, self.v, self.a = x, v, 0.0
+
+    def speed_change(self, target_speed: float, max_accel: float, jerk: float) -> None:
+        """S-curve from the current speed (with zero acceleration) to ``target_speed``."""
+        dv = target_speed - self.v
+        if dv == 0.0:
+            return
+        sign = 1.0 if dv > 0.0 else -1.0
+        ramp, hold = speed_change_durations(abs(dv), max_accel, jerk)
+        self.add(ramp, sign * jerk)
+        self.add(hold, 0.0)
+        self.add(ramp, -sign * jerk)
+        self.v, self.a = target_speed, 0.0
+
+    def accelerate_to(self, target_speed: float, capability, jerk: float,
+                      min_acceleration: float, step_s: float = 1.0) -> None:
+        """Traction phase from the current speed (zero acceleration) up to ``target_speed``,
+        following the acceleration the train can deliver, ``capability(v)`` [m/s^2] but at least
+        ``min_acceleration`` (the caller keeps the target where that is feasible), with
+        |jerk| <= ``jerk``, ending with zero acceleration exactly at the target speed."""
+        if target_speed <= self.v:
+            return
+        for _ in range(1_000_000):
+            remaining = target_speed - self.v
+            if remaining <= 1e-12:
+                break
+            # Ramp down now if the remaining speed gain is what a full-jerk ramp-down needs.
+            if self.a > 0.0 and remaining <= self.a * self.a / (2.0 * jerk) + 1e-12:
+                ramp_jerk = self.a * self.a / (2.0 * remaining)
+                self.add(self.a / ramp_jerk, -ramp_jerk)
+                break
+            predicted = self.v + self.a * step_s
+            wanted = max(min(capability(predicted), capability(self.v)), min_acceleration)
+            self.add(step_s, min(max((wanted - self.a) / step_s, -jerk), jerk))
+        self.v, self.a = target_speed, 0.0
+
+    def build(self) -> 'Trajectory':
+        return Trajectory(self.segments, (self.t, self.x, self.v, self.a))
+
+
+def speed_change_durations(dv: float, max_accel: float, jerk: float) -> tuple[float, float]:
+    """(jerk ramp duration, constant-acceleration duration) of a symmetric S-curve changing the
+    speed by ``dv`` >= 0 with |a| <= max_accel and |j| = jerk."""
+    if dv >= max_accel * max_accel / jerk:
+        return max_accel / jerk, dv / max_accel - max_accel / jerk
+    return math.sqrt(dv / jerk), 0.0
+
+
+def speed_change_distance(v_from: float, v_to: float, max_accel: float, jerk: float) -> float:
+    """Distance covered by that S-curve; symmetric, so mean speed times duration."""
+    ramp, hold = speed_change_durations(abs(v_to - v_from), max_accel, jerk)
+    return 0.5 * (v_from + v_to) * (2.0 * ramp + hold)
+
+
+class Trajectory:
+    def __init__(self, segments: list[Segment], end_state: tuple[float, float, float, float]):
+        if not segments:
+            raise ValueError('a trajectory needs at least one segment')
+        self.segments = segments
+        self._starts = [s.t0 for s in segments]
+        self.start_time = segments[0].t0
+        self.end_time, self.end_position, self.end_speed, self.end_acceleration = end_state
+
+    def at(self, t: float) -> ReferencePoint:
+        """The reference at time t; before the start and after the end the train stands still
+        at the first/last position."""
+        if t >= self.end_time:
+            return ReferencePoint(t, self.end_position, self.end_speed, self.end_acceleration)
+        if t <= self.start_time:
+            first = self.segments[0]
+            return ReferencePoint(t, first.x0, first.v0, first.a0)
+        segment = self.segments[bisect_right(self._starts, t) - 1]
+        x, v, a = segment.at(t)
+        return ReferencePoint(t, x, v, a)
+
+    def jerk_at(self, t: float) -> float:
+        if t < self.start_time or t >= self.end_time:
+            return 0.0
+        return self.segments[bisect_right(self._starts, t) - 1].jerk

@@ -1,0 +1,58 @@
+#!/usr/bin/env bash
+# Idempotent set-up: .venv with pinned packages, then `colcon build` of ros_ws.
+# Fast when nothing changed: each stage keeps a stamp of its inputs and is skipped when they match.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$root"
+venv="${ATO_VENV:-$root/.venv}"
+python="${PYTHON:-python3}"
+
+log() { printf '[setup] %s\n' "$*"; }
+
+if [ -f /opt/ros/jazzy/setup.bash ]; then
+  ros_source=system
+else
+  ros_source=wheels
+fi
+
+# --- 1. Python environment ---------------------------------------------------------------
+req_files=(requirements-tools.txt constraints.txt)
+[ "$ros_source" = wheels ] && req_files+=(requirements.txt)
+req_hash="$ros_source $("$python" --version 2>&1) $(cat "${req_files[@]}" | sha256sum | cut -c1-16)"
+if [ ! -x "$venv/bin/python" ] || [ "$(cat "$venv/.ato-requirements" 2>/dev/null)" != "$req_hash" ]; then
+  log "creating $venv (ROS from $ros_source)"
+  rm -rf "$venv"
+  if [ "$ros_source" = system ]; then
+    set +u; . /opt/ros/jazzy/setup.bash; set -u
+    "$python" -m venv --system-site-packages "$venv"
+  else
+    "$python" -m venv "$venv"
+  fi
+  pip_args=(-r requirements-tools.txt -c constraints.txt)
+  [ "$ros_source" = wheels ] && pip_args+=(-r requirements.txt)
+  "$venv/bin/python" -m pip install --quiet "${pip_args[@]}" 2> >(grep -v "is ignored: it is neither a file nor a directory" >&2)
+  echo "$req_hash" > "$venv/.ato-requirements"
+else
+  log "$venv is up to date"
+fi
+
+# --- 2. colcon workspace -------------------------------------------------------------------
+packages=(ato_common train_plant_node profile_node ato_controller_node ato_bringup)
+src_hash="$(find "${packages[@]}" -type f -not -path '*/__pycache__/*' -not -path '*/test/*' -print0 \
+  | sort -z | xargs -0 sha256sum | sha256sum | cut -c1-16) $venv"
+stamp="ros_ws/install/.ato-sources"
+if [ ! -f ros_ws/install/setup.bash ] || [ "$(cat "$stamp" 2>/dev/null)" != "$src_hash" ]; then
+  log "building ros_ws with colcon"
+  (
+    set +u
+    # shellcheck source=/dev/null
+    . scripts/env.sh
+    cd ros_ws
+    colcon --log-base log build --event-handlers console_cohesion- summary+ status- \
+      --cmake-args -DBUILD_TESTING=OFF > /dev/null 2> build.err || { cat build.err >&2; exit 1; }
+    rm -f build.err
+  )
+  echo "$src_hash" > "$stamp"
+else
+  log "ros_ws is up to date"
+fi

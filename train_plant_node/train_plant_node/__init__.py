@@ -1,0 +1,1 @@
+"""Train plant: longitudinal train dynamics (pure-Python core) and its rclpy node."""

@@ -1,0 +1,47 @@
+"""Plant models, one module each, behind one small interface (see :class:`PlantModel`).
+
+A model owns the physics only: its state vector, the derivative for given actuator forces, an
+integrator step with zero-order hold of the forces, and the per-car outputs. Actuator limits,
+sensors and time keeping live in :mod:`train_plant_node.simulation`.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Protocol, Sequence
+
+import numpy as np
+
+from ato_common.line import Line
+from ato_common.trains import TrainParameters
+
+
+class PlantModel(Protocol):
+    car_names: tuple[str, ...]
+    actuator_names: tuple[str, ...]
+
+    def initial_state(self, position_m: float, speed_mps: float = 0.0) -> np.ndarray: ...
+
+    def step(self, state: np.ndarray, duration_s: float, forces: Sequence[float]) -> np.ndarray:
+        """State after ``duration_s`` with the actuator forces held constant."""
+
+    def outputs(self, state: np.ndarray, forces: Sequence[float]
+                ) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
+        """(positions, speeds, accelerations, applied forces) per car."""
+
+
+def _point_mass(train: TrainParameters, line: Line, **options) -> PlantModel:
+    from train_plant_node.models.point_mass import PointMassModel
+    return PointMassModel(train, line, **options)
+
+
+MODELS: dict[str, Callable[..., PlantModel]] = {
+    'point_mass': _point_mass,
+}
+
+
+def make_model(name: str, train: TrainParameters, line: Line, **options) -> PlantModel:
+    try:
+        factory = MODELS[name]
+    except KeyError:
+        raise KeyError(f"unknown plant model '{name}'; valid: {', '.join(sorted(MODELS))}") from None
+    return factory(train, line, **options)

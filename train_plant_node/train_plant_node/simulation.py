@@ -1,0 +1,105 @@
+"""Lockstep plant simulation: model + actuator limits + sensors + exact integer time.
+
+``TrainSimulation`` is what the node drives: ``apply_command`` (validated, then saturated by the
+traction characteristic), ``advance`` by one control period with the applied force held, and
+``truth``/``measured`` snapshots. It has no rclpy dependency and is deterministic for a seed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from typing import Sequence
+
+import numpy as np
+
+from ato_common.scenario import Scenario
+from ato_common.types import TrainState, nanoseconds, seconds
+from train_plant_node.models import PlantModel, make_model
+
+
+class CommandRejected(ValueError):
+    """A command that must not reach the actuators; the message says why."""
+
+
+@dataclass(frozen=True)
+class SensorSettings:
+    position_noise_m: float = 0.0   # standard deviation of white noise on each measurement
+    speed_noise_mps: float = 0.0
+    seed: int = 0
+
+
+class TrainSimulation:
+    def __init__(self, scenario: Scenario, model_name: str = 'point_mass',
+                 sensors: SensorSettings = SensorSettings(), **model_options):
+        self.scenario = scenario
+        self.model: PlantModel = make_model(model_name, scenario.train, scenario.line,
+                                            **model_options)
+        self.sensors = sensors
+        self._rng = np.random.default_rng(sensors.seed)
+        self.stamp_ns = 0
+        self.state = self.model.initial_state(scenario.run.initial_position_m)
+        n = len(self.model.actuator_names)
+        self.commanded = (0.0,) * n
+        self.applied = (0.0,) * n
+        self.rejected_commands = 0
+
+    @property
+    def time_s(self) -> float:
+        return seconds(self.stamp_ns)
+
+    @property
+    def actuator_names(self) -> tuple[str, ...]:
+        return self.model.actuator_names
+
+    def _speed(self) -> float:
+        return float(self.state[1]) if len(self.state) == 2 else float(np.mean(self.state[1::2]))
+
+    def apply_command(self, forces: Sequence[float]) -> tuple[float, ...]:
+        """Validate and saturate a command; it is then held until the next one (zero-order hold).
+
+        A command of the wrong length or with a non-finite value raises CommandRejected and the
+        previous command stays in force."""
+        names = self.model.actuator_names
+        if len(forces) != len(names):
+            self.rejected_commands += 1
+            raise CommandRejected(f'{len(forces)} forces for {len(names)} actuators {list(names)}')
+        values = tuple(float(f) for f in forces)
+        if not all(math.isfinite(f) for f in values):
+            self.rejected_commands += 1
+            raise CommandRejected(f'non-finite force in {list(values)}')
+        # Physical limits: the traction characteristic and the emergency brake, for the whole
+        # train; each actuator gets its share.
+        traction = self.scenario.train.traction
+        highest = traction.max_traction_at(self._speed())
+        lowest = -traction.max_emergency_brake_force_n
+        share = 1.0 / len(names)
+        self.commanded = values
+        self.applied = tuple(min(max(f, lowest * share), highest * share) for f in values)
+        return self.applied
+
+    def advance(self, duration_ns: int) -> None:
+        self.state = self.model.step(self.state, seconds(duration_ns), self.applied)
+        self.stamp_ns += duration_ns
+
+    def truth(self) -> TrainState:
+        positions, speeds, accelerations, forces = self.model.outputs(self.state, self.applied)
+        return TrainState(self.stamp_ns, self.model.car_names, positions, speeds, accelerations,
+                          forces)
+
+    def measured(self, truth: TrainState | None = None) -> TrainState:
+        truth = truth or self.truth()
+        s = self.sensors
+        if s.position_noise_m == 0.0 and s.speed_noise_mps == 0.0:
+            return truth
+        n = len(truth.positions)
+        noise_s = self._rng.normal(0.0, s.position_noise_m, n) if s.position_noise_m else np.zeros(n)
+        noise_v = self._rng.normal(0.0, s.speed_noise_mps, n) if s.speed_noise_mps else np.zeros(n)
+        return TrainState(truth.stamp_ns, truth.car_names,
+                          tuple(p + e for p, e in zip(truth.positions, noise_s)),
+                          tuple(v + e for v, e in zip(truth.speeds, noise_v)),
+                          truth.accelerations, truth.forces)
+
+
+def control_period_ns(rate_hz: float) -> int:
+    return nanoseconds(1.0 / rate_hz)
