@@ -23,7 +23,7 @@ build: setup
 
 demo: setup
 	@$(ENV) \
-	run_scenario $(if $(SCENARIO),--scenario $(SCENARIO)) $(if $(CONTROLLER),--controller $(CONTROLLER))
+	python -m ato_bringup.run_scenario $(if $(SCENARIO),--scenario $(SCENARIO)) $(if $(CONTROLLER),--controller $(CONTROLLER))
 
 test: setup
 	@$(ENV) python -m pytest $(PYTEST_ARGS)

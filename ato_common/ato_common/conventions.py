@@ -15,17 +15,19 @@ from dataclasses import dataclass
 class QosSpec:
     reliable: bool
     transient_local: bool
-    depth: int
+    depth: int  # 0: keep all
 
     def describe(self) -> str:
+        history = f'keep last {self.depth}' if self.depth else 'keep all'
         return (f"{'reliable' if self.reliable else 'best effort'}, "
-                f"{'transient local' if self.transient_local else 'volatile'}, "
-                f"keep last {self.depth}")
+                f"{'transient local' if self.transient_local else 'volatile'}, {history}")
 
 
-# Lockstep streams: every message matters (a lost one stalls or skews a step), and a monitor or
-# recorder may lag a little behind the loop, hence reliable with a deep history.
-STREAM = QosSpec(reliable=True, transient_local=False, depth=100)
+# Lockstep streams: every message matters (a lost one stalls or skews a step, or leaves a hole
+# in a recording). A monitor or recorder may lag behind the loop: with reliable keep-all the
+# publisher keeps what a reader has not acknowledged (and blocks when its resource limits are
+# reached) instead of overwriting it, so nothing is lost.
+STREAM = QosSpec(reliable=True, transient_local=False, depth=0)
 # Data a late joiner needs (the whole target curve): latched.
 LATCHED = QosSpec(reliable=True, transient_local=True, depth=1)
 CLOCK = QosSpec(reliable=True, transient_local=False, depth=10)

@@ -114,16 +114,15 @@ def parse_line(data, where: str = 'line') -> Line:
     if limit_starts[0] != 0.0:
         raise ConfigError(f'{where}.speed_limits[0].start_m: the first limit must start at 0 m')
 
-    grade_starts, grades = [0.0], [0.0]
+    grade_starts, grades = [], []
     for item in f.items('gradients'):
-        start = item.number('start_m', minimum=0.0, maximum=length)
-        grade = units.per_mille_to_sine(item.number('per_mille', minimum=-100.0, maximum=100.0))
-        if start == 0.0 and len(grade_starts) == 1:
-            grades[0] = grade
-        else:
-            grade_starts.append(start)
-            grades.append(grade)
+        grade_starts.append(item.number('start_m', minimum=0.0, maximum=length))
+        grades.append(units.per_mille_to_sine(item.number('per_mille', minimum=-100.0,
+                                                          maximum=100.0)))
         item.reject_unknown()
+    if not grade_starts or grade_starts[0] > 0.0:  # level until the first given grade
+        grade_starts.insert(0, 0.0)
+        grades.insert(0, 0.0)
     _ascending(grade_starts, f'{where}.gradients')
 
     curves = []

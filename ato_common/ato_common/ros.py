@@ -6,6 +6,7 @@ Only the node adapters import this module; the cores use :mod:`ato_common.types`
 from __future__ import annotations
 
 import math
+import os
 import signal
 import sys
 import time
@@ -26,7 +27,8 @@ from ato_common.types import NS_PER_S, Command, Reference, ReferencePoint, Train
 
 def qos_profile(spec: QosSpec) -> QoSProfile:
     return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST, depth=spec.depth,
+        history=HistoryPolicy.KEEP_LAST if spec.depth else HistoryPolicy.KEEP_ALL,
+        depth=spec.depth or 1000,
         reliability=ReliabilityPolicy.RELIABLE if spec.reliable else ReliabilityPolicy.BEST_EFFORT,
         durability=(DurabilityPolicy.TRANSIENT_LOCAL if spec.transient_local
                     else DurabilityPolicy.VOLATILE))
@@ -159,13 +161,16 @@ def _format_value(value: object) -> str:
 
 def make_executor(context=None):
     """The executor every node of the suite spins: EventsExecutor (about 0.35 ms per
-    inter-process round trip against 0.57 ms for SingleThreadedExecutor), else the default."""
-    try:
-        from rclpy.experimental import EventsExecutor
-        return EventsExecutor(context=context)
-    except ImportError:  # pragma: no cover - older rclpy
-        from rclpy.executors import SingleThreadedExecutor
-        return SingleThreadedExecutor(context=context)
+    inter-process round trip against 0.57 ms for SingleThreadedExecutor) unless the environment
+    variable ATO_EXECUTOR=single asks for the default one (for comparisons in the benchmark)."""
+    if os.environ.get('ATO_EXECUTOR', 'events') != 'single':
+        try:
+            from rclpy.experimental import EventsExecutor
+            return EventsExecutor(context=context)
+        except ImportError:  # pragma: no cover - older rclpy
+            pass
+    from rclpy.executors import SingleThreadedExecutor
+    return SingleThreadedExecutor(context=context)
 
 
 def spin_until(executor, done: Callable[[], bool], timeout_s: float | None = None,

@@ -81,7 +81,7 @@ def load_scenario(name_or_path: str) -> Scenario:
 
 
 def parse_scenario(data, origin: str = '<memory>') -> Scenario:
-    f = Fields(data, 'scenario')
+    f = Fields(data, '')
     train_fields = f.section('train', required=True)
     preset = train_fields.text('preset')
     if preset not in TRAIN_PRESETS:
@@ -93,7 +93,7 @@ def parse_scenario(data, origin: str = '<memory>') -> Scenario:
             train_fields.number('mass_t', minimum=1.0, maximum=10000.0)))
     train_fields.reject_unknown()
 
-    line = parse_line(f.section('line', required=True)._data, 'scenario.line')
+    line = parse_line(f.raw('line', required=True), 'line')
 
     p = f.section('planning', required=True)
     planning = PlanningLimits(

@@ -15,13 +15,14 @@ class Fields:
 
     def __init__(self, data: Any, where: str):
         if not isinstance(data, Mapping):
-            raise ConfigError(f'{where}: expected a mapping, got {type(data).__name__}')
+            raise ConfigError(f'{where or "the file"}: expected a mapping, got '
+                              f'{type(data).__name__}')
         self._data = data
         self.where = where
         self._used: set[str] = set()
 
     def _path(self, key: str) -> str:
-        return f'{self.where}.{key}'
+        return f'{self.where}.{key}' if self.where else key
 
     def has(self, key: str) -> bool:
         return key in self._data
@@ -76,8 +77,15 @@ class Fields:
             return Fields({}, self._path(key))
         return Fields(self._data[key], self._path(key))
 
+    def raw(self, key: str, required: bool = False) -> Any:
+        """The value as it is, for a sub-parser that takes its own path."""
+        self._used.add(key)
+        if required and self._data.get(key) is None:
+            raise ConfigError(f'{self._path(key)}: required section is missing')
+        return self._data.get(key)
+
     def reject_unknown(self) -> None:
         """Typos in a line file must not pass silently as defaults."""
         unknown = sorted(set(map(str, self._data)) - self._used)
         if unknown:
-            raise ConfigError(f'{self.where}: unknown field(s) {", ".join(unknown)}')
+            raise ConfigError(f'{self.where or "the file"}: unknown field(s) {", ".join(unknown)}')

@@ -1,0 +1,61 @@
+"""run_scenario: the full stack as separate processes on one scenario, to its end, in lockstep
+simulated time; then every process is stopped and the run's summary printed.
+
+    ros2 run ato_bringup run_scenario --scenario short_line --controller luo_xu
+"""
+
+from __future__ import annotations
+
+import argparse
+from datetime import datetime
+import os
+from pathlib import Path
+import sys
+
+from ato_common.metrics import format_summary
+from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios
+from ato_common.validation import ConfigError
+from ato_bringup.runner import RunFailed, run_lockstep
+from ato_bringup.stack import StackConfig
+from ato_controller_node.laws import LAWS
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--scenario', default=DEFAULT_SCENARIO,
+                        help=f"built-in ({', '.join(builtin_scenarios())}) or a YAML file")
+    parser.add_argument('--controller', default='pid', choices=sorted(LAWS))
+    parser.add_argument('--domain-id', type=int,
+                        default=int(os.environ.get('ROS_DOMAIN_ID', '0') or 0),
+                        help='ROS_DOMAIN_ID of the run (default: the environment\'s, else 0)')
+    parser.add_argument('--timeout', type=float, default=900.0, help='wall-time limit, s')
+    parser.add_argument('--log-dir', type=Path, default=None,
+                        help='where each node writes its log (default: runs/<time>-<scenario>)')
+    return parser.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    stamp = datetime.now().strftime('%Y%m%d-%H%M%S')
+    scenario_label = Path(args.scenario).stem
+    log_dir = args.log_dir or Path('runs') / f'{stamp}-{scenario_label}-{args.controller}'
+    config = StackConfig(scenario=args.scenario, controller=args.controller,
+                         domain_id=args.domain_id, log_dir=log_dir)
+    print(f'running {args.scenario} with {args.controller} in lockstep '
+          f'(ROS_DOMAIN_ID={args.domain_id}, node logs in {log_dir})', file=sys.stderr)
+    try:
+        outcome = run_lockstep(config, timeout_s=args.timeout, progress=True)
+    except ConfigError as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 2
+    except (RunFailed, FileNotFoundError) as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 1
+    print(format_summary(outcome.metrics, outcome.scenario.name, ', '.join(outcome.laws),
+                         outcome.wall_time_s))
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,101 @@
+"""Drive one run of the stack to the end of its scenario and compute its metrics."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import sys
+import time
+from typing import Callable
+
+import numpy as np
+
+from ato_common.metrics import RunMetrics, compute_metrics
+from ato_common.scenario import Scenario, load_scenario
+from ato_common.types import NS_PER_S
+from ato_bringup.offline import run_end_time_s, stop_samples
+from ato_bringup.stack import Sample, Stack, StackConfig
+from profile_node.planner import plan_reference
+
+
+class RunFailed(RuntimeError):
+    pass
+
+
+@dataclass
+class RunOutcome:
+    scenario: Scenario
+    config: StackConfig
+    samples: list[tuple[int, Sample]]
+    diagnostics: list
+    wall_time_s: float
+    exit_codes: dict[str, int]
+    metrics: RunMetrics
+    laws: list[str] = field(default_factory=list)
+    parameter_results: list = field(default_factory=list)
+
+    def array(self, attribute: str, index: int = 0) -> np.ndarray:
+        return np.array([getattr(s, attribute)[index] if isinstance(getattr(s, attribute), tuple)
+                         else getattr(s, attribute) for _, s in self.samples])
+
+    @property
+    def times_s(self) -> np.ndarray:
+        return np.array([k / NS_PER_S for k, _ in self.samples])
+
+
+def prepare(config: StackConfig) -> tuple[Scenario, float]:
+    scenario = load_scenario(config.scenario)
+    plan = plan_reference(scenario)
+    if not config.end_time_s:
+        config.end_time_s = run_end_time_s(scenario, plan)
+    return scenario, config.end_time_s
+
+
+def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], object]] | None = None,
+                 timeout_s: float = 600.0, progress: bool = False) -> RunOutcome:
+    """Run to the scenario's end. ``actions`` maps a simulated time to a callable run on the
+    stack once the run has passed it (e.g. a parameter change); its result is kept."""
+    scenario, end_time_s = prepare(config)
+    plan = plan_reference(scenario)
+    pending = sorted((actions or {}).items())
+    results = []
+    with Stack(config) as stack:
+        stack.start()
+        started = time.monotonic()
+        last_report = started
+        monitor = stack.monitor
+        while not stack.exited('plant'):
+            if time.monotonic() - started > timeout_s:
+                raise RunFailed(f'the run did not end within {timeout_s:.0f} s of wall time '
+                                f'(simulated {monitor.last_stamp_ns / NS_PER_S:.1f} s of '
+                                f'{end_time_s:.1f} s)\n{stack.log_tail("plant")}')
+            for name in ('controller', 'profile'):
+                if stack.exited(name):
+                    raise RunFailed(f'{name} exited early with code '
+                                    f'{stack.processes[name].returncode}:\n{stack.log_tail(name)}')
+            stack.executor.spin_once(timeout_sec=0.05)
+            t = monitor.last_stamp_ns / NS_PER_S
+            while pending and t >= pending[0][0]:
+                results.append(pending.pop(0)[1](stack))
+            if progress and time.monotonic() - last_report > 2.0:
+                last_report = time.monotonic()
+                print(f'  ... simulated {t:7.1f} / {end_time_s:.1f} s', file=sys.stderr)
+        wall = time.monotonic() - started
+        stack.spin_for(0.3)  # the last messages in flight
+        codes = stack.stop()
+        codes['plant'] = stack.processes['plant'].returncode
+        bad = {k: v for k, v in codes.items() if v != 0}
+        if bad:
+            raise RunFailed(f'processes exited with errors {bad}:\n' +
+                            '\n'.join(stack.log_tail(k) for k in bad))
+        samples = monitor.complete_samples()
+        diagnostics = list(monitor.diagnostics)
+    if not samples:
+        raise RunFailed('the monitor received no state')
+    times = [k / NS_PER_S for k, _ in samples]
+    metrics = compute_metrics(times, [s.positions[0] for _, s in samples],
+                              [s.speeds[0] for _, s in samples],
+                              [sum(s.forces) for _, s in samples],
+                              [s.ref_position for _, s in samples],
+                              [s.ref_speed for _, s in samples], stop_samples(plan))
+    laws = sorted({s.law for _, s in samples if s.law})
+    return RunOutcome(scenario, config, samples, diagnostics, wall, codes, metrics, laws, results)

@@ -1,0 +1,80 @@
+import copy
+
+import pytest
+import yaml
+
+from ato_common.scenario import builtin_scenarios, load_scenario, parse_scenario
+from ato_common.validation import ConfigError
+
+
+def base():
+    return {
+        'name': 't', 'train': {'preset': 'crh3_luo_xu'},
+        'line': {'name': 'l', 'length_m': 10000,
+                 'stations': [{'name': 'A', 'position_m': 0}, {'name': 'B', 'position_m': 9000}],
+                 'speed_limits': [{'start_m': 0, 'speed_kmh': 200}],
+                 'gradients': [{'start_m': 0, 'per_mille': 0}, {'start_m': 5000, 'per_mille': 10}],
+                 'curves': [{'start_m': 1000, 'length_m': 500, 'radius_m': 3000}],
+                 'tunnels': [{'start_m': 2000, 'length_m': 1000}]},
+        'planning': {'max_acceleration_mps2': 0.5, 'service_deceleration_mps2': 0.6,
+                     'max_jerk_mps3': 0.2}}
+
+
+def test_builtin_scenarios_load():
+    assert 'short_line' in builtin_scenarios()
+    for name in builtin_scenarios():
+        scenario = load_scenario(name)
+        assert scenario.name == name
+        assert len(scenario.line.stations) >= 2
+
+
+def test_line_lookups_in_si():
+    s = parse_scenario(base())
+    assert s.line.speed_limit_mps(100.0) == pytest.approx(200 / 3.6)
+    assert s.line.grade_sine(4999.0) == 0.0
+    assert s.line.grade_sine(5000.0) == pytest.approx(0.01, rel=1e-4)
+    g = 9.80665
+    # curve 600/R N/kN, tunnel 0.00013 L N/kN
+    assert s.line.line_force_per_kg(1200.0) == pytest.approx(g * 600 / 3000 / 1000)
+    assert s.line.line_force_per_kg(2500.0) == pytest.approx(g * 0.00013 * 1000 / 1000)
+    assert s.line.line_force_per_kg(100.0) == 0.0
+
+
+@pytest.mark.parametrize('mutate, message', [
+    (lambda d: d['line']['stations'][1].update(position_m='far'),
+     r"line.stations\[1\].position_m: must be a number, got 'far'"),
+    (lambda d: d['line']['stations'][1].update(position_m=20000),
+     r'line.stations\[1\].position_m: must be <= 10000'),
+    (lambda d: d['line']['stations'].reverse(), r'positions must increase'),
+    (lambda d: d['line'].update(stations=[{'name': 'A', 'position_m': 0}]), r'at least two'),
+    (lambda d: d['line']['speed_limits'][0].update(speed_kmh=-5), r'speed_kmh: must be >'),
+    (lambda d: d['line']['speed_limits'][0].update(start_m=10), r'must start at 0 m'),
+    (lambda d: d['line']['gradients'][1].update(start_m=0.0), r'start_m must increase'),
+    (lambda d: d['line'].update(stations_typo=[]), r'unknown field\(s\) stations_typo'),
+    (lambda d: d['train'].update(preset='maglev'), r"unknown train 'maglev'; valid: crh"),
+    (lambda d: d.pop('planning'), r'planning: required section is missing'),
+    (lambda d: d['planning'].update(max_jerk_mps3=float('nan')), r'max_jerk_mps3: must be'),
+    (lambda d: d['line'].update(curves=[{'start_m': 0, 'length_m': 10, 'radius_m': 0}]),
+     r'radius_m: must be > 0'),
+])
+def test_malformed_scenarios_name_the_field(mutate, message):
+    data = copy.deepcopy(base())
+    mutate(data)
+    with pytest.raises(ConfigError, match=message):
+        parse_scenario(data)
+
+
+def test_files_errors_name_the_file(tmp_path):
+    missing = tmp_path / 'nope.yaml'
+    with pytest.raises(ConfigError, match='neither a built-in scenario'):
+        load_scenario(str(missing))
+    broken = tmp_path / 'broken.yaml'
+    broken.write_text('name: [unclosed\n')
+    with pytest.raises(ConfigError, match=f'{broken}: not valid YAML'):
+        load_scenario(str(broken))
+    wrong = tmp_path / 'wrong.yaml'
+    data = base()
+    data['line']['length_m'] = 'long'
+    wrong.write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError, match=f'{wrong}: line.length_m: must be a number'):
+        load_scenario(str(wrong))

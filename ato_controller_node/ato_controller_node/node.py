@@ -1,0 +1,245 @@
+"""ato_controller_node: runs the selected law of :mod:`ato_controller_node.laws` at a fixed rate.
+
+Lockstep: a step is taken when the measured state and the reference of the same stamp have both
+arrived; the command carries that stamp. A state re-sent by the plant gets the same command
+again (the law is stepped once per stamp). Real time: a wall-clock timer at ``rate_hz`` steps on
+the latest state and reference.
+
+Parameters: ``controller`` selects the law and may change at run time (``ros2 param set
+/ato_controller_node controller luo_xu``; bumpless); an unknown name or a law that does not fit
+the train is rejected with the reason and the running law stays. Every law's gains are
+parameters ``<law>.<gain>`` with ranges, defaults from the papers.
+"""
+
+from __future__ import annotations
+
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
+from trajectory_msgs.msg import JointTrajectory
+
+from ato_common.params import Param, ParameterTable
+from ato_common.ros import (MessageError, command_to_msg, diagnostic_status, qos_profile,
+                            reference_from_msg, run_node, state_from_msg, to_time, topic)
+from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
+from ato_common.types import Command, seconds
+from ato_controller_node.host import ControllerHost, LawRejected
+from ato_controller_node.laws import LAWS
+from ato_common.validation import ConfigError
+from ato_controller_node.laws.base import (Measurement, TrainKnowledge, setting_fields,
+                                           validated_settings)
+
+NODE_PARAMS = (
+    Param('scenario', DEFAULT_SCENARIO, 'built-in scenario name or path to a scenario YAML file '
+          '(the train the controller drives: nominal mass, resistance, traction limits)'),
+    Param('controller', 'pid', 'control law', choices=tuple(sorted(LAWS)), read_only=False),
+    Param('rate_hz', 0.0, "control rate, Hz (0: the scenario's controller_rate_hz)",
+          minimum=0.0, maximum=1000.0),
+    Param('lockstep', True, 'step on each (state, reference) pair of equal stamp '
+          '(false: on a wall-clock timer)'),
+    Param('bumpless_time_constant_s', 3.0, 'decay time of the command step on a law switch, s',
+          minimum=0.01, maximum=600.0, read_only=False),
+    Param('diagnostics_period_s', 1.0, 'period of the diagnostics, s of (simulated) time',
+          minimum=0.01, maximum=3600.0, read_only=False),
+)
+
+
+def gain_params() -> list[Param]:
+    params = []
+    for law_name, law in LAWS.items():
+        for f in setting_fields(law.Settings):
+            meta = f.metadata
+            is_bool = isinstance(f.default, bool)
+            params.append(Param(
+                f'{law_name}.{f.name}', f.default,
+                f"{meta['description']} [{meta['units']}]",
+                minimum=None if is_bool else meta['minimum'],
+                maximum=None if is_bool else meta['maximum'], read_only=False))
+    return params
+
+
+class AtoControllerNode(Node):
+    def __init__(self):
+        super().__init__('ato_controller_node')
+        self.params = ParameterTable(self, NODE_PARAMS + tuple(gain_params()))
+        p = self.params
+        self.scenario = load_scenario(p['scenario'])
+        self.rate_hz = p['rate_hz'] or self.scenario.run.controller_rate_hz
+        self.dt = 1.0 / self.rate_hz
+        self.lockstep = p['lockstep']
+        self.train = TrainKnowledge.of(self.scenario.train)
+        settings = {law: {f.name: p[f'{law}.{f.name}'] for f in setting_fields(cls.Settings)}
+                    for law, cls in LAWS.items()}
+        try:
+            self.host = ControllerHost(self.train, self.dt, p['controller'], settings,
+                                       p['bumpless_time_constant_s'])
+        except (LawRejected, ValueError) as error:
+            raise ConfigError(str(error)) from None
+        self.params.extra_checks.append(self.check_changes)
+        self.add_post_set_parameters_callback(self.apply_changes)
+
+        self.states: dict[int, object] = {}
+        self.references: dict[int, object] = {}
+        self.last_stamp_ns = -1
+        self.last_command_msg = None
+        self.last_result = None
+        self.next_diagnostic_ns = 0
+        self.step_times_s: list[float] = []
+        self.period_warning_given = False
+        self.input_fault = ''
+
+        self.command_pub = self.create_publisher(JointState, topic('command').name,
+                                                 qos_profile(topic('command').qos))
+        self.diag_pub = self.create_publisher(DiagnosticArray, topic('diagnostics').name,
+                                              qos_profile(topic('diagnostics').qos))
+        self.create_subscription(JointTrajectory, topic('state_measured').name, self.on_state,
+                                 qos_profile(topic('state_measured').qos))
+        self.create_subscription(JointTrajectory, topic('reference').name, self.on_reference,
+                                 qos_profile(topic('reference').qos))
+        if not self.lockstep:
+            self.create_timer(self.dt, self.on_timer)
+        self.get_logger().info(f"law {self.host.law.name} at {self.rate_hz:g} Hz "
+                               f"({'lockstep' if self.lockstep else 'real time'}), actuators "
+                               f'{list(self.train.actuator_names)}')
+
+    # --- parameters: validate, then apply ---------------------------------------------------
+    def _gain_changes(self, changes: dict) -> dict[str, dict]:
+        per_law: dict[str, dict] = {}
+        for name, value in changes.items():
+            if '.' in name:
+                law, field = name.split('.', 1)
+                per_law.setdefault(law, {})[field] = value
+        return per_law
+
+    def check_changes(self, changes: dict) -> str | None:
+        if 'controller' in changes:
+            try:
+                self.host.check(changes['controller'])
+            except LawRejected as error:
+                return str(error)
+        for law, values in self._gain_changes(changes).items():
+            try:
+                validated_settings(LAWS[law].Settings, values, self.host.settings(law))
+            except ValueError as error:
+                return f'{law}: {error}'
+        return None
+
+    def apply_changes(self, parameters) -> None:
+        changes = {p.name: p.value for p in parameters}
+        for law, values in self._gain_changes(changes).items():
+            self.host.update_settings(law, values)
+        if 'bumpless_time_constant_s' in changes:
+            self.host.bumpless_time_constant_s = changes['bumpless_time_constant_s']
+        if 'controller' in changes and changes['controller'] != self.host.law.name:
+            previous = self.host.law.name
+            self.host.select(changes['controller'])
+            self.get_logger().info(f'law switched from {previous} to {self.host.law.name}')
+            self.next_diagnostic_ns = 0  # announce the new law at the next step
+
+    # --- inputs -------------------------------------------------------------------------------
+    def on_state(self, msg: JointTrajectory) -> None:
+        try:
+            state = state_from_msg(msg)
+        except MessageError as error:
+            self.input_fault = f'bad state message: {error}'
+            return
+        if self.lockstep:
+            self.states[state.stamp_ns] = state
+            self.try_step(state.stamp_ns)
+        else:
+            self.states = {0: state}
+
+    def on_reference(self, msg: JointTrajectory) -> None:
+        try:
+            reference = reference_from_msg(msg)
+        except MessageError as error:
+            self.input_fault = f'bad reference message: {error}'
+            return
+        if self.lockstep:
+            self.references[reference.stamp_ns] = reference
+            self.try_step(reference.stamp_ns)
+        else:
+            self.references = {0: reference}
+
+    def try_step(self, stamp_ns: int) -> None:
+        if stamp_ns == self.last_stamp_ns:
+            if stamp_ns in self.states and self.last_command_msg is not None:
+                self.states.pop(stamp_ns, None)
+                self.references.pop(stamp_ns, None)
+                self.command_pub.publish(self.last_command_msg)  # the plant asked again
+            return
+        if stamp_ns not in self.states or stamp_ns not in self.references:
+            return
+        if stamp_ns < self.last_stamp_ns:
+            return
+        if (not self.period_warning_given and self.last_stamp_ns >= 0
+                and abs(seconds(stamp_ns - self.last_stamp_ns) - self.dt) > 1e-6):
+            self.period_warning_given = True
+            self.get_logger().warning(
+                f'state period {seconds(stamp_ns - self.last_stamp_ns):g} s differs from the '
+                f'control period {self.dt:g} s: set the same rate on plant and controller')
+        state = self.states.pop(stamp_ns)
+        reference = self.references.pop(stamp_ns)
+        # Drop anything older (a stamp that will never be completed).
+        self.states = {k: v for k, v in self.states.items() if k > stamp_ns}
+        self.references = {k: v for k, v in self.references.items() if k > stamp_ns}
+        self.step(stamp_ns, state, reference, seconds(stamp_ns))
+
+    def on_timer(self) -> None:
+        state, reference = self.states.get(0), self.references.get(0)
+        if state is None or reference is None:
+            return
+        now_ns = self.get_clock().now().nanoseconds
+        # Bring the latest reference forward to now along its preview (real time).
+        ref_point = reference.points[0]
+        for point in reference.points:
+            if point.time_s - reference.points[0].time_s <= seconds(now_ns - reference.stamp_ns):
+                ref_point = point
+        self.step(now_ns, state, type(reference)(reference.stamp_ns, (ref_point,)),
+                  ref_point.time_s)
+
+    # --- the step -----------------------------------------------------------------------------
+    def step(self, stamp_ns: int, state, reference, time_s: float) -> None:
+        started = time.perf_counter()
+        measurement = Measurement(time_s, state.positions[0], state.speeds[0])
+        result = self.host.step(measurement, reference.now)
+        self.step_times_s.append(time.perf_counter() - started)
+        msg = command_to_msg(Command(stamp_ns, self.train.actuator_names, result.forces_n,
+                                     result.law))
+        self.command_pub.publish(msg)
+        self.last_command_msg = msg
+        self.last_stamp_ns = stamp_ns
+        self.last_result = result
+        if stamp_ns >= self.next_diagnostic_ns:
+            self.publish_diagnostics(stamp_ns)
+            self.next_diagnostic_ns = stamp_ns + int(self.params['diagnostics_period_s'] * 1e9)
+
+    def publish_diagnostics(self, stamp_ns: int) -> None:
+        r = self.last_result
+        fault = r.fault or self.input_fault
+        values = {'law': r.law, 'rate_hz': self.rate_hz, 'speed_error_mps': r.speed_error_mps,
+                  'position_error_m': r.position_error_m, 'command_n': r.total_force_n,
+                  'wanted_n': r.wanted_force_n, 'saturated': r.saturated,
+                  'faults': self.host.faults}
+        values.update({f'estimate.{k}': v for k, v in r.estimates.items()})
+        if self.step_times_s:
+            values['step_time_max_ms'] = 1e3 * max(self.step_times_s)
+            self.step_times_s.clear()
+        status = diagnostic_status(
+            'ato_controller_node: law', r.law,
+            DiagnosticStatus.WARN if fault else DiagnosticStatus.OK,
+            fault or f'{r.law} running', values)
+        self.diag_pub.publish(DiagnosticArray(header=Header(stamp=to_time(stamp_ns)),
+                                              status=[status]))
+        self.input_fault = ''
+
+
+def main(args=None) -> int:
+    return run_node(AtoControllerNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

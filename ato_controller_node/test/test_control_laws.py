@@ -1,0 +1,119 @@
+import math
+
+import pytest
+
+from ato_bringup.offline import run_offline
+from ato_common.scenario import load_scenario
+from ato_common.types import ReferencePoint
+from ato_controller_node.host import ControllerHost, LawRejected
+from ato_controller_node.laws import LAWS, law_class
+from ato_controller_node.laws.base import Measurement, TrainKnowledge, validated_settings
+from ato_controller_node.laws.luo_xu import LuoXuLaw
+
+
+@pytest.fixture(scope='module')
+def scenario():
+    return load_scenario('short_line')
+
+
+@pytest.fixture
+def train(scenario):
+    return TrainKnowledge.of(scenario.train)
+
+
+def test_registry_lists_the_laws_and_rejects_unknown_names():
+    assert {'pid', 'luo_xu'} <= set(LAWS)
+    with pytest.raises(KeyError, match='valid: luo_xu, pid'):
+        law_class('mpc')
+
+
+@pytest.mark.parametrize('law', ['pid', 'luo_xu'])
+def test_closed_loop_tracks_the_reference_offline(scenario, law):
+    metrics = run_offline(scenario, law).metrics()
+    assert metrics.rms_speed_error_kmh < 0.2
+    assert metrics.max_speed_error_kmh < 1.0
+    assert metrics.max_position_error_m < 1.0
+    assert all(abs(e) < 0.1 for e in metrics.stop_errors_m.values())
+
+
+def test_luo_xu_estimates_stay_bounded_and_error_converges(scenario):
+    run = run_offline(scenario, 'luo_xu')
+    nominal = scenario.train.mass_kg
+    masses = [e['mass_hat_kg'] for e in run.estimates]
+    assert 0.7 * nominal <= min(masses) and max(masses) <= 1.5 * nominal
+    assert abs(run.estimates[-1]['z1_m']) < 0.05
+
+
+def test_luo_xu_fix_changes_the_law_and_printed_switch_runs_it(train):
+    m = Measurement(0.0, 10.0, 20.0)
+    r = ReferencePoint(0.0, 0.0, 20.0, 0.0)
+    fixed = LuoXuLaw(train, 0.1)
+    printed = LuoXuLaw(train, 0.1, validated_settings(LuoXuLaw.Settings, {'paper_as_printed': True}))
+    # z1 = 10 m: the corrected varphi has (c1^2 - 1) z1, the printed one c1^2 z1
+    diff = printed.step(m, r).force_n - fixed.step(m, r).force_n
+    assert diff == pytest.approx(train.nominal_mass_kg * 10.0)
+
+
+def test_luo_xu_adaptation_freezes_under_saturation(train):
+    law = LuoXuLaw(train, 0.1)
+    before = (law.mass_hat, list(law.theta_hat))
+    out = law.step(Measurement(0.0, 0.0, 0.0), ReferencePoint(0.0, 500.0, 30.0, 0.3))
+    law.after_saturation(out.force_n, 0.5 * out.force_n)
+    assert (law.mass_hat, law.theta_hat) == before
+    out = law.step(Measurement(0.0, 0.0, 0.0), ReferencePoint(0.0, 5.0, 0.1, 0.0))
+    law.after_saturation(out.force_n, out.force_n)
+    assert (law.mass_hat, law.theta_hat) != before
+
+
+def test_host_saturates_to_the_traction_characteristic(train):
+    host = ControllerHost(train, 0.1, 'pid')
+    result = host.step(Measurement(0.0, 0.0, 80.0), ReferencePoint(0.0, 5000.0, 90.0, 0.5))
+    assert result.total_force_n == pytest.approx(train.traction.max_traction_at(80.0))
+    assert result.saturated and result.wanted_force_n > result.total_force_n
+    result = host.step(Measurement(0.1, 0.0, 80.0), ReferencePoint(0.1, -5000.0, 0.0, -1.0))
+    assert result.total_force_n == -train.traction.max_service_brake_force_n
+
+
+@pytest.mark.parametrize('first, second', [('pid', 'luo_xu'), ('luo_xu', 'pid')])
+def test_switch_is_bumpless(train, first, second):
+    host = ControllerHost(train, 0.1, first)
+    m, r = Measurement(0.0, 1000.0, 50.0), ReferencePoint(0.0, 1003.0, 50.5, 0.1)
+    for _ in range(50):
+        before = host.step(m, r).total_force_n
+    host.select(second)
+    after = host.step(m, r)
+    assert after.law == second
+    assert after.total_force_n == pytest.approx(before, rel=1e-6, abs=1.0)
+
+
+def test_switching_mid_run_keeps_tracking(scenario):
+    run = run_offline(scenario, 'pid', switches={150.0: 'luo_xu', 450.0: 'pid'})
+    assert set(run.laws) == {'pid', 'luo_xu'}
+    metrics = run.metrics()
+    assert metrics.max_position_error_m < 1.0
+    assert metrics.max_speed_error_kmh < 1.0
+
+
+def test_host_rejects_unknown_law_and_keeps_the_running_one(train):
+    host = ControllerHost(train, 0.1, 'pid')
+    with pytest.raises(LawRejected, match="unknown controller 'bogus'; valid: luo_xu, pid"):
+        host.select('bogus')
+    assert host.law.name == 'pid'
+
+
+def test_settings_are_validated_with_the_field_named(train):
+    host = ControllerHost(train, 0.1, 'pid')
+    with pytest.raises(ValueError, match=r'kd_speed must be within \[0, 100\]'):
+        host.update_settings('pid', {'kd_speed': -1.0})
+    with pytest.raises(ValueError, match='must be a number'):
+        host.update_settings('pid', {'kd_speed': 'fast'})
+    host.update_settings('pid', {'kd_speed': 2.0})
+    assert host.law.settings.kd_speed == 2.0
+
+
+def test_non_finite_law_output_never_reaches_the_command(train, monkeypatch):
+    host = ControllerHost(train, 0.1, 'pid')
+    host.step(Measurement(0.0, 0.0, 10.0), ReferencePoint(0.0, 0.0, 10.0, 0.0))
+    result = host.step(Measurement(0.1, 0.0, float('nan')), ReferencePoint(0.1, 1.0, 10.0, 0.0))
+    assert all(math.isfinite(f) for f in result.forces_n)
+    assert result.fault

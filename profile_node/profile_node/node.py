@@ -1,0 +1,122 @@
+"""profile_node: streams the target curve planned by :mod:`profile_node.planner`.
+
+Lockstep: the reference (with a preview), the distance to go and the permitted speed are
+published for each control instant, stamped with it. The reference is a function of time only,
+so once the clock period is known (two ticks) the profile publishes the next instant's reference
+one period ahead: the controller then finds it waiting when the plant's state arrives, which
+takes the profile off the loop's critical path. A tick whose reference was not sent ahead (the
+first ones, a changed period, a re-sent tick) gets it at once. Real time: the same on a
+wall-clock timer, with the curve's time origin taken from the plant's first state message
+(its stamp minus its run time). The whole curve is latched once at start-up.
+"""
+
+from __future__ import annotations
+
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Float64
+from trajectory_msgs.msg import JointTrajectory
+
+from ato_common.params import Param, ParameterTable
+from ato_common.ros import (from_duration, from_time, qos_profile, reference_to_msg, run_node,
+                            topic)
+from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
+from ato_common.types import Reference, nanoseconds, seconds
+from profile_node.planner import plan_reference
+
+PARAMS = (
+    Param('scenario', DEFAULT_SCENARIO, 'built-in scenario name or path to a scenario YAML file'),
+    Param('lockstep', True, 'publish on every /clock tick (false: on a wall-clock timer)'),
+    Param('rate_hz', 10.0, 'publication rate in real-time mode, Hz', minimum=0.1, maximum=1000.0),
+    Param('preview_horizon_s', 2.0, 'length of the preview published with each reference, s',
+          minimum=0.0, maximum=600.0, read_only=False),
+    Param('preview_step_s', 1.0, 'spacing of the preview points, s', minimum=0.01,
+          maximum=60.0, read_only=False),
+    Param('curve_sample_period_s', 1.0, 'spacing of the latched whole-curve samples, s',
+          minimum=0.01, maximum=60.0),
+)
+
+
+class ProfileNode(Node):
+    def __init__(self):
+        super().__init__('profile_node')
+        self.params = ParameterTable(self, PARAMS)
+        self.scenario = load_scenario(self.params['scenario'])
+        self.plan = plan_reference(self.scenario)
+        self.trajectory = self.plan.trajectory
+        self.lockstep = self.params['lockstep']
+        self.time_origin_ns: int | None = 0 if self.lockstep else None
+        self.last_tick_ns: int | None = None
+        self.sent_ahead_ns: int | None = None
+
+        self.reference_pub = self.create_publisher(JointTrajectory, topic('reference').name,
+                                                   qos_profile(topic('reference').qos))
+        self.dtg_pub = self.create_publisher(Float64, topic('distance_to_go').name,
+                                             qos_profile(topic('distance_to_go').qos))
+        self.permitted_pub = self.create_publisher(Float64, topic('permitted_speed').name,
+                                                   qos_profile(topic('permitted_speed').qos))
+        curve_pub = self.create_publisher(JointTrajectory, topic('curve').name,
+                                          qos_profile(topic('curve').qos))
+        curve_pub.publish(self.curve_msg())
+        self._curve_pub = curve_pub  # keep the latched publisher alive
+        if self.lockstep:
+            self.create_subscription(Clock, topic('clock').name, self.on_clock,
+                                     qos_profile(topic('clock').qos))
+        else:
+            self.create_subscription(JointTrajectory, topic('state').name, self.on_state,
+                                     qos_profile(topic('state').qos))
+            self.create_timer(1.0 / self.params['rate_hz'], self.on_timer)
+        self.get_logger().info(
+            f'scenario {self.scenario.name}: {len(self.plan.stops)} stops, reference ends at '
+            f'{self.trajectory.end_time:.1f} s, {len(self.trajectory.segments)} segments')
+
+    def curve_msg(self) -> JointTrajectory:
+        step = self.params['curve_sample_period_s']
+        count = int(self.trajectory.end_time // step) + 1
+        times = [i * step for i in range(count)]
+        if times[-1] < self.trajectory.end_time:
+            times.append(self.trajectory.end_time)
+        points = tuple(self.trajectory.at(t) for t in times)
+        return reference_to_msg(Reference(0, points))
+
+    def reference_at(self, stamp_ns: int) -> Reference:
+        t = seconds(stamp_ns - self.time_origin_ns)
+        horizon, step = self.params['preview_horizon_s'], self.params['preview_step_s']
+        count = int(horizon / step + 1e-9)
+        return Reference(stamp_ns, tuple(self.trajectory.at(t + i * step)
+                                         for i in range(count + 1)))
+
+    def publish(self, stamp_ns: int) -> None:
+        reference = self.reference_at(stamp_ns)
+        self.reference_pub.publish(reference_to_msg(reference))
+        now = reference.now
+        stop = self.plan.next_stop(now.time_s)
+        self.dtg_pub.publish(Float64(data=stop.station.position_m - now.position))
+        self.permitted_pub.publish(Float64(data=self.scenario.line.speed_limit_mps(now.position)))
+
+    def on_clock(self, msg: Clock) -> None:
+        tick = from_time(msg.clock)
+        if tick != self.sent_ahead_ns or tick == self.last_tick_ns:
+            self.publish(tick)  # not sent ahead, or the plant re-sent the tick
+        if self.last_tick_ns is not None and tick > self.last_tick_ns:
+            self.sent_ahead_ns = 2 * tick - self.last_tick_ns
+            self.publish(self.sent_ahead_ns)
+        self.last_tick_ns = tick
+
+    def on_state(self, msg: JointTrajectory) -> None:
+        if self.time_origin_ns is None and msg.points:
+            run_time_ns = nanoseconds(from_duration(msg.points[0].time_from_start))
+            self.time_origin_ns = from_time(msg.header.stamp) - run_time_ns
+            self.get_logger().info('real time: curve origin taken from the plant')
+
+    def on_timer(self) -> None:
+        if self.time_origin_ns is not None:
+            self.publish(self.get_clock().now().nanoseconds)
+
+
+def main(args=None) -> int:
+    return run_node(ProfileNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

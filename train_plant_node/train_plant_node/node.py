@@ -1,0 +1,196 @@
+"""train_plant_node: the rclpy adapter of :class:`TrainSimulation`.
+
+Lockstep (default): the plant owns simulated time. It publishes /clock, the true and the measured
+state at t_k, waits for the command stamped t_k, holds it while integrating to t_k+1, and
+publishes again. Until the first command arrives (and while waiting for one) it re-publishes the
+current step every ``resend_period_s`` of wall time, so start-up order and DDS discovery do not
+matter. Real time: the same simulation advanced by a wall-clock timer, commands held as they come.
+"""
+
+from __future__ import annotations
+
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
+from trajectory_msgs.msg import JointTrajectory
+
+from ato_common.params import Param, ParameterTable
+from ato_common.ros import (MessageError, command_from_msg, diagnostic_status, qos_profile,
+                            run_node, state_to_msg, to_duration, to_time, topic)
+from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
+from ato_common.types import TrainState, nanoseconds, seconds
+from train_plant_node.models import MODELS
+from train_plant_node.simulation import (CommandRejected, SensorSettings, TrainSimulation,
+                                         control_period_ns)
+
+PARAMS = (
+    Param('scenario', DEFAULT_SCENARIO, 'built-in scenario name or path to a scenario YAML file'),
+    Param('model', 'point_mass', 'plant model', choices=tuple(sorted(MODELS))),
+    Param('lockstep', True, 'advance simulated time one control period per command and '
+          'publish /clock (false: real time on a wall-clock timer)'),
+    Param('control_rate_hz', 0.0, 'control rate the plant steps at in lockstep, Hz; must equal '
+          "the controller's rate_hz (0: the scenario's controller_rate_hz)",
+          minimum=0.0, maximum=1000.0),
+    Param('real_time_rate_hz', 100.0, 'integration and publication rate in real-time mode, Hz',
+          minimum=1.0, maximum=1000.0),
+    Param('end_time_s', 0.0, 'simulated time at which the run ends and the node exits '
+          '(0: run until shut down)', minimum=0.0, maximum=1e7),
+    Param('wait_for_subscribers', 0, 'number of subscribers of train/state to wait for before '
+          'the first step (so a monitor or recorder misses nothing)', minimum=0, maximum=100),
+    Param('resend_period_s', 0.2, 'lockstep: re-publish the current step after this much wall '
+          'time without its command', minimum=0.01, maximum=10.0),
+    Param('max_substep_s', 0.1, 'longest internal integration step, s', minimum=1e-4,
+          maximum=1.0),
+    Param('sensor_position_noise_m', 0.0, 'standard deviation of position measurement noise, m',
+          minimum=0.0, maximum=100.0),
+    Param('sensor_speed_noise_mps', 0.0, 'standard deviation of speed measurement noise, m/s',
+          minimum=0.0, maximum=10.0),
+    Param('seed', 0, 'seed of the sensor noise', minimum=0, maximum=2**31 - 1),
+)
+
+DIAGNOSTIC_PERIOD_S = 1.0
+
+
+class TrainPlantNode(Node):
+    def __init__(self):
+        super().__init__('train_plant_node')
+        self.params = ParameterTable(self, PARAMS)
+        p = self.params
+        self.scenario = load_scenario(p['scenario'])
+        rate = p['control_rate_hz'] or self.scenario.run.controller_rate_hz
+        self.lockstep = p['lockstep']
+        self.period_ns = (control_period_ns(rate) if self.lockstep
+                          else control_period_ns(p['real_time_rate_hz']))
+        self.end_ns = nanoseconds(p['end_time_s'])
+        self.sim = TrainSimulation(
+            self.scenario, p['model'],
+            SensorSettings(p['sensor_position_noise_m'], p['sensor_speed_noise_mps'], p['seed']),
+            max_substep_s=p['max_substep_s'])
+        self.finished = False
+        self.started = False
+        self.last_rejection = ''
+        self.last_publish_wall = 0.0
+        self.next_diagnostic_ns = 0
+        self.wall_start_ns = 0
+
+        self.truth_pub = self.create_publisher(JointTrajectory, topic('state').name,
+                                               qos_profile(topic('state').qos))
+        self.measured_pub = self.create_publisher(JointTrajectory, topic('state_measured').name,
+                                                  qos_profile(topic('state_measured').qos))
+        self.diag_pub = self.create_publisher(DiagnosticArray, topic('diagnostics').name,
+                                              qos_profile(topic('diagnostics').qos))
+        self.clock_pub = (self.create_publisher(Clock, topic('clock').name,
+                                                qos_profile(topic('clock').qos))
+                          if self.lockstep else None)
+        self.create_subscription(JointState, topic('command').name, self.on_command,
+                                 qos_profile(topic('command').qos))
+        # Wall-clock timer: start-up, re-sends in lockstep, integration in real time.
+        self.timer = self.create_timer(
+            0.02 if self.lockstep else 1.0 / p['real_time_rate_hz'], self.on_timer)
+        self.get_logger().info(
+            f"scenario {self.scenario.name} ({self.scenario.origin}), model {p['model']}, "
+            f"{'lockstep at ' + format(rate, 'g') + ' Hz' if self.lockstep else 'real time'}, "
+            f'actuators {list(self.sim.actuator_names)}')
+
+    # --- time ----------------------------------------------------------------------------------
+    def stamp_ns(self) -> int:
+        """Header stamp: simulated time in lockstep, the wall clock in real time."""
+        if self.lockstep:
+            return self.sim.stamp_ns
+        return self.wall_start_ns + self.sim.stamp_ns
+
+    # --- publishing ---------------------------------------------------------------------------
+    def publish_step(self) -> None:
+        truth = self.sim.truth()
+        measured = self.sim.measured(truth)
+        stamp = self.stamp_ns()
+        if self.clock_pub is not None:
+            self.clock_pub.publish(Clock(clock=to_time(stamp)))
+        self.truth_pub.publish(self._msg(truth, stamp))
+        self.measured_pub.publish(self._msg(measured, stamp))
+        self.last_publish_wall = time.monotonic()
+        if self.sim.stamp_ns >= self.next_diagnostic_ns:
+            self.publish_diagnostics()
+            self.next_diagnostic_ns = self.sim.stamp_ns + nanoseconds(DIAGNOSTIC_PERIOD_S)
+
+    def _msg(self, state: TrainState, stamp_ns: int):
+        msg = state_to_msg(state)
+        msg.header.stamp = to_time(stamp_ns)
+        # Run time since the start, so real-time subscribers can relate stamps to the curve.
+        msg.points[0].time_from_start = to_duration(seconds(state.stamp_ns))
+        return msg
+
+    def publish_diagnostics(self) -> None:
+        level = DiagnosticStatus.WARN if self.last_rejection else DiagnosticStatus.OK
+        status = diagnostic_status(
+            'train_plant_node: simulation', self.scenario.train.name, level,
+            self.last_rejection or 'running',
+            {'time_s': self.sim.time_s, 'commanded_n': list(self.sim.commanded),
+             'applied_n': list(self.sim.applied),
+             'rejected_commands': self.sim.rejected_commands})
+        self.diag_pub.publish(DiagnosticArray(header=self._header(), status=[status]))
+
+    def _header(self) -> Header:
+        return Header(stamp=to_time(self.stamp_ns()))
+
+    # --- events -------------------------------------------------------------------------------
+    def on_timer(self) -> None:
+        if self.finished:
+            return
+        if not self.started:
+            if self.truth_pub.get_subscription_count() < self.params['wait_for_subscribers']:
+                return
+            self.started = True
+            self.wall_start_ns = self.get_clock().now().nanoseconds
+            self.publish_step()
+            return
+        if self.lockstep:
+            if time.monotonic() - self.last_publish_wall >= self.params['resend_period_s']:
+                self.publish_step()  # the command for this step has not come: say it again
+        else:
+            self.advance()
+
+    def on_command(self, msg: JointState) -> None:
+        if not self.started or self.finished:
+            return
+        try:
+            command = command_from_msg(msg, self.sim.actuator_names)
+            if self.lockstep and command.stamp_ns != self.stamp_ns():
+                return  # a re-sent or late command for another step
+            self.sim.apply_command(command.forces)
+            if self.last_rejection:
+                self.get_logger().info('valid commands again')
+                self.last_rejection = ''
+        except (MessageError, CommandRejected) as error:
+            if isinstance(error, MessageError):  # CommandRejected is counted by the simulation
+                self.sim.rejected_commands += 1
+            self.last_rejection = f'rejected command: {error}; holding the previous one'
+            self.get_logger().warning(self.last_rejection, throttle_duration_sec=1.0)
+            self.publish_diagnostics()
+            if self.lockstep and self._stamp_of(msg) != self.stamp_ns():
+                return
+        if self.lockstep:
+            self.advance()
+
+    def _stamp_of(self, msg) -> int:
+        return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+    def advance(self) -> None:
+        self.sim.advance(self.period_ns)
+        self.publish_step()
+        if self.end_ns and self.sim.stamp_ns >= self.end_ns:
+            self.publish_diagnostics()
+            self.get_logger().info(f'end of run at t = {self.sim.time_s:.3f} s')
+            self.finished = True
+
+
+def main(args=None) -> int:
+    return run_node(TrainPlantNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
