@@ -156,12 +156,13 @@ class Stack:
             common_sim = {'use_sim_time': True}
         else:
             common_sim = {}
+        # Nobody publishes into the loop before the monitor is matched: it must see every step.
         return {
             'plant': {**common, 'end_time_s': float(c.end_time_s),
                       'wait_for_subscribers': 1, **c.plant_params},
-            'profile': {**common, **common_sim, **c.profile_params},
+            'profile': {**common, **common_sim, 'wait_for_subscribers': 2, **c.profile_params},
             'controller': {**common, **common_sim, 'controller': c.controller,
-                           **c.controller_params},
+                           'wait_for_subscribers': 2, **c.controller_params},
         }
 
     def start(self, order=('controller', 'profile', 'plant')) -> None:

@@ -40,6 +40,8 @@ NODE_PARAMS = (
           minimum=0.0, maximum=1000.0),
     Param('lockstep', True, 'step on each (state, reference) pair of equal stamp '
           '(false: on a wall-clock timer)'),
+    Param('wait_for_subscribers', 0, 'lockstep: command nothing before ato/command has this '
+          'many subscribers (so a monitor or recorder misses nothing)', minimum=0, maximum=100),
     Param('bumpless_time_constant_s', 3.0, 'decay time of the command step on a law switch, s',
           minimum=0.01, maximum=600.0, read_only=False),
     Param('diagnostics_period_s', 1.0, 'period of the diagnostics, s of (simulated) time',
@@ -173,6 +175,8 @@ class AtoControllerNode(Node):
             return
         if stamp_ns not in self.states or stamp_ns not in self.references:
             return
+        if self.command_pub.get_subscription_count() < self.params['wait_for_subscribers']:
+            return  # the plant re-sends the step until the command comes
         if stamp_ns < self.last_stamp_ns:
             return
         if (not self.period_warning_given and self.last_stamp_ns >= 0

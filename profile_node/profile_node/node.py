@@ -32,6 +32,9 @@ PARAMS = (
           minimum=0.0, maximum=600.0, read_only=False),
     Param('preview_step_s', 1.0, 'spacing of the preview points, s', minimum=0.01,
           maximum=60.0, read_only=False),
+    Param('wait_for_subscribers', 0, 'lockstep: publish no reference before ato/reference has '
+          'this many subscribers (so a monitor or recorder misses nothing)', minimum=0,
+          maximum=100),
     Param('curve_sample_period_s', 1.0, 'spacing of the latched whole-curve samples, s',
           minimum=0.01, maximum=60.0),
 )
@@ -95,6 +98,8 @@ class ProfileNode(Node):
         self.permitted_pub.publish(Float64(data=self.scenario.line.speed_limit_mps(now.position)))
 
     def on_clock(self, msg: Clock) -> None:
+        if self.reference_pub.get_subscription_count() < self.params['wait_for_subscribers']:
+            return  # the plant re-sends the tick until the reference comes
         tick = from_time(msg.clock)
         if tick != self.sent_ahead_ns or tick == self.last_tick_ns:
             self.publish(tick)  # not sent ahead, or the plant re-sent the tick

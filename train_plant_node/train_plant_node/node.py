@@ -76,6 +76,7 @@ class TrainPlantNode(Node):
         self.last_publish_wall = 0.0
         self.next_diagnostic_ns = 0
         self.wall_start_ns = 0
+        self.step_messages = None
 
         self.truth_pub = self.create_publisher(JointTrajectory, topic('state').name,
                                                qos_profile(topic('state').qos))
@@ -105,13 +106,18 @@ class TrainPlantNode(Node):
 
     # --- publishing ---------------------------------------------------------------------------
     def publish_step(self) -> None:
-        truth = self.sim.truth()
-        measured = self.sim.measured(truth)
         stamp = self.stamp_ns()
+        if self.step_messages is None or self.step_messages[0] != stamp:
+            # Once per step: a re-sent step must repeat the same measurement (sensor noise is
+            # drawn here), or lockstep runs would depend on how often a step was re-sent.
+            truth = self.sim.truth()
+            self.step_messages = (stamp, Clock(clock=to_time(stamp)), self._msg(truth, stamp),
+                                  self._msg(self.sim.measured(truth), stamp))
+        _, clock, truth_msg, measured_msg = self.step_messages
         if self.clock_pub is not None:
-            self.clock_pub.publish(Clock(clock=to_time(stamp)))
-        self.truth_pub.publish(self._msg(truth, stamp))
-        self.measured_pub.publish(self._msg(measured, stamp))
+            self.clock_pub.publish(clock)
+        self.truth_pub.publish(truth_msg)
+        self.measured_pub.publish(measured_msg)
         self.last_publish_wall = time.monotonic()
         if self.sim.stamp_ns >= self.next_diagnostic_ns:
             self.publish_diagnostics()
