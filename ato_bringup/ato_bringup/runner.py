@@ -32,6 +32,14 @@ class RunOutcome:
     metrics: RunMetrics
     laws: list[str] = field(default_factory=list)
     parameter_results: list = field(default_factory=list)
+    arrivals: list[tuple[float, int]] = field(default_factory=list)
+
+    def steady_real_time_factor(self, start: float = 0.1, end: float = 0.9) -> float:
+        """Simulated over wall time between two fractions of the run (start-up excluded)."""
+        last = self.arrivals[-1][1]
+        inside = [(w, s) for w, s in self.arrivals if start * last <= s <= end * last]
+        (w0, s0), (w1, s1) = inside[0], inside[-1]
+        return (s1 - s0) / NS_PER_S / (w1 - w0)
 
     def array(self, attribute: str, index: int = 0) -> np.ndarray:
         return np.array([getattr(s, attribute)[index] if isinstance(getattr(s, attribute), tuple)
@@ -89,6 +97,7 @@ def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], obj
                             '\n'.join(stack.log_tail(k) for k in bad))
         samples = monitor.complete_samples()
         diagnostics = list(monitor.diagnostics)
+        arrivals = list(monitor.arrivals)
     if not samples:
         raise RunFailed('the monitor received no state')
     times = [k / NS_PER_S for k, _ in samples]
@@ -98,4 +107,5 @@ def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], obj
                               [s.ref_position for _, s in samples],
                               [s.ref_speed for _, s in samples], stop_samples(plan))
     laws = sorted({s.law for _, s in samples if s.law})
-    return RunOutcome(scenario, config, samples, diagnostics, wall, codes, metrics, laws, results)
+    return RunOutcome(scenario, config, samples, diagnostics, wall, codes, metrics, laws, results,
+                      arrivals)

@@ -72,6 +72,7 @@ class Monitor:
     diagnostics: list[tuple[int, str, dict[str, str], str]] = field(default_factory=list)
     state_messages: int = 0
     last_stamp_ns: int = -1  # of the newest state
+    arrivals: list[tuple[float, int]] = field(default_factory=list)  # (monotonic s, stamp ns)
 
     def __post_init__(self):
         n = self.node
@@ -96,6 +97,7 @@ class Monitor:
         p = msg.points[0]
         s = self._sample(msg.header.stamp)
         self.last_stamp_ns = max(self.last_stamp_ns, from_time(msg.header.stamp))
+        self.arrivals.append((time.monotonic(), self.last_stamp_ns))
         s.positions, s.speeds = tuple(p.positions), tuple(p.velocities)
         s.accelerations, s.forces = tuple(p.accelerations), tuple(p.effort)
 

@@ -1,0 +1,100 @@
+"""make bench: how fast the suite runs on this machine.
+
+1. Lockstep real-time factor of a scenario through the ROS graph (three node processes plus the
+   run monitor), overall (start-up included) and steady (10 % to 90 % of the run), with the
+   EventsExecutor the nodes use and, for comparison, the SingleThreadedExecutor.
+2. Controller step time (p50, p99, max) of every law on the same scenario, offline.
+3. Plant model speed standalone (simulated seconds per wall second, one core).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+from pathlib import Path
+import tempfile
+
+import numpy as np
+
+from ato_bringup.runner import run_lockstep
+from ato_bringup.stack import StackConfig
+from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
+from ato_common.types import nanoseconds
+from ato_controller_node.host import ControllerHost
+from ato_controller_node.laws import LAWS
+from ato_controller_node.laws.base import Measurement, TrainKnowledge
+from profile_node.planner import plan_reference
+from train_plant_node.simulation import TrainSimulation
+
+
+def graph_rtf(scenario: str, executor: str, domain_id: int) -> tuple[float, float, int]:
+    os.environ['ATO_EXECUTOR'] = executor
+    with tempfile.TemporaryDirectory() as logs:
+        outcome = run_lockstep(StackConfig(scenario=scenario, domain_id=domain_id,
+                                           log_dir=Path(logs)))
+    overall = outcome.metrics.simulated_time_s / outcome.wall_time_s
+    return overall, outcome.steady_real_time_factor(), outcome.metrics.samples
+
+
+def law_step_times(scenario_name: str) -> dict[str, np.ndarray]:
+    scenario = load_scenario(scenario_name)
+    plan = plan_reference(scenario)
+    period_ns = nanoseconds(1.0 / scenario.run.controller_rate_hz)
+    times = {}
+    for law in sorted(LAWS):
+        sim = TrainSimulation(scenario)
+        host = ControllerHost(TrainKnowledge.of(scenario.train), period_ns / 1e9, law)
+        durations = []
+        while sim.time_s <= plan.trajectory.end_time:
+            state = sim.measured()
+            measurement = Measurement(sim.time_s, state.positions[0], state.speeds[0])
+            reference = plan.trajectory.at(sim.time_s)
+            started = time.perf_counter()
+            result = host.step(measurement, reference)
+            durations.append(time.perf_counter() - started)
+            sim.apply_command(result.forces_n)
+            sim.advance(period_ns)
+        times[law] = np.array(durations)
+    return times
+
+
+def plant_speed(scenario_name: str, simulated_s: float = 600.0) -> float:
+    scenario = load_scenario(scenario_name)
+    sim = TrainSimulation(scenario)
+    period_ns = nanoseconds(1.0 / scenario.run.controller_rate_hz)
+    sim.apply_command((200e3,))
+    started = time.perf_counter()
+    while sim.time_s < simulated_s:
+        sim.advance(period_ns)
+        sim.truth()
+    return simulated_s / (time.perf_counter() - started)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--scenario', default=DEFAULT_SCENARIO)
+    parser.add_argument('--domain-id', type=int, default=int(os.environ.get('ROS_DOMAIN_ID', 0)
+                                                             or 91))
+    args = parser.parse_args()
+    print(f'machine: {platform.machine()}, {os.cpu_count()} cores, Python '
+          f'{platform.python_version()}; scenario {args.scenario}')
+    print('\nlockstep through the ROS graph (real-time factor = simulated / wall time)')
+    for executor in ('events', 'single'):
+        overall, steady, steps = graph_rtf(args.scenario, executor, args.domain_id)
+        name = 'EventsExecutor' if executor == 'events' else 'SingleThreadedExecutor'
+        print(f'  {name:24s} {steps} steps: overall {overall:6.1f}x (start-up included), '
+              f'steady {steady:6.1f}x ({1e3 / (10 * steady):.2f} ms per 0.1 s step)')
+    print('\ncontroller step time (offline, the law and the host: saturation, bumpless)')
+    for law, durations in law_step_times(args.scenario).items():
+        p50, p99 = np.percentile(durations, [50, 99]) * 1e6
+        print(f'  {law:10s} p50 {p50:7.1f} us   p99 {p99:7.1f} us   max '
+              f'{durations.max() * 1e6:7.1f} us   ({durations.size} steps)')
+    print('\nplant model alone (one core)')
+    print(f'  point_mass  {plant_speed(args.scenario):9.0f}x real time at 10 Hz steps')
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,115 @@
+"""Each node on its own over rclpy: install layout, bad input, real-time mode."""
+
+import math
+import os
+from pathlib import Path
+import subprocess
+import xml.etree.ElementTree as ET
+
+from ament_index_python.packages import get_package_prefix, get_package_share_directory
+import pytest
+from sensor_msgs.msg import JointState
+
+from ato_bringup.stack import EXECUTABLES, Stack, StackConfig, executable_path
+from ato_common.ros import qos_profile, to_time, topic
+
+PACKAGES = ['ato_common', 'train_plant_node', 'profile_node', 'ato_controller_node',
+            'ato_bringup']
+
+
+@pytest.mark.parametrize('package', PACKAGES)
+def test_packages_are_installed_as_ros2_run_expects(package):
+    prefix = Path(get_package_prefix(package))
+    assert (prefix / 'share/ament_index/resource_index/packages' / package).is_file()
+    manifest = ET.parse(Path(get_package_share_directory(package)) / 'package.xml').getroot()
+    assert manifest.get('format') == '3'
+    assert manifest.find('export/build_type').text == 'ament_python'
+    for pkg, exe in EXECUTABLES.values():
+        if pkg == package:
+            assert os.access(prefix / 'lib' / pkg / exe, os.X_OK)
+    if package == 'ato_bringup':
+        assert os.access(prefix / 'lib/ato_bringup/run_scenario', os.X_OK)
+        assert (Path(get_package_share_directory(package)) / 'launch/ato.launch.py').is_file()
+
+
+@pytest.mark.parametrize('name', ['plant', 'profile', 'controller'])
+def test_a_malformed_scenario_stops_the_node_before_it_starts(tmp_path, name, domain_id):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('name: bad\ntrain: {preset: crh3_luo_xu}\n'
+                   'line: {name: l, length_m: 1000, stations: [{name: A, position_m: 0}, '
+                   '{name: B, position_m: nowhere}], speed_limits: [{start_m: 0, speed_kmh: 80}]}\n'
+                   'planning: {max_acceleration_mps2: 0.5, service_deceleration_mps2: 0.5, '
+                   'max_jerk_mps3: 0.5}\n')
+    result = subprocess.run([executable_path(*EXECUTABLES[name]), '--ros-args', '-p',
+                             f'scenario:={bad}'], capture_output=True, text=True, timeout=60,
+                            env=dict(os.environ, ROS_DOMAIN_ID=str(domain_id)))
+    assert result.returncode == 2
+    assert f"{bad}: line.stations[1].position_m: must be a number, got 'nowhere'" in \
+        result.stderr
+    assert 'Traceback' not in result.stderr
+
+
+def test_an_unknown_controller_at_start_is_refused_with_the_valid_names(domain_id):
+    result = subprocess.run([executable_path(*EXECUTABLES['controller']), '--ros-args', '-p',
+                             'controller:=bogus'], capture_output=True, text=True, timeout=60,
+                            env=dict(os.environ, ROS_DOMAIN_ID=str(domain_id)))
+    assert result.returncode == 2
+    assert 'valid: luo_xu, pid' in result.stderr
+
+
+def test_plant_rejects_bad_commands_and_keeps_running(tmp_path, domain_id):
+    config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path)
+    with Stack(config) as stack:
+        command_pub = stack.node.create_publisher(JointState, topic('command').name,
+                                                  qos_profile(topic('command').qos))
+        stack.start_process('plant', {'scenario': 'short_line', 'wait_for_subscribers': 1})
+        monitor = stack.monitor
+
+        def plant_status():
+            return [(message, values) for _, name, values, message in monitor.diagnostics
+                    if name == 'train_plant_node: simulation']
+
+        def send(stamp_ns, names, efforts):
+            assert stack.spin_until(lambda: monitor.last_stamp_ns == stamp_ns, 30.0)
+            msg = JointState(name=names, effort=efforts)
+            msg.header.stamp = to_time(stamp_ns)
+            command_pub.publish(msg)
+            assert stack.spin_until(lambda: monitor.last_stamp_ns > stamp_ns, 30.0)
+
+        send(0, ['traction'], [math.nan])
+        send(100_000_000, ['traction', 'extra'], [1.0, 2.0])
+        send(200_000_000, ['brake'], [1.0])
+        send(300_000_000, ['traction'], [250e3])
+        stack.spin_until(lambda: len(plant_status()) >= 4, 10.0)
+        messages = [m for m, _ in plant_status()]
+        assert any('not finite' in m for m in messages)
+        assert any('do not match the actuators' in m for m in messages)
+        assert plant_status()[-1][1]['rejected_commands'] == '3'
+        states = monitor.complete_samples()
+        assert [k for k, _ in states] == [0, 100_000_000, 200_000_000, 300_000_000, 400_000_000]
+        assert states[-1][1].forces == (250e3,)  # the first valid command is applied
+        assert all(math.isfinite(v) for _, s in states for v in s.positions + s.speeds)
+        assert not stack.exited('plant')
+        assert stack.stop()['plant'] == 0
+
+
+def test_real_time_mode_runs_on_wall_clock_timers(tmp_path, domain_id):
+    config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path,
+                         lockstep=False)
+    with Stack(config) as stack:
+        stack.start()
+        monitor = stack.monitor
+        stack.spin_for(8.0)
+        commands = [s for _, s in monitor.samples.items() if s.command]
+        states = monitor.complete_samples()
+        refs = [s for _, s in monitor.samples.items() if not math.isnan(s.ref_speed)]
+        # 10 Hz control and 100 Hz plant for about 8 s (start-up eats a little)
+        assert 40 <= len(commands) <= 90
+        assert len(states) >= 400
+        assert all(s.law == 'pid' for s in commands)
+        latest_state, latest_ref = states[-1][1], refs[-1]
+        assert latest_state.positions[0] > 0.0
+        assert abs(latest_state.speeds[0] - latest_ref.ref_speed) < 1.0
+        assert abs(latest_state.positions[0] - latest_ref.ref_position) < 10.0
+        codes = stack.stop()
+    assert codes == {'controller': 0, 'profile': 0, 'plant': 0}
