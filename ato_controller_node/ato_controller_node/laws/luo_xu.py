@@ -39,11 +39,11 @@ class LuoXuSettings:
                         description='backstepping gain of z2 (paper: 0.1)')
     gamma_mass: float = setting(1e5, minimum=0.0, maximum=1e9, units='kg s^2/m^2',
                                 description='adaptation gain gamma of the mass estimate (paper: 1e5)')
-    gamma_c0: float = setting(1e-3, minimum=0.0, maximum=1.0, units='SI',
+    gamma_c0: float = setting(1e-3, minimum=0.0, maximum=1.0, units='1/s^2',
                               description='adaptation gain Gamma_11 of c0 (retuned for SI)')
-    gamma_cv: float = setting(3e-7, minimum=0.0, maximum=1.0, units='SI',
+    gamma_cv: float = setting(3e-7, minimum=0.0, maximum=1.0, units='1/m^2',
                               description='adaptation gain Gamma_22 of cv (retuned for SI)')
-    gamma_ca: float = setting(3e-10, minimum=0.0, maximum=1.0, units='SI',
+    gamma_ca: float = setting(3e-10, minimum=0.0, maximum=1.0, units='s^2/m^4',
                               description='adaptation gain Gamma_33 of ca (retuned for SI)')
     mass_min_ratio: float = setting(0.7, minimum=0.1, maximum=1.0, units='-',
                                     description='lower bound of m_hat over the nominal mass')
