@@ -70,7 +70,7 @@ def test_plant_rejects_bad_commands_and_keeps_running(tmp_path, domain_id):
                     if name == 'train_plant_node: simulation']
 
         def send(stamp_ns, names, efforts):
-            assert stack.spin_until(lambda: monitor.last_stamp_ns == stamp_ns, 30.0)
+            assert stack.spin_until(lambda: monitor.last_stamp_ns == stamp_ns, 120.0)
             msg = JointState(name=names, effort=efforts)
             msg.header.stamp = to_time(stamp_ns)
             command_pub.publish(msg)
@@ -99,14 +99,20 @@ def test_real_time_mode_runs_on_wall_clock_timers(tmp_path, domain_id):
     with Stack(config) as stack:
         stack.start()
         monitor = stack.monitor
+
+        def commands():
+            return [s for _, s in sorted(monitor.samples.items()) if s.command]
+
+        # Process start-up takes from under a second to several on a loaded machine.
+        assert stack.spin_until(lambda: len(commands()) > 0, 120.0)
+        first_commands, first_states = len(commands()), len(monitor.complete_samples())
         stack.spin_for(8.0)
-        commands = [s for _, s in monitor.samples.items() if s.command]
         states = monitor.complete_samples()
-        refs = [s for _, s in monitor.samples.items() if not math.isnan(s.ref_speed)]
-        # 10 Hz control and 100 Hz plant for about 8 s (start-up eats a little)
-        assert 40 <= len(commands) <= 90
-        assert len(states) >= 400
-        assert all(s.law == 'pid' for s in commands)
+        refs = [s for _, s in sorted(monitor.samples.items()) if not math.isnan(s.ref_speed)]
+        # 10 Hz control and 100 Hz plant for 8 s of wall time
+        assert 60 <= len(commands()) - first_commands <= 90
+        assert 600 <= len(states) - first_states <= 900
+        assert all(s.law == 'pid' for s in commands())
         latest_state, latest_ref = states[-1][1], refs[-1]
         assert latest_state.positions[0] > 0.0
         assert abs(latest_state.speeds[0] - latest_ref.ref_speed) < 1.0
