@@ -37,7 +37,7 @@ else
 fi
 
 # --- 2. colcon workspace -------------------------------------------------------------------
-packages=(ato_common train_plant_node profile_node ato_controller_node ato_bringup)
+packages=(ato_common train_plant_node profile_node ato_controller_node ato_bringup recorder)
 src_hash="$(find "${packages[@]}" -type f -not -path '*/__pycache__/*' -not -path '*/test/*' -print0 \
   | sort -z | xargs -0 sha256sum | sha256sum | cut -c1-16) $venv"
 stamp="ros_ws/install/.ato-sources"

@@ -18,6 +18,8 @@ from ato_common.validation import ConfigError
 from ato_bringup.runner import RunFailed, run_lockstep
 from ato_bringup.stack import StackConfig
 from ato_controller_node.laws import LAWS
+from recorder.bag import BagError
+from recorder.report import load_run, plot
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -31,7 +33,10 @@ def parse_args(argv=None) -> argparse.Namespace:
                         help='ROS_DOMAIN_ID of the run (default: the environment\'s, else 0)')
     parser.add_argument('--timeout', type=float, default=900.0, help='wall-time limit, s')
     parser.add_argument('--log-dir', type=Path, default=None,
-                        help='where each node writes its log (default: runs/<time>-<scenario>)')
+                        help='where each node writes its log and the recording goes '
+                             '(default: runs/<time>-<scenario>-<controller>)')
+    parser.add_argument('--no-record', action='store_true',
+                        help='do not record the run (by default: <log-dir>/bag, with a report)')
     return parser.parse_args(argv)
 
 
@@ -40,8 +45,9 @@ def main(argv=None) -> int:
     stamp = datetime.now().strftime('%Y%m%d-%H%M%S')
     scenario_label = Path(args.scenario).stem
     log_dir = args.log_dir or Path('runs') / f'{stamp}-{scenario_label}-{args.controller}'
+    record_to = None if args.no_record else log_dir / 'bag'
     config = StackConfig(scenario=args.scenario, controller=args.controller,
-                         domain_id=args.domain_id, log_dir=log_dir)
+                         domain_id=args.domain_id, log_dir=log_dir, record_to=record_to)
     print(f'running {args.scenario} with {args.controller} in lockstep '
           f'(ROS_DOMAIN_ID={args.domain_id}, node logs in {log_dir})', file=sys.stderr)
     try:
@@ -54,6 +60,14 @@ def main(argv=None) -> int:
         return 1
     print(format_summary(outcome.metrics, outcome.scenario.name, ', '.join(outcome.laws),
                          outcome.wall_time_s))
+    if record_to is not None:
+        try:
+            plots = plot(load_run(record_to), record_to / 'report')
+        except BagError as error:
+            print(f'error: the recording cannot be read: {error}', file=sys.stderr)
+            return 1
+        print(f'recording             {record_to} (ros2 run recorder info {record_to})')
+        print(f'report                {plots[0].parent} ({", ".join(p.name for p in plots)})')
     return 0
 
 

@@ -30,6 +30,7 @@ EXECUTABLES = {
     'plant': ('train_plant_node', 'train_plant_node'),
     'profile': ('profile_node', 'profile_node'),
     'controller': ('ato_controller_node', 'ato_controller_node'),
+    'recorder': ('recorder', 'recorder'),
 }
 
 
@@ -130,6 +131,7 @@ class StackConfig:
     plant_params: dict = field(default_factory=dict)
     profile_params: dict = field(default_factory=dict)
     controller_params: dict = field(default_factory=dict)
+    record_to: Path | None = None  # bag folder: run the recorder too
 
 
 class Stack:
@@ -158,27 +160,35 @@ class Stack:
             common_sim = {'use_sim_time': True}
         else:
             common_sim = {}
-        # Nobody publishes into the loop before the monitor is matched: it must see every step.
+        # Nobody publishes into the loop before the observers (the monitor, the recorder) are
+        # matched: they must see every step.
+        observers = 1 + (c.record_to is not None)
         return {
             'plant': {**common, 'end_time_s': float(c.end_time_s),
-                      'wait_for_subscribers': 1, **c.plant_params},
-            'profile': {**common, **common_sim, 'wait_for_subscribers': 2, **c.profile_params},
+                      'wait_for_subscribers': observers, **c.plant_params},
+            'profile': {**common, **common_sim, 'wait_for_subscribers': 1 + observers,
+                        **c.profile_params},
             'controller': {**common, **common_sim, 'controller': c.controller,
-                           'wait_for_subscribers': 2, **c.controller_params},
+                           'wait_for_subscribers': 1 + observers, **c.controller_params},
+            'recorder': common_sim,
         }
 
     def start(self, order=('controller', 'profile', 'plant')) -> None:
         self.config.log_dir.mkdir(parents=True, exist_ok=True)
         params = self.node_params()
+        if self.config.record_to is not None:
+            self.start_process('recorder', params['recorder'],
+                               ['-o', str(self.config.record_to)])
         for name in order:
             self.start_process(name, params[name])
 
-    def start_process(self, name: str, params: dict) -> subprocess.Popen:
+    def start_process(self, name: str, params: dict, args: list[str] = ()) -> subprocess.Popen:
         package, executable = EXECUTABLES[name]
         log = self.config.log_dir / f'{name}.log'
         self.logs[name] = log
         with open(log, 'ab') as out:
-            process = subprocess.Popen([executable_path(package, executable), *ros_args(params)],
+            process = subprocess.Popen([executable_path(package, executable), *args,
+                                        *ros_args(params)],
                                        stdout=out, stderr=subprocess.STDOUT, env=self.env,
                                        stdin=subprocess.DEVNULL)
         self.processes[name] = process
@@ -218,8 +228,13 @@ class Stack:
             self.node.destroy_client(client)
 
     def stop(self, names=None, timeout_s: float = 10.0) -> dict[str, int]:
-        """SIGINT every process still running, wait, SIGKILL what does not end; exit codes."""
+        """SIGINT every process still running, wait, SIGKILL what does not end; exit codes.
+        The recorder goes last, so that it records everything the others sent."""
         names = list(names or self.processes)
+        if 'recorder' in names and len(names) > 1:
+            codes = self.stop([n for n in names if n != 'recorder'], timeout_s)
+            self.spin_for(0.3)
+            return {**codes, **self.stop(['recorder'], timeout_s)}
         for name in names:
             if self.processes[name].poll() is None:
                 self.processes[name].send_signal(signal.SIGINT)

@@ -61,8 +61,10 @@ def compute_metrics(times_s, positions, speeds, forces, ref_positions, ref_speed
         traction_energy_kwh=units.joules_to_kwh(energy))
 
 
-def format_summary(metrics: RunMetrics, scenario: str, controller: str, wall_time_s: float
-                   ) -> str:
+def format_summary(metrics: RunMetrics, scenario: str, controller: str,
+                   wall_time_s: float | None = None) -> str:
+    """The run summary; without a wall time (a report from a recording) the speed lines are
+    left out."""
     lines = [
         f'scenario              {scenario}',
         f'controller            {controller}',
@@ -73,11 +75,11 @@ def format_summary(metrics: RunMetrics, scenario: str, controller: str, wall_tim
     ]
     for station, error in metrics.stop_errors_m.items():
         lines.append(f'stopping error        {station}: {error:+.4f} m')
-    rtf = metrics.simulated_time_s / wall_time_s if wall_time_s > 0 else float('inf')
     lines += [
         f'traction energy       {metrics.traction_energy_kwh:.2f} kWh',
         f'simulated time        {metrics.simulated_time_s:.1f} s ({metrics.samples} steps)',
-        f'wall time             {wall_time_s:.2f} s',
-        f'real-time factor      {rtf:.0f}x',
     ]
+    if wall_time_s is not None and wall_time_s > 0.0:
+        lines += [f'wall time             {wall_time_s:.2f} s',
+                  f'real-time factor      {metrics.simulated_time_s / wall_time_s:.0f}x']
     return '\n'.join(lines)

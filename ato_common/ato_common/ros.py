@@ -215,3 +215,8 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], args=None) -> int:
     finally:
         if rclpy.ok():
             rclpy.shutdown()
+        # From here the process only tears down (a recorder still closes its file). A second
+        # SIGINT, as Ctrl-C in a launch sends one to the group and launch forwards another,
+        # must not kill it half-way with the interpreter's default handler.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)

@@ -76,9 +76,11 @@ class ProfileNode(Node):
     def curve_msg(self) -> JointTrajectory:
         step = self.params['curve_sample_period_s']
         count = int(self.trajectory.end_time // step) + 1
-        times = [i * step for i in range(count)]
-        if times[-1] < self.trajectory.end_time:
-            times.append(self.trajectory.end_time)
+        # The exact arrival and departure of every stop are samples too, so a reader of the
+        # curve (a report from a recording) finds the stops where the plan has them.
+        times = sorted({i * step for i in range(count)} | {self.trajectory.end_time}
+                       | {t for stop in self.plan.stops for t in (stop.arrival_s,
+                                                                   stop.departure_s)})
         points = tuple(self.trajectory.at(t) for t in times)
         return reference_to_msg(Reference(0, points))
 

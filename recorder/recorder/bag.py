@@ -1,0 +1,316 @@
+"""Bags in the rosbag2 MCAP conventions: a folder with ``<name>_0.mcap`` and ``metadata.yaml``.
+
+MCAP profile ``ros2``; one schema per type, encoding ``ros2msg`` with the full definition and its
+dependencies; message encoding ``cdr`` (the raw bytes as received); each channel carries
+``offered_qos_profiles`` (YAML, as rosbag2 writes it) so a latched topic replays latched. Chunks
+are zstd-compressed and closed at least every ``flush_period_s`` of wall time, so a killed
+recorder loses at most about that much; ``recover`` turns what a killed recording holds back into
+a valid bag.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import logging
+import os
+from pathlib import Path
+import time
+from typing import BinaryIO, Iterator
+
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+from mcap.records import Channel, Message, Schema
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, Writer
+import yaml
+
+from recorder.definitions import DefinitionNotFound, full_definition
+
+log = logging.getLogger(__name__)
+
+METADATA_FILE = 'metadata.yaml'
+ROSBAG2_METADATA_VERSION = 9
+DEFAULT_CHUNK_SIZE = 256 * 1024
+DEFAULT_FLUSH_PERIOD_S = 0.5
+
+
+class BagError(RuntimeError):
+    """A bag that cannot be read or written; the message says which file and what is wrong."""
+
+
+@dataclass
+class TopicInfo:
+    name: str
+    type: str
+    offered_qos_profiles: str = ''
+    message_count: int = 0
+
+
+@dataclass
+class BagInfo:
+    path: Path
+    start_ns: int
+    end_ns: int
+    topics: dict[str, TopicInfo] = field(default_factory=dict)
+
+    @property
+    def duration_s(self) -> float:
+        return (self.end_ns - self.start_ns) / 1e9
+
+    @property
+    def message_count(self) -> int:
+        return sum(t.message_count for t in self.topics.values())
+
+
+def bag_file(folder: Path) -> Path:
+    return Path(folder) / f'{Path(folder).name}_0.mcap'
+
+
+class BagWriter:
+    def __init__(self, folder: Path, compression: str = 'zstd',
+                 chunk_size: int = DEFAULT_CHUNK_SIZE,
+                 flush_period_s: float = DEFAULT_FLUSH_PERIOD_S):
+        self.folder = Path(folder)
+        if self.folder.exists() and any(self.folder.iterdir()):
+            raise BagError(f'{self.folder} exists and is not empty: choose another output folder')
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            self.path = bag_file(self.folder)
+            self._file: BinaryIO = open(self.path, 'wb')
+        except OSError as error:
+            raise BagError(f'cannot create {self.folder}: {error.strerror}') from None
+        kinds = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
+                 'none': CompressionType.NONE}
+        if compression not in kinds:
+            raise BagError(f"compression '{compression}' is not one of {', '.join(kinds)}")
+        self._writer = Writer(self._file, chunk_size=chunk_size, compression=kinds[compression])
+        self._writer.start(profile='ros2', library='ato-emulator recorder')
+        self.flush_period_s = flush_period_s
+        self._last_flush = time.monotonic()
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self.topics: dict[str, TopicInfo] = {}
+        self.start_ns: int | None = None
+        self.end_ns = 0
+        self.closed = False
+        self.warnings: list[str] = []
+
+    def add_topic(self, topic: str, type_name: str, offered_qos_profiles: str = '') -> None:
+        if topic in self._channels:
+            return
+        schema_id = self._schemas.get(type_name)
+        if schema_id is None:
+            try:
+                definition = full_definition(type_name)
+            except (DefinitionNotFound, ValueError) as error:
+                # Still recorded; readers that need the definition will not decode it.
+                definition = ''
+                warning = f'no message definition for {type_name} ({error}); {topic} is ' \
+                          'recorded without one'
+                self.warnings.append(warning)
+                log.warning(warning)
+            schema_id = self._writer.register_schema(type_name, 'ros2msg', definition.encode())
+            self._schemas[type_name] = schema_id
+        self._channels[topic] = self._writer.register_channel(
+            topic, 'cdr', schema_id, {'offered_qos_profiles': offered_qos_profiles})
+        self.topics[topic] = TopicInfo(topic, type_name, offered_qos_profiles)
+
+    def write(self, topic: str, log_time_ns: int, data: bytes,
+              publish_time_ns: int | None = None) -> None:
+        info = self.topics[topic]
+        self._writer.add_message(self._channels[topic], log_time=log_time_ns, data=data,
+                                 publish_time=log_time_ns if publish_time_ns is None
+                                 else publish_time_ns, sequence=info.message_count)
+        info.message_count += 1
+        if self.start_ns is None or log_time_ns < self.start_ns:
+            self.start_ns = log_time_ns
+        self.end_ns = max(self.end_ns, log_time_ns)
+        now = time.monotonic()
+        if now - self._last_flush >= self.flush_period_s:
+            self.flush(now)
+
+    def flush(self, now: float | None = None) -> None:
+        """Close the open chunk and push it to the file (what a SIGKILL cannot take back)."""
+        self._writer.flush()
+        self._last_flush = time.monotonic() if now is None else now
+
+    def close(self) -> BagInfo:
+        if self.closed:
+            return self.info()
+        self._writer.finish()
+        self._file.flush()
+        os.fsync(self._file.fileno())
+        self._file.close()
+        self.closed = True
+        info = self.info()
+        write_metadata(info)
+        return info
+
+    def info(self) -> BagInfo:
+        start = self.start_ns or 0
+        return BagInfo(self.path, start, max(self.end_ns, start), dict(self.topics))
+
+
+def write_metadata(info: BagInfo) -> None:
+    """metadata.yaml as rosbag2 writes it, so the folder opens as a bag."""
+    relative = info.path.name
+    data = {'rosbag2_bagfile_information': {
+        'version': ROSBAG2_METADATA_VERSION,
+        'storage_identifier': 'mcap',
+        'duration': {'nanoseconds': info.end_ns - info.start_ns},
+        'starting_time': {'nanoseconds_since_epoch': info.start_ns},
+        'message_count': info.message_count,
+        'topics_with_message_count': [
+            {'topic_metadata': {'name': t.name, 'type': t.type, 'serialization_format': 'cdr',
+                                'offered_qos_profiles': t.offered_qos_profiles,
+                                'type_description_hash': ''},
+             'message_count': t.message_count} for t in info.topics.values()],
+        'compression_format': '',
+        'compression_mode': '',
+        'relative_file_paths': [relative],
+        'files': [{'path': relative,
+                   'starting_time': {'nanoseconds_since_epoch': info.start_ns},
+                   'duration': {'nanoseconds': info.end_ns - info.start_ns},
+                   'message_count': info.message_count}],
+        'custom_data': {},
+        'ros_distro': 'jazzy',
+    }}
+    target = info.path.parent / METADATA_FILE
+    temporary = target.with_suffix('.yaml.tmp')
+    temporary.write_text(yaml.safe_dump(data, sort_keys=False))
+    temporary.replace(target)  # never a half-written metadata.yaml
+
+
+def resolve(path: Path) -> Path:
+    """The .mcap of a bag folder, or the file itself."""
+    path = Path(path)
+    if path.is_dir():
+        files = sorted(path.glob('*.mcap'))
+        if not files:
+            raise BagError(f'{path} holds no .mcap file')
+        return files[0]
+    if not path.is_file():
+        raise BagError(f'{path} does not exist')
+    return path
+
+
+@dataclass(frozen=True)
+class BagMessage:
+    topic: str
+    type: str
+    log_time_ns: int
+    publish_time_ns: int
+    data: bytes
+    channel: Channel
+    schema: Schema | None
+
+
+def read_messages(path: Path, topics: list[str] | None = None) -> Iterator[BagMessage]:
+    """Messages in log-time order from a complete bag; BagError (naming the file and what is
+    wrong) for a file that is not MCAP, truncated or corrupt."""
+    file = resolve(path)
+    try:
+        with open(file, 'rb') as stream:
+            reader = make_reader(stream)
+            try:
+                summary = reader.get_summary()
+            except (McapError, ValueError, EOFError) as error:
+                raise _explain(file, error) from None
+            if summary is None:
+                raise BagError(f'{file} has no summary section: it was not closed (a killed '
+                               f'recording?); recover it with: ros2 run recorder recover {file}')
+            for schema, channel, message in reader.iter_messages(topics=topics):
+                yield BagMessage(channel.topic, schema.name if schema else '', message.log_time,
+                                 message.publish_time, message.data, channel, schema)
+    except BagError:
+        raise
+    except (McapError, ValueError, EOFError, KeyError) as error:
+        raise _explain(file, error) from None
+    except OSError as error:
+        raise BagError(f'{file}: cannot read: {error.strerror}') from None
+
+
+def _explain(file: Path, error: Exception) -> BagError:
+    size = file.stat().st_size if file.exists() else 0
+    with open(file, 'rb') as stream:
+        head = stream.read(8)
+    if not head.startswith(b'\x89MCAP'):
+        return BagError(f'{file} is not an MCAP file (it does not start with the MCAP magic)')
+    return BagError(f'{file} ({size} bytes) is truncated or corrupt: {type(error).__name__}: '
+                    f'{error}; recover what it holds with: ros2 run recorder recover {file}')
+
+
+def bag_info(path: Path) -> BagInfo:
+    file = resolve(path)
+    try:
+        with open(file, 'rb') as stream:
+            summary = make_reader(stream).get_summary()
+    except (McapError, ValueError, EOFError) as error:
+        raise _explain(file, error) from None
+    if summary is None or summary.statistics is None:
+        raise BagError(f'{file} has no summary: it was not closed; recover it with: '
+                       f'ros2 run recorder recover {file}')
+    stats = summary.statistics
+    topics = {}
+    for channel_id, channel in summary.channels.items():
+        schema = summary.schemas.get(channel.schema_id)
+        topics[channel.topic] = TopicInfo(channel.topic, schema.name if schema else '',
+                                          channel.metadata.get('offered_qos_profiles', ''),
+                                          stats.channel_message_counts.get(channel_id, 0))
+    return BagInfo(file, stats.message_start_time, stats.message_end_time, topics)
+
+
+def recover(path: Path) -> tuple[BagInfo, int]:
+    """Rewrite what a damaged (e.g. SIGKILLed) MCAP holds into a valid bag at the same place.
+
+    Reads records in file order until the data ends or breaks; the damaged file is kept next to
+    it as ``.damaged``. Returns the new bag's info and the number of bytes that could not be read.
+    """
+    file = resolve(path)
+    damaged = file.with_name(file.name + '.damaged')
+    if damaged.exists():
+        raise BagError(f'{damaged} exists already: move it away first')
+    file.replace(damaged)
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    messages: list[Message] = []
+    consumed = 0
+    with open(damaged, 'rb') as stream:
+        reader = StreamReader(stream, skip_magic=False, emit_chunks=False)
+        try:
+            for record in reader.records:
+                if isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, Message):
+                    messages.append(record)
+                consumed = stream.tell()
+        except (McapError, ValueError, EOFError, KeyError) as error:
+            log.info('stopped reading %s: %s', damaged, error)
+    lost = damaged.stat().st_size - consumed
+    folder = file.parent
+    temporary = folder / (file.name + '.recovering')
+    with open(temporary, 'wb') as out:
+        writer = Writer(out, compression=CompressionType.ZSTD)
+        writer.start(profile='ros2', library='ato-emulator recorder (recovered)')
+        schema_ids = {sid: writer.register_schema(s.name, s.encoding, s.data)
+                      for sid, s in schemas.items()}
+        channel_ids = {cid: writer.register_channel(c.topic, c.message_encoding,
+                                                    schema_ids.get(c.schema_id, 0), c.metadata)
+                       for cid, c in channels.items()}
+        counts: dict[int, int] = {}
+        for m in sorted(messages, key=lambda m: m.log_time):
+            if m.channel_id in channel_ids:
+                writer.add_message(channel_ids[m.channel_id], m.log_time, m.data,
+                                   m.publish_time, m.sequence)
+                counts[m.channel_id] = counts.get(m.channel_id, 0) + 1
+        writer.finish()
+    temporary.replace(file)
+    times = [m.log_time for m in messages] or [0]
+    topics = {c.topic: TopicInfo(c.topic, schemas[c.schema_id].name if c.schema_id in schemas
+                                 else '', c.metadata.get('offered_qos_profiles', ''),
+                                 counts.get(cid, 0)) for cid, c in channels.items()}
+    info = BagInfo(file, min(times), max(times), topics)
+    write_metadata(info)
+    return info, lost

@@ -1,0 +1,134 @@
+"""replay: publish a recording's topics with their original timing.
+
+    ros2 run recorder replay runs/my_run --rate 10 --start-offset 30 --topics /train/state
+    ros2 run recorder replay runs/my_run --loop --remap /train/state:=/replayed/state
+
+Messages go out as the recorded bytes, each topic with the QoS its publishers offered (a latched
+topic is replayed latched). ``/clock`` is replayed as recorded, so nodes with use_sim_time follow
+the recording; a recording without ``/clock`` gets one synthesised from the log times
+(``--no-clock`` turns that off).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from rclpy.node import Node
+from rclpy.utilities import remove_ros_args
+from rosgraph_msgs.msg import Clock
+
+from ato_common.ros import make_executor, to_time
+from recorder.bag import BagError, bag_info, read_messages
+from recorder.ros_io import message_class, qos_from_yaml
+
+CLOCK_TOPIC = '/clock'
+
+
+def parse_args(argv: list[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog='replay', description=__doc__.split('\n\n')[0])
+    parser.add_argument('bag', type=Path)
+    parser.add_argument('--rate', type=float, default=1.0, help='speed factor (2: twice as fast)')
+    parser.add_argument('--start-offset', type=float, default=0.0,
+                        help='skip this many seconds from the start of the recording')
+    parser.add_argument('--loop', action='store_true', help='start again at the end')
+    parser.add_argument('--topics', nargs='+', default=None, help='replay only these topics')
+    parser.add_argument('--remap', nargs='+', default=[], metavar='FROM:=TO',
+                        help='publish a topic under another name')
+    parser.add_argument('--no-clock', action='store_true',
+                        help='do not synthesise /clock when the recording has none')
+    parser.add_argument('--wait-for-subscribers', type=int, default=0,
+                        help='wait until every replayed topic has this many subscribers')
+    options = parser.parse_args(argv)
+    if not options.rate > 0.0:
+        parser.error(f'--rate must be > 0, got {options.rate}')
+    if options.start_offset < 0.0:
+        parser.error(f'--start-offset must be >= 0, got {options.start_offset}')
+    for item in options.remap:
+        if ':=' not in item:
+            parser.error(f"--remap takes FROM:=TO, got '{item}'")
+    return options
+
+
+class Replayer:
+    def __init__(self, node: Node, options: argparse.Namespace):
+        self.node = node
+        self.options = options
+        self.info = bag_info(options.bag)
+        remaps = dict(item.split(':=', 1) for item in options.remap)
+        wanted = set(options.topics) if options.topics else set(self.info.topics)
+        unknown = wanted - set(self.info.topics)
+        if unknown:
+            raise BagError(f'{options.bag} has no topic {", ".join(sorted(unknown))}; it has '
+                           f'{", ".join(sorted(self.info.topics))}')
+        self.topics = sorted(wanted)
+        self.publishers = {}
+        for name in self.topics:
+            topic = self.info.topics[name]
+            self.publishers[name] = node.create_publisher(
+                message_class(topic.type), remaps.get(name, name),
+                qos_from_yaml(topic.offered_qos_profiles))
+        self.synthesise_clock = CLOCK_TOPIC not in self.info.topics and not options.no_clock
+        self.clock_pub = (node.create_publisher(Clock, CLOCK_TOPIC, 10)
+                          if self.synthesise_clock else None)
+        self.published = 0
+
+    def play_once(self, executor) -> None:
+        start_ns = self.info.start_ns + int(self.options.start_offset * 1e9)
+        wall_start = time.monotonic()
+        last_clock = -1
+        for message in read_messages(self.options.bag, self.topics):
+            if message.log_time_ns < start_ns:
+                continue
+            due = wall_start + (message.log_time_ns - start_ns) / 1e9 / self.options.rate
+            while True:
+                delay = due - time.monotonic()
+                if delay <= 0.0:
+                    break
+                executor.spin_once(timeout_sec=min(delay, 0.05))
+            if self.clock_pub is not None and message.log_time_ns > last_clock:
+                self.clock_pub.publish(Clock(clock=to_time(message.log_time_ns)))
+                last_clock = message.log_time_ns
+            self.publishers[message.topic].publish(message.data)
+            self.published += 1
+
+
+def main(args=None) -> int:
+    import rclpy
+    argv = remove_ros_args(args if args is not None else sys.argv)[1:]
+    options = parse_args(argv)
+    rclpy.init(args=args)
+    node = Node('replay')
+    executor = make_executor()
+    executor.add_node(node)
+    try:
+        replayer = Replayer(node, options)
+        if options.wait_for_subscribers:
+            while rclpy.ok() and any(p.get_subscription_count() < options.wait_for_subscribers
+                                     for p in replayer.publishers.values()):
+                executor.spin_once(timeout_sec=0.05)
+        while True:
+            replayer.play_once(executor)
+            if not options.loop:
+                break
+        # Let reliable subscribers take the last messages before the publishers go away.
+        deadline = time.monotonic() + 1.0
+        while time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        node.get_logger().info(f'replayed {replayer.published} messages')
+        return 0
+    except BagError as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 0
+    finally:
+        node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

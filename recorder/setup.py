@@ -1,0 +1,32 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE_NAME = 'recorder'
+
+setup(
+    name=PACKAGE_NAME,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
+        ('share/' + PACKAGE_NAME, ['package.xml']),
+        ('share/' + PACKAGE_NAME + '/config', glob('config/*.json')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='ATO emulator maintainers',
+    maintainer_email='ato-emulator@example.org',
+    description='Record runs to MCAP (rosbag2 conventions), replay, recover, report.',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'recorder = recorder.node:main',
+            'replay = recorder.replay:main',
+            'info = recorder.cli:info_main',
+            'recover = recorder.cli:recover_main',
+            'report = recorder.report:main',
+        ],
+    },
+)
