@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import logging
 import os
 from pathlib import Path
+import struct
 import time
 from typing import BinaryIO, Iterator
 
@@ -27,6 +28,9 @@ import yaml
 from recorder.definitions import DefinitionNotFound, full_definition
 
 log = logging.getLogger(__name__)
+
+# What the mcap library raises on damaged data, depending on where the damage is.
+READ_ERRORS = (McapError, ValueError, EOFError, KeyError, struct.error)
 
 METADATA_FILE = 'metadata.yaml'
 ROSBAG2_METADATA_VERSION = 9
@@ -214,7 +218,7 @@ def read_messages(path: Path, topics: list[str] | None = None) -> Iterator[BagMe
             reader = make_reader(stream)
             try:
                 summary = reader.get_summary()
-            except (McapError, ValueError, EOFError) as error:
+            except READ_ERRORS as error:
                 raise _explain(file, error) from None
             if summary is None:
                 raise BagError(f'{file} has no summary section: it was not closed (a killed '
@@ -224,7 +228,7 @@ def read_messages(path: Path, topics: list[str] | None = None) -> Iterator[BagMe
                                  message.publish_time, message.data, channel, schema)
     except BagError:
         raise
-    except (McapError, ValueError, EOFError, KeyError) as error:
+    except READ_ERRORS as error:
         raise _explain(file, error) from None
     except OSError as error:
         raise BagError(f'{file}: cannot read: {error.strerror}') from None
@@ -245,7 +249,7 @@ def bag_info(path: Path) -> BagInfo:
     try:
         with open(file, 'rb') as stream:
             summary = make_reader(stream).get_summary()
-    except (McapError, ValueError, EOFError) as error:
+    except READ_ERRORS as error:
         raise _explain(file, error) from None
     if summary is None or summary.statistics is None:
         raise BagError(f'{file} has no summary: it was not closed; recover it with: '
@@ -286,7 +290,7 @@ def recover(path: Path) -> tuple[BagInfo, int]:
                 elif isinstance(record, Message):
                     messages.append(record)
                 consumed = stream.tell()
-        except (McapError, ValueError, EOFError, KeyError) as error:
+        except READ_ERRORS as error:
             log.info('stopped reading %s: %s', damaged, error)
     lost = damaged.stat().st_size - consumed
     folder = file.parent

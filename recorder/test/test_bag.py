@@ -1,0 +1,152 @@
+"""Round trips of the bag core in a temporary folder: write, read back with independent readers,
+break the file, recover it."""
+
+import shutil
+
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+import pytest
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.serialization import serialize_message
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import Stores, get_typestore
+import yaml
+
+from ato_common.ros import state_to_msg
+from ato_common.types import TrainState
+from recorder.bag import (BagError, BagWriter, bag_file, bag_info, read_messages, recover)
+from recorder.cli import info_main, recover_main
+from recorder.definitions import full_definition
+from recorder.ros_io import qos_from_yaml, qos_to_yaml
+
+STATE_TYPE = 'trajectory_msgs/msg/JointTrajectory'
+
+
+def state_bytes(k: int) -> bytes:
+    state = TrainState(k * 100_000_000, ('car_1', 'car_2'), (k * 1.0, k * 1.0 - 25.0),
+                       (k * 0.5, k * 0.5), (0.1, 0.1), (1000.0 * k, 0.0))
+    return serialize_message(state_to_msg(state))
+
+
+def write_bag(folder, count=100, **options):
+    writer = BagWriter(folder, **options)
+    writer.add_topic('/train/state', STATE_TYPE, qos_to_yaml([QoSProfile(depth=10)]))
+    for k in range(count):
+        writer.write('/train/state', k * 100_000_000, state_bytes(k))
+    return writer
+
+
+def test_definition_carries_every_dependency():
+    text = full_definition(STATE_TYPE)
+    for dependency in ('MSG: std_msgs/Header', 'MSG: builtin_interfaces/Time',
+                       'MSG: trajectory_msgs/JointTrajectoryPoint',
+                       'MSG: builtin_interfaces/Duration'):
+        assert dependency in text
+    assert text.count('MSG: builtin_interfaces/Time') == 1
+
+
+def test_round_trip_with_the_mcap_ros2_decoder(tmp_path):
+    info = write_bag(tmp_path / 'run').close()
+    assert info.message_count == 100 and info.duration_s == pytest.approx(9.9)
+    with open(bag_file(tmp_path / 'run'), 'rb') as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        assert reader.get_header().profile == 'ros2'
+        decoded = list(reader.iter_decoded_messages())
+    assert len(decoded) == 100
+    schema, channel, message, msg = decoded[42]
+    assert schema.encoding == 'ros2msg' and channel.message_encoding == 'cdr'
+    assert channel.metadata['offered_qos_profiles'].startswith('- history')
+    assert msg.joint_names == ['car_1', 'car_2']
+    assert list(msg.points[0].positions) == [42.0, 17.0]
+    assert msg.header.stamp.sec == 4 and msg.header.stamp.nanosec == 200_000_000
+    # raw bytes come back unchanged
+    raw = [m.data for m in read_messages(tmp_path / 'run')]
+    assert raw == [state_bytes(k) for k in range(100)]
+
+
+def test_the_folder_is_a_rosbag2_bag_that_rosbags_reads(tmp_path):
+    write_bag(tmp_path / 'run').close()
+    metadata = yaml.safe_load((tmp_path / 'run' / 'metadata.yaml').read_text())
+    assert metadata['rosbag2_bagfile_information']['storage_identifier'] == 'mcap'
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    with Reader(tmp_path / 'run') as reader:
+        assert [(c.topic, c.msgtype, c.msgcount) for c in reader.connections] == \
+            [('/train/state', STATE_TYPE, 100)]
+        messages = [typestore.deserialize_cdr(raw, c.msgtype) for c, _, raw in reader.messages()]
+    assert len(messages) == 100 and list(messages[7].points[0].velocities) == [3.5, 3.5]
+
+
+def test_info_lists_topics_counts_and_times(tmp_path, capsys):
+    write_bag(tmp_path / 'run').close()
+    info = bag_info(tmp_path / 'run')
+    assert info.topics['/train/state'].message_count == 100
+    assert info.start_ns == 0 and info.end_ns == 9_900_000_000
+    assert info_main([str(tmp_path / 'run')]) == 0
+    out = capsys.readouterr().out
+    assert '/train/state' in out and '100' in out and 'duration:  9.900 s' in out
+
+
+def test_unknown_type_is_recorded_with_a_warning(tmp_path):
+    writer = BagWriter(tmp_path / 'run')
+    writer.add_topic('/custom', 'nowhere_msgs/msg/Thing')
+    writer.write('/custom', 5, b'\x00\x01\x00\x00abc')
+    info = writer.close()
+    assert info.topics['/custom'].message_count == 1
+    assert any('nowhere_msgs/msg/Thing' in w for w in writer.warnings)
+
+
+def test_refuses_to_overwrite_a_recording(tmp_path):
+    write_bag(tmp_path / 'run').close()
+    with pytest.raises(BagError, match='exists and is not empty'):
+        BagWriter(tmp_path / 'run')
+
+
+def test_not_an_mcap_file_gives_a_clear_error(tmp_path, capsys):
+    bogus = tmp_path / 'bogus.mcap'
+    bogus.write_bytes(b'this is not a recording at all' * 10)
+    with pytest.raises(BagError, match='is not an MCAP file'):
+        list(read_messages(bogus))
+    assert info_main([str(bogus)]) == 2
+    err = capsys.readouterr().err
+    assert 'is not an MCAP file' in err and 'Traceback' not in err
+    with pytest.raises(BagError, match='does not exist'):
+        bag_info(tmp_path / 'missing.mcap')
+
+
+def test_truncated_file_names_the_problem_and_recover_restores_what_it_holds(tmp_path, capsys):
+    write_bag(tmp_path / 'run', count=2000, chunk_size=4096).close()
+    file = bag_file(tmp_path / 'run')
+    data = file.read_bytes()
+    file.write_bytes(data[: len(data) // 2])
+    with pytest.raises(BagError, match='truncated or corrupt.*recover'):
+        list(read_messages(tmp_path / 'run'))
+    assert recover_main([str(tmp_path / 'run')]) == 0
+    assert 'recovered' in capsys.readouterr().out
+    recovered = [m.data for m in read_messages(tmp_path / 'run')]
+    assert 200 < len(recovered) < 2000  # roughly the half before the cut
+    assert recovered == [state_bytes(k) for k in range(len(recovered))]  # a prefix, in order
+    assert (file.parent / (file.name + '.damaged')).exists()
+    assert bag_info(tmp_path / 'run').message_count == len(recovered)
+
+
+def test_an_unclosed_recording_keeps_what_was_flushed(tmp_path):
+    writer = write_bag(tmp_path / 'run', count=300, chunk_size=1 << 20)
+    writer.flush()  # what the recorder does every flush period
+    for k in range(300, 320):  # written after the last flush: may be lost
+        writer.write('/train/state', k * 100_000_000, state_bytes(k))
+    killed = tmp_path / 'killed'
+    killed.mkdir()
+    shutil.copy(writer.path, killed / 'killed_0.mcap')  # the file as a SIGKILL leaves it
+    with pytest.raises(BagError):
+        list(read_messages(killed))
+    info, _ = recover(killed)
+    assert info.message_count >= 300
+
+
+def test_offered_qos_round_trip_keeps_latched_topics_latched():
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    assert qos_from_yaml(qos_to_yaml([latched])).durability == DurabilityPolicy.TRANSIENT_LOCAL
+    assert qos_from_yaml(qos_to_yaml([QoSProfile(depth=5)])).durability == \
+        DurabilityPolicy.VOLATILE
+    mixed = qos_to_yaml([latched, QoSProfile(depth=5)])
+    assert qos_from_yaml(mixed).durability == DurabilityPolicy.VOLATILE
