@@ -33,6 +33,7 @@ class RunOutcome:
     laws: list[str] = field(default_factory=list)
     parameter_results: list = field(default_factory=list)
     arrivals: list[tuple[float, int]] = field(default_factory=list)
+    counts: dict[str, int] = field(default_factory=dict)  # messages the monitor received
 
     def steady_real_time_factor(self, start: float = 0.1, end: float = 0.9) -> float:
         """Simulated over wall time between two fractions of the run (start-up excluded)."""
@@ -98,6 +99,7 @@ def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], obj
         samples = monitor.complete_samples()
         diagnostics = list(monitor.diagnostics)
         arrivals = list(monitor.arrivals)
+        counts = dict(monitor.counts)
     if not samples:
         raise RunFailed('the monitor received no state')
     times = [k / NS_PER_S for k, _ in samples]
@@ -108,4 +110,4 @@ def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], obj
                               [s.ref_speed for _, s in samples], stop_samples(plan))
     laws = sorted({s.law for _, s in samples if s.law})
     return RunOutcome(scenario, config, samples, diagnostics, wall, codes, metrics, laws, results,
-                      arrivals)
+                      arrivals, counts)

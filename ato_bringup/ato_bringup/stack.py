@@ -71,9 +71,10 @@ class Monitor:
     node: Node
     samples: dict[int, Sample] = field(default_factory=dict)
     diagnostics: list[tuple[int, str, dict[str, str], str]] = field(default_factory=list)
-    state_messages: int = 0
     last_stamp_ns: int = -1  # of the newest state
     arrivals: list[tuple[float, int]] = field(default_factory=list)  # (monotonic s, stamp ns)
+    counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
+        ('state', 'reference', 'command', 'diagnostics'), 0))  # messages received per topic
 
     def __post_init__(self):
         n = self.node
@@ -94,7 +95,7 @@ class Monitor:
         return sample
 
     def on_state(self, msg: JointTrajectory) -> None:
-        self.state_messages += 1
+        self.counts['state'] += 1
         p = msg.points[0]
         s = self._sample(msg.header.stamp)
         self.last_stamp_ns = max(self.last_stamp_ns, from_time(msg.header.stamp))
@@ -103,14 +104,17 @@ class Monitor:
         s.accelerations, s.forces = tuple(p.accelerations), tuple(p.effort)
 
     def on_reference(self, msg: JointTrajectory) -> None:
+        self.counts['reference'] += 1
         s = self._sample(msg.header.stamp)
         s.ref_position, s.ref_speed = msg.points[0].positions[0], msg.points[0].velocities[0]
 
     def on_command(self, msg: JointState) -> None:
+        self.counts['command'] += 1
         s = self._sample(msg.header.stamp)
         s.command, s.law = tuple(msg.effort), msg.header.frame_id
 
     def on_diagnostics(self, msg: DiagnosticArray) -> None:
+        self.counts['diagnostics'] += 1
         for status in msg.status:
             self.diagnostics.append((from_time(msg.header.stamp), status.name,
                                      {kv.key: kv.value for kv in status.values}, status.message))
@@ -165,7 +169,8 @@ class Stack:
         observers = 1 + (c.record_to is not None)
         return {
             'plant': {**common, 'end_time_s': float(c.end_time_s),
-                      'wait_for_subscribers': observers, **c.plant_params},
+                      'wait_for_subscribers': observers, 'start_delay_s': 1.0,
+                      **c.plant_params},
             'profile': {**common, **common_sim, 'wait_for_subscribers': 1 + observers,
                         **c.profile_params},
             'controller': {**common, **common_sim, 'controller': c.controller,
@@ -233,8 +238,11 @@ class Stack:
         names = list(names or self.processes)
         if 'recorder' in names and len(names) > 1:
             codes = self.stop([n for n in names if n != 'recorder'], timeout_s)
-            self.spin_for(0.3)
-            return {**codes, **self.stop(['recorder'], timeout_s)}
+            try:
+                self.spin_for(0.3)
+            finally:  # whatever a callback raises, the recorder must not be left running
+                codes.update(self.stop(['recorder'], timeout_s))
+            return codes
         for name in names:
             if self.processes[name].poll() is None:
                 self.processes[name].send_signal(signal.SIGINT)
@@ -248,7 +256,13 @@ class Stack:
         return codes
 
     def close(self) -> None:
-        self.stop()
+        try:
+            self.stop()
+        finally:
+            for process in self.processes.values():  # never leave a process behind
+                if process.poll() is None:
+                    process.kill()
+                    process.wait()
         self.executor.shutdown()
         self.node.destroy_node()
         if self.context.ok():

@@ -47,7 +47,9 @@ def qos_from_yaml(text: str) -> QoSProfile:
                                      for e in entries)
     latched = bool(entries) and all(e.get('durability') == DurabilityPolicy.TRANSIENT_LOCAL.value
                                     for e in entries)
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1 if latched else 1000,
+    # Keep-all for streams: a subscriber that lags slows the replay instead of losing messages.
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST if latched else HistoryPolicy.KEEP_ALL,
+                      depth=1 if latched else 1000,
                       reliability=ReliabilityPolicy.RELIABLE if reliable or not entries
                       else ReliabilityPolicy.BEST_EFFORT,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL if latched

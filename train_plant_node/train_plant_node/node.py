@@ -41,6 +41,10 @@ PARAMS = (
           '(0: run until shut down)', minimum=0.0, maximum=1e7),
     Param('wait_for_subscribers', 0, 'number of subscribers of train/state to wait for before '
           'the first step (so a monitor or recorder misses nothing)', minimum=0, maximum=100),
+    Param('start_delay_s', 0.0, 'wall time to wait after wait_for_subscribers is met before the '
+          'first step: DDS matches each topic separately, and an observer matched on '
+          'train/state may still be matching on /clock or train/state/measured', minimum=0.0,
+          maximum=60.0),
     Param('resend_period_s', 0.2, 'lockstep: re-publish the current step after this much wall '
           'time without its command', minimum=0.01, maximum=10.0),
     Param('max_substep_s', 0.1, 'longest internal integration step, s', minimum=1e-4,
@@ -77,6 +81,8 @@ class TrainPlantNode(Node):
         self.next_diagnostic_ns = 0
         self.wall_start_ns = 0
         self.step_messages = None
+        self.steps_published = 0  # re-sent steps included: what a recording must hold
+        self.ready_since: float | None = None
 
         self.truth_pub = self.create_publisher(JointTrajectory, topic('state').name,
                                                qos_profile(topic('state').qos))
@@ -118,6 +124,7 @@ class TrainPlantNode(Node):
             self.clock_pub.publish(clock)
         self.truth_pub.publish(truth_msg)
         self.measured_pub.publish(measured_msg)
+        self.steps_published += 1
         self.last_publish_wall = time.monotonic()
         if self.sim.stamp_ns >= self.next_diagnostic_ns:
             self.publish_diagnostics()
@@ -137,7 +144,8 @@ class TrainPlantNode(Node):
             self.last_rejection or 'running',
             {'time_s': self.sim.time_s, 'commanded_n': list(self.sim.commanded),
              'applied_n': list(self.sim.applied),
-             'rejected_commands': self.sim.rejected_commands})
+             'rejected_commands': self.sim.rejected_commands,
+             'steps_published': self.steps_published})
         self.diag_pub.publish(DiagnosticArray(header=self._header(), status=[status]))
 
     def _header(self) -> Header:
@@ -149,6 +157,11 @@ class TrainPlantNode(Node):
             return
         if not self.started:
             if self.truth_pub.get_subscription_count() < self.params['wait_for_subscribers']:
+                return
+            now = time.monotonic()
+            if self.ready_since is None:
+                self.ready_since = now
+            if now - self.ready_since < self.params['start_delay_s']:
                 return
             self.started = True
             self.wall_start_ns = self.get_clock().now().nanoseconds

@@ -1,0 +1,123 @@
+"""Recording runs to MCAP, reading them with independent readers, replaying, recovering."""
+
+import signal
+import subprocess
+
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+import pytest
+from rclpy.serialization import deserialize_message
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import Stores, get_typestore
+from trajectory_msgs.msg import JointTrajectory
+
+from ato_bringup.runner import run_lockstep
+from ato_bringup.stack import Stack, StackConfig, executable_path
+from ato_common.ros import from_time
+from recorder.bag import bag_file, bag_info, read_messages, recover
+from recorder.report import load_run, run_metrics
+
+LOOP_TOPICS = ['/clock', '/train/state', '/train/state/measured', '/ato/reference',
+               '/ato/reference/curve', '/ato/distance_to_go', '/ato/permitted_speed',
+               '/ato/command', '/diagnostics']
+
+
+@pytest.fixture(scope='module')
+def recorded(tmp_path_factory):
+    folder = tmp_path_factory.mktemp('recorded')
+    outcome = run_lockstep(StackConfig(scenario='short_line', domain_id=191, end_time_s=200.0,
+                                       log_dir=folder / 'logs', record_to=folder / 'bag'))
+    return outcome, folder / 'bag'
+
+
+def test_recording_holds_every_message_the_run_published(recorded):
+    outcome, bag = recorded
+    info = bag_info(bag)
+    assert outcome.exit_codes['recorder'] == 0
+    assert set(LOOP_TOPICS) <= set(info.topics)
+    # The plant counts what it published, steps re-sent while the others came up included.
+    published = int([values for _, name, values, _ in outcome.diagnostics
+                     if name == 'train_plant_node: simulation'][-1]['steps_published'])
+    assert published >= 2001
+    for topic in ('/clock', '/train/state', '/train/state/measured'):
+        assert info.topics[topic].message_count == published, topic
+    assert info.topics['/ato/reference'].message_count == outcome.counts['reference']
+    assert info.topics['/ato/command'].message_count == outcome.counts['command']
+    stamps = sorted({from_time(deserialize_message(m.data, JointTrajectory).header.stamp)
+                     for m in read_messages(bag, ['/train/state'])})
+    assert stamps == [k for k, _ in outcome.samples]  # every step
+    assert info.topics['/ato/reference/curve'].message_count == 1
+    assert info.end_ns >= 200_000_000_000  # log time is simulated time
+
+
+def test_the_mcap_library_with_mcap_ros2_decodes_every_message(recorded):
+    _, bag = recorded
+    with open(bag_file(bag), 'rb') as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        assert reader.get_header().profile == 'ros2'
+        assert all(s.encoding == 'ros2msg' and s.data for s in summary.schemas.values())
+        decoded = sum(1 for _ in reader.iter_decoded_messages())
+    assert decoded == sum(summary.statistics.channel_message_counts.values())
+
+
+def test_rosbags_opens_the_bag_folder_and_decodes_every_message(recorded):
+    _, bag = recorded
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    with Reader(bag) as reader:
+        total = sum(c.msgcount for c in reader.connections)
+        decoded = sum(1 for c, _, raw in reader.messages()
+                      if typestore.deserialize_cdr(raw, c.msgtype) is not None)
+    assert decoded == total == bag_info(bag).message_count
+
+
+def test_report_from_the_recording_gives_the_run_metrics(recorded):
+    outcome, bag = recorded
+    from_bag = run_metrics(load_run(bag))
+    assert from_bag.rms_speed_error_kmh == pytest.approx(outcome.metrics.rms_speed_error_kmh,
+                                                         rel=1e-9)
+    assert from_bag.max_position_error_m == pytest.approx(outcome.metrics.max_position_error_m,
+                                                          rel=1e-9)
+    assert from_bag.traction_energy_kwh == pytest.approx(outcome.metrics.traction_energy_kwh,
+                                                         rel=1e-9)
+    assert list(from_bag.stop_errors_m.values()) == \
+        pytest.approx(list(outcome.metrics.stop_errors_m.values()))
+
+
+def test_record_replay_record_gives_the_same_bytes(recorded, tmp_path, domain_id):
+    _, bag = recorded
+    again = tmp_path / 'again'
+    with Stack(StackConfig(scenario='short_line', domain_id=domain_id,
+                           log_dir=tmp_path / 'logs')) as stack:
+        stack.config.log_dir.mkdir(parents=True, exist_ok=True)
+        stack.start_process('recorder', {}, ['-o', str(again), *LOOP_TOPICS])
+        replay = subprocess.run(
+            [executable_path('recorder', 'replay'), str(bag), '--rate', '100',
+             '--wait-for-subscribers', '1', '--topics', *LOOP_TOPICS],
+            env=stack.env, capture_output=True, text=True, timeout=300)
+        assert replay.returncode == 0, replay.stderr
+        assert stack.stop()['recorder'] == 0
+    for topic in LOOP_TOPICS:
+        first = [m.data for m in read_messages(bag, [topic])]
+        second = [m.data for m in read_messages(again, [topic])]
+        assert second == first, topic
+
+
+def test_sigkill_loses_at_most_the_last_second(tmp_path, domain_id):
+    config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path / 'logs',
+                         lockstep=False, record_to=tmp_path / 'bag')
+    with Stack(config) as stack:
+        stack.start()
+        monitor = stack.monitor
+        assert stack.spin_until(lambda: monitor.counts['command'] > 0, 120.0)
+        stack.spin_for(4.0)
+        killed_at_ns = monitor.last_stamp_ns
+        stack.processes['recorder'].send_signal(signal.SIGKILL)
+        stack.processes['recorder'].wait()
+        stack.stop()
+    info, _ = recover(tmp_path / 'bag')
+    stamps = [m.log_time_ns for m in read_messages(tmp_path / 'bag', ['/train/state'])]
+    assert stamps, 'nothing recovered'
+    assert killed_at_ns - stamps[-1] < 1_000_000_000
+    gaps = [b - a for a, b in zip(stamps, stamps[1:])]
+    assert max(gaps) < 100_000_000  # 100 Hz state, nothing missing in between
