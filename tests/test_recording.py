@@ -1,5 +1,6 @@
 """Recording runs to MCAP, reading them with independent readers, replaying, recovering."""
 
+import os
 import signal
 import subprocess
 
@@ -121,3 +122,35 @@ def test_sigkill_loses_at_most_the_last_second(tmp_path, domain_id):
     assert killed_at_ns - stamps[-1] < 1_000_000_000
     gaps = [b - a for a, b in zip(stamps, stamps[1:])]
     assert max(gaps) < 100_000_000  # 100 Hz state, nothing missing in between
+
+
+def test_replay_with_offset_topic_selection_and_remap(recorded, tmp_path, domain_id):
+    _, bag = recorded
+    out = tmp_path / 'remapped'
+    with Stack(StackConfig(scenario='short_line', domain_id=domain_id,
+                           log_dir=tmp_path / 'logs')) as stack:
+        stack.config.log_dir.mkdir(parents=True, exist_ok=True)
+        stack.start_process('recorder', {}, ['-o', str(out), '/replayed/state', '/clock'])
+        replay = subprocess.run(
+            [executable_path('recorder', 'replay'), str(bag), '--rate', '200',
+             '--start-offset', '150', '--topics', '/train/state', '--wait-for-subscribers', '1',
+             '--ros-args', '-r', '/train/state:=/replayed/state'],
+            env=stack.env, capture_output=True, text=True, timeout=300)
+        assert replay.returncode == 0, replay.stderr
+        assert stack.stop()['recorder'] == 0
+    info = bag_info(out)
+    states = [from_time(deserialize_message(m.data, JointTrajectory).header.stamp)
+              for m in read_messages(out, ['/replayed/state'])]
+    assert set(info.topics) == {'/replayed/state', '/clock'}  # the recorded /clock goes along
+    assert min(states) >= 150_000_000_000 and max(states) == 200_000_000_000
+    assert len(states) == info.topics['/replayed/state'].message_count >= 500
+
+
+def test_replay_of_a_broken_file_says_what_is_wrong(tmp_path, domain_id):
+    bogus = tmp_path / 'bogus.mcap'
+    bogus.write_bytes(b'not a bag')
+    result = subprocess.run([executable_path('recorder', 'replay'), str(bogus)],
+                            capture_output=True, text=True, timeout=60,
+                            env=dict(os.environ, ROS_DOMAIN_ID=str(domain_id)))
+    assert result.returncode == 2
+    assert 'is not an MCAP file' in result.stderr and 'Traceback' not in result.stderr

@@ -1,12 +1,13 @@
 """replay: publish a recording's topics with their original timing.
 
     ros2 run recorder replay runs/my_run --rate 10 --start-offset 30 --topics /train/state
-    ros2 run recorder replay runs/my_run --loop --remap /train/state:=/replayed/state
+    ros2 run recorder replay runs/my_run --loop --ros-args -r /train/state:=/replayed/state
 
 Messages go out as the recorded bytes, each topic with the QoS its publishers offered (a latched
 topic is replayed latched). ``/clock`` is replayed as recorded, so nodes with use_sim_time follow
 the recording; a recording without ``/clock`` gets one synthesised from the log times
-(``--no-clock`` turns that off).
+(``--no-clock`` turns both off). /clock is replayed whatever ``--topics`` selects. Topics are renamed with the standard ROS remapping
+(``--ros-args -r from:=to``), which applies to the replay node's publishers.
 """
 
 from __future__ import annotations
@@ -35,10 +36,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                         help='skip this many seconds from the start of the recording')
     parser.add_argument('--loop', action='store_true', help='start again at the end')
     parser.add_argument('--topics', nargs='+', default=None, help='replay only these topics')
-    parser.add_argument('--remap', nargs='+', default=[], metavar='FROM:=TO',
-                        help='publish a topic under another name')
     parser.add_argument('--no-clock', action='store_true',
-                        help='do not synthesise /clock when the recording has none')
+                        help='publish no /clock (by default the recorded one, or one '
+                             'synthesised from the log times when the recording has none)')
     parser.add_argument('--wait-for-subscribers', type=int, default=0,
                         help='wait until every replayed topic has this many subscribers')
     options = parser.parse_args(argv)
@@ -46,9 +46,6 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
         parser.error(f'--rate must be > 0, got {options.rate}')
     if options.start_offset < 0.0:
         parser.error(f'--start-offset must be >= 0, got {options.start_offset}')
-    for item in options.remap:
-        if ':=' not in item:
-            parser.error(f"--remap takes FROM:=TO, got '{item}'")
     return options
 
 
@@ -57,21 +54,25 @@ class Replayer:
         self.node = node
         self.options = options
         self.info = bag_info(options.bag)
-        remaps = dict(item.split(':=', 1) for item in options.remap)
         wanted = set(options.topics) if options.topics else set(self.info.topics)
         unknown = wanted - set(self.info.topics)
         if unknown:
             raise BagError(f'{options.bag} has no topic {", ".join(sorted(unknown))}; it has '
                            f'{", ".join(sorted(self.info.topics))}')
+        recorded_clock = CLOCK_TOPIC in self.info.topics
+        if options.no_clock:
+            wanted.discard(CLOCK_TOPIC)
+        elif recorded_clock:
+            wanted.add(CLOCK_TOPIC)  # nodes with use_sim_time follow the recording
         self.topics = sorted(wanted)
         self.publishers = {}
         for name in self.topics:
             topic = self.info.topics[name]
             self.publishers[name] = node.create_publisher(
-                message_class(topic.type), remaps.get(name, name),
+                message_class(topic.type), name,
                 qos_from_yaml(topic.offered_qos_profiles))
-        self.synthesise_clock = CLOCK_TOPIC not in self.info.topics and not options.no_clock
-        self.clock_pub = (node.create_publisher(Clock, CLOCK_TOPIC, 10)
+        self.synthesise_clock = not recorded_clock and not options.no_clock
+        self.clock_pub = (node.create_publisher(Clock, CLOCK_TOPIC, qos_from_yaml(''))
                           if self.synthesise_clock else None)
         self.published = 0
 
@@ -106,8 +107,10 @@ def main(args=None) -> int:
     try:
         replayer = Replayer(node, options)
         if options.wait_for_subscribers:
+            publishers = list(replayer.publishers.values()) + [
+                p for p in (replayer.clock_pub,) if p is not None]
             while rclpy.ok() and any(p.get_subscription_count() < options.wait_for_subscribers
-                                     for p in replayer.publishers.values()):
+                                     for p in publishers):
                 executor.spin_once(timeout_sec=0.05)
         while True:
             replayer.play_once(executor)
