@@ -1,6 +1,3 @@
-import os
-from glob import glob
-
 from setuptools import find_packages, setup
 
 PACKAGE_NAME = 'ato_controller_node'

@@ -1,6 +1,3 @@
-import os
-from glob import glob
-
 from setuptools import find_packages, setup
 
 PACKAGE_NAME = 'train_plant_node'

@@ -9,7 +9,6 @@ import math
 import os
 import signal
 import sys
-import time
 from typing import Callable, Sequence
 
 import rclpy
@@ -171,18 +170,6 @@ def make_executor(context=None):
             pass
     from rclpy.executors import SingleThreadedExecutor
     return SingleThreadedExecutor(context=context)
-
-
-def spin_until(executor, done: Callable[[], bool], timeout_s: float | None = None,
-               poll_s: float = 0.05) -> bool:
-    """Spin ``executor`` until ``done()``; False on timeout. Loops on spin_once with a timeout
-    because EventsExecutor.spin() without one busy-loops in this rclpy build."""
-    deadline = None if timeout_s is None else time.monotonic() + timeout_s
-    while rclpy.ok() and not done():
-        if deadline is not None and time.monotonic() > deadline:
-            return False
-        executor.spin_once(timeout_sec=poll_s)
-    return done()
 
 
 def run_node(make_node: Callable[[], 'rclpy.node.Node'], args=None) -> int:

@@ -133,8 +133,3 @@ class Trajectory:
         segment = self.segments[bisect_right(self._starts, t) - 1]
         x, v, a = segment.at(t)
         return ReferencePoint(t, x, v, a)
-
-    def jerk_at(self, t: float) -> float:
-        if t < self.start_time or t >= self.end_time:
-            return 0.0
-        return self.segments[bisect_right(self._starts, t) - 1].jerk
