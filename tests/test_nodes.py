@@ -104,7 +104,7 @@ def test_real_time_mode_runs_on_wall_clock_timers(tmp_path, domain_id):
             return [s for _, s in sorted(monitor.samples.items()) if s.command]
 
         # Process start-up takes from under a second to several on a loaded machine.
-        assert stack.spin_until(lambda: len(commands()) > 0, 120.0)
+        assert stack.spin_until(lambda: len(commands()) > 0 and monitor.last_stamp_ns > 0, 120.0)
         first_commands, first_states = len(commands()), len(monitor.complete_samples())
         first_stamp = monitor.last_stamp_ns
         stack.spin_for(8.0)
