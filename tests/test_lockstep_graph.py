@@ -22,7 +22,10 @@ def pid_run(tmp_path_factory):
                                     plant_params=dict(NOISY_PLANT)))
 
 
-def test_every_step_arrives_once_in_order(pid_run):
+def test_every_step_arrives_in_order_and_nothing_is_lost(pid_run):
+    published = int([values for _, name, values, _ in pid_run.diagnostics
+                     if name == 'train_plant_node: simulation'][-1]['steps_published'])
+    assert pid_run.counts['state'] == published  # re-sent steps at start-up included
     stamps = [k for k, _ in pid_run.samples]
     assert stamps[0] == 0
     assert np.all(np.diff(stamps) == PERIOD_NS)

@@ -103,9 +103,10 @@ def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], obj
     if not samples:
         raise RunFailed('the monitor received no state')
     times = [k / NS_PER_S for k, _ in samples]
+    # A state carries the force applied up to it; the force held after sample k is in k+1.
+    applied = [sum(s.forces) for _, s in samples]
     metrics = compute_metrics(times, [s.positions[0] for _, s in samples],
-                              [s.speeds[0] for _, s in samples],
-                              [sum(s.forces) for _, s in samples],
+                              [s.speeds[0] for _, s in samples], applied[1:] + applied[-1:],
                               [s.ref_position for _, s in samples],
                               [s.ref_speed for _, s in samples], stop_samples(plan))
     laws = sorted({s.law for _, s in samples if s.law})

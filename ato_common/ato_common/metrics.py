@@ -4,7 +4,9 @@ The same definitions serve ``make demo``, the tests and reports from recordings:
 - speed and position errors are reference minus truth of the lead car at each control instant;
 - the stopping error at a stop is the lead car's position minus the station position at the end
   of the dwell (or at the end of the run for the last stop);
-- traction energy is the integral of max(F v, 0) dt with the applied force held between samples.
+- traction energy is the work of the traction force: the sum over control intervals of
+  max(F dx, 0), F the force applied (held) from one sample to the next and dx the distance run
+  meanwhile (exact for a held force; braking work is not counted).
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ class RunMetrics:
 
 def compute_metrics(times_s, positions, speeds, forces, ref_positions, ref_speeds,
                     stops: list[StopSample]) -> RunMetrics:
+    """``forces[k]``: the force applied from sample k to sample k+1."""
     t = np.asarray(times_s, dtype=float)
     x = np.asarray(positions, dtype=float)
     v = np.asarray(speeds, dtype=float)
@@ -45,8 +48,7 @@ def compute_metrics(times_s, positions, speeds, forces, ref_positions, ref_speed
     ex = np.asarray(ref_positions, dtype=float) - x
     if t.size == 0:
         raise ValueError('no samples to compute metrics from')
-    power = np.maximum(f * v, 0.0)
-    energy = float(np.sum(power[:-1] * np.diff(t))) if t.size > 1 else 0.0
+    energy = float(np.sum(np.maximum(f[:-1] * np.diff(x), 0.0))) if t.size > 1 else 0.0
     stop_errors = {}
     for stop in stops:
         i = min(int(np.searchsorted(t, stop.time_s, side='right')) - 1, t.size - 1)

@@ -88,9 +88,6 @@ def parse_scenario(data, origin: str = '<memory>') -> Scenario:
         raise ConfigError(f"{train_fields.where}.preset: unknown train '{preset}'; valid: "
                           f"{', '.join(sorted(TRAIN_PRESETS))}")
     train = train_preset(preset)
-    if train_fields.has('mass_t'):
-        train = train.with_overrides(mass_kg=units.tonnes_to_kg(
-            train_fields.number('mass_t', minimum=1.0, maximum=10000.0)))
     train_fields.reject_unknown()
 
     line = parse_line(f.raw('line', required=True), 'line')
@@ -114,6 +111,11 @@ def parse_scenario(data, origin: str = '<memory>') -> Scenario:
         settle_time_s=r.number('settle_time_s', 10.0, minimum=0.0),
     )
     r.reject_unknown()
+    stations = [s.position_m for s in line.stations[:-1]]
+    if run.initial_position_m not in stations:
+        raise ConfigError(f'run.initial_position_m: the run starts at a station other than the '
+                          f'last one ({", ".join(f"{p:g}" for p in stations)} m), got '
+                          f'{run.initial_position_m:g}')
     scenario = Scenario(
         name=f.text('name'), description=f.text('description', ''),
         source=f.text('source', 'suite'), origin=origin, train=train, line=line,

@@ -7,7 +7,7 @@ from the papers' units happen here, through :mod:`ato_common.units`, and nowhere
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 import math
 from typing import Mapping
 
@@ -73,9 +73,6 @@ class TrainParameters:
     actuator_names: tuple[str, ...] = ('traction',)
     length_m: float = 200.0
     sources: Mapping[str, str] = field(default_factory=dict)
-
-    def with_overrides(self, **changes) -> 'TrainParameters':
-        return replace(self, **changes)
 
 
 def _crh3_luo_xu() -> TrainParameters:

@@ -56,6 +56,9 @@ def test_line_lookups_in_si():
     (lambda d: d['planning'].update(max_jerk_mps3=float('nan')), r'max_jerk_mps3: must be'),
     (lambda d: d['line'].update(curves=[{'start_m': 0, 'length_m': 10, 'radius_m': 0}]),
      r'radius_m: must be > 0'),
+    (lambda d: d.update(run={'initial_position_m': 500}),
+     r'run.initial_position_m: the run starts at a station'),
+    (lambda d: d['train'].update(mass_t=600), r'unknown field\(s\) mass_t'),
 ])
 def test_malformed_scenarios_name_the_field(mutate, message):
     data = copy.deepcopy(base())

@@ -84,15 +84,24 @@ class ControllerHost:
 
     def step(self, measurement: Measurement, reference: ReferencePoint) -> StepResult:
         law = self.law
+        inputs = (measurement.position, measurement.speed, reference.position, reference.speed,
+                  reference.acceleration)
+        if not all(math.isfinite(x) for x in inputs):
+            # Hold the last command and leave the law untouched: a non-finite value must not
+            # reach its integrators or estimates.
+            self.faults += 1
+            return self._held(law, 'non-finite measurement or reference; holding the last '
+                              'command', reference, measurement)
         if not self.started:
-            law.reset(measurement, reference, self.last_force_n)
+            law.reset(measurement, reference,
+                      self.last_force_n if self._has_commanded else None)
         output = law.step(measurement, reference)
+        if not math.isfinite(output.force_n):
+            self.faults += 1
+            return self._held(law, f'{law.name} produced a non-finite force; holding the last '
+                              'command', reference, measurement)
         fault = ''
         wanted = output.force_n
-        if not math.isfinite(wanted):
-            fault = f'{law.name} produced a non-finite force; holding the last command'
-            self.faults += 1
-            wanted = self.last_force_n
         if not self.started:
             # Nothing to be bumpless to before the first command.
             self._offset_n = self.last_force_n - wanted if self._has_commanded else 0.0
@@ -105,8 +114,16 @@ class ControllerHost:
         law.after_saturation(wanted - self._offset_n, total - self._offset_n)
         self.last_force_n = total
         self._has_commanded = True
+        return self._result(total, wanted, law, dict(output.estimates), reference, measurement,
+                            fault)
+
+    def _result(self, total, wanted, law, estimates, reference, measurement, fault):
         share = total / len(self.train.actuator_names)
         return StepResult(total, (share,) * len(self.train.actuator_names), wanted,
-                          total != wanted, law.name, dict(output.estimates),
+                          total != wanted, law.name, estimates,
                           reference.speed - measurement.speed,
                           reference.position - measurement.position, fault)
+
+    def _held(self, law, fault, reference, measurement) -> StepResult:
+        return self._result(self.last_force_n, self.last_force_n, law, {}, reference,
+                            measurement, fault)

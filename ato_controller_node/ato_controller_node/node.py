@@ -25,7 +25,7 @@ from ato_common.params import Param, ParameterTable
 from ato_common.ros import (MessageError, command_to_msg, diagnostic_status, qos_profile,
                             reference_from_msg, run_node, state_from_msg, to_time, topic)
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
-from ato_common.types import Command, seconds
+from ato_common.types import Command, Reference, ReferencePoint, seconds
 from ato_controller_node.host import ControllerHost, LawRejected
 from ato_controller_node.laws import LAWS
 from ato_common.validation import ConfigError
@@ -47,6 +47,21 @@ NODE_PARAMS = (
     Param('diagnostics_period_s', 1.0, 'period of the diagnostics, s of (simulated) time',
           minimum=0.01, maximum=3600.0, read_only=False),
 )
+
+
+def reference_now(reference: Reference, now_ns: int) -> ReferencePoint:
+    """Real time: the latest reference brought forward to now along its preview (from the last
+    preview point not after now, with its speed and acceleration)."""
+    elapsed = seconds(now_ns - reference.stamp_ns)
+    t0 = reference.points[0].time_s
+    base = reference.points[0]
+    for point in reference.points:
+        if point.time_s - t0 <= elapsed:
+            base = point
+    dt = elapsed - (base.time_s - t0)
+    return ReferencePoint(base.time_s + dt,
+                          base.position + dt * (base.speed + 0.5 * dt * base.acceleration),
+                          base.speed + dt * base.acceleration, base.acceleration)
 
 
 def gain_params() -> list[Param]:
@@ -197,13 +212,8 @@ class AtoControllerNode(Node):
         if state is None or reference is None:
             return
         now_ns = self.get_clock().now().nanoseconds
-        # Bring the latest reference forward to now along its preview (real time).
-        ref_point = reference.points[0]
-        for point in reference.points:
-            if point.time_s - reference.points[0].time_s <= seconds(now_ns - reference.stamp_ns):
-                ref_point = point
-        self.step(now_ns, state, type(reference)(reference.stamp_ns, (ref_point,)),
-                  ref_point.time_s)
+        self.step(now_ns, state, Reference(now_ns, (reference_now(reference, now_ns),)),
+                  seconds(now_ns))
 
     # --- the step -----------------------------------------------------------------------------
     def step(self, stamp_ns: int, state, reference, time_s: float) -> None:

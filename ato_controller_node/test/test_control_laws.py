@@ -77,13 +77,15 @@ def test_host_saturates_to_the_traction_characteristic(train):
 @pytest.mark.parametrize('first, second', [('pid', 'luo_xu'), ('luo_xu', 'pid')])
 def test_switch_is_bumpless(train, first, second):
     host = ControllerHost(train, 0.1, first)
-    m, r = Measurement(0.0, 1000.0, 50.0), ReferencePoint(0.0, 1003.0, 50.5, 0.1)
+    m, r = Measurement(0.0, 1000.0, 50.0), ReferencePoint(0.0, 1000.2, 50.05, 0.0)
     for _ in range(50):
         before = host.step(m, r).total_force_n
     host.select(second)
     after = host.step(m, r)
     assert after.law == second
     assert after.total_force_n == pytest.approx(before, rel=1e-6, abs=1.0)
+    if second == 'pid':  # the PID takes over through its integrator, with no offset to decay
+        assert host._offset_n == pytest.approx(0.0, abs=1.0)
 
 
 def test_switching_mid_run_keeps_tracking(scenario):
@@ -111,9 +113,34 @@ def test_settings_are_validated_with_the_field_named(train):
     assert host.law.settings.kd_speed == 2.0
 
 
-def test_non_finite_law_output_never_reaches_the_command(train, monkeypatch):
+@pytest.mark.parametrize('law', ['pid', 'luo_xu'])
+@pytest.mark.parametrize('bad', [Measurement(0.0, math.nan, 10.0),
+                                 Measurement(0.0, 0.0, math.inf),
+                                 Measurement(0.0, -math.inf, math.nan)])
+def test_non_finite_measurements_hold_the_command_and_do_not_poison_the_law(train, law, bad):
+    host = ControllerHost(train, 0.1, law)
+    good = Measurement(0.0, 100.0, 10.0)
+    ref = ReferencePoint(0.0, 101.0, 10.0, 0.0)
+    held = host.step(good, ref).total_force_n
+    for _ in range(5):
+        result = host.step(bad, ref)
+        assert result.fault and result.total_force_n == held
+        assert all(math.isfinite(f) for f in result.forces_n)
+    recovered = host.step(good, ref)
+    assert not recovered.fault and math.isfinite(recovered.total_force_n)
+    assert all(math.isfinite(v) for v in recovered.estimates.values())
+
+
+def test_pid_integral_does_not_wind_up_while_ki_is_zero(train):
+    host = ControllerHost(train, 0.1, 'pid', {'pid': {'ki_position': 0.0}})
+    m, r = Measurement(0.0, 100.0, 10.0), ReferencePoint(0.0, 100.5, 10.0, 0.0)
+    for _ in range(3000):
+        before = host.step(m, r).total_force_n
+    host.update_settings('pid', {'ki_position': 0.064})
+    assert host.step(m, r).total_force_n == pytest.approx(before, abs=0.01 * 510e3 * 0.1)
+
+
+def test_pid_starts_without_a_preloaded_integral(train):
     host = ControllerHost(train, 0.1, 'pid')
-    host.step(Measurement(0.0, 0.0, 10.0), ReferencePoint(0.0, 0.0, 10.0, 0.0))
-    result = host.step(Measurement(0.1, 0.0, float('nan')), ReferencePoint(0.1, 1.0, 10.0, 0.0))
-    assert all(math.isfinite(f) for f in result.forces_n)
-    assert result.fault
+    result = host.step(Measurement(0.0, 0.0, 0.0), ReferencePoint(0.0, 0.0, 0.0, 0.0))
+    assert result.estimates['integral_action_mps2'] == 0.0

@@ -92,9 +92,11 @@ class ProfileNode(Node):
                                          for i in range(count + 1)))
 
     def publish(self, stamp_ns: int) -> None:
-        reference = self.reference_at(stamp_ns)
-        self.reference_pub.publish(reference_to_msg(reference))
-        now = reference.now
+        self.reference_pub.publish(reference_to_msg(self.reference_at(stamp_ns)))
+
+    def publish_supervision(self, stamp_ns: int) -> None:
+        """Distance to go and permitted speed now (unstamped: only ever for the current tick)."""
+        now = self.trajectory.at(seconds(stamp_ns - self.time_origin_ns))
         stop = self.plan.next_stop(now.time_s)
         self.dtg_pub.publish(Float64(data=stop.station.position_m - now.position))
         self.permitted_pub.publish(Float64(data=self.scenario.line.speed_limit_mps(now.position)))
@@ -105,6 +107,7 @@ class ProfileNode(Node):
         tick = from_time(msg.clock)
         if tick != self.sent_ahead_ns or tick == self.last_tick_ns:
             self.publish(tick)  # not sent ahead, or the plant re-sent the tick
+        self.publish_supervision(tick)
         if self.last_tick_ns is not None and tick > self.last_tick_ns:
             self.sent_ahead_ns = 2 * tick - self.last_tick_ns
             self.publish(self.sent_ahead_ns)
@@ -118,7 +121,9 @@ class ProfileNode(Node):
 
     def on_timer(self) -> None:
         if self.time_origin_ns is not None:
-            self.publish(self.get_clock().now().nanoseconds)
+            now = self.get_clock().now().nanoseconds
+            self.publish(now)
+            self.publish_supervision(now)
 
 
 def main(args=None) -> int:

@@ -74,23 +74,27 @@ class TrajectoryBuilder:
             remaining = target_speed - self.v
             if remaining <= 1e-12:
                 break
-            if self.a <= 0.0 and remaining <= min_acceleration ** 2 / jerk:
-                # Too close to reach even the minimum acceleration: a symmetric triangle.
-                peak = math.sqrt(remaining * jerk)
-                self.add(peak / jerk, jerk)
-                self.add(peak / jerk, -jerk)
+            if self.a > 0.0 and remaining <= self.a * self.a / (2.0 * jerk) + 1e-12:
+                ramp_jerk = self.a * self.a / (2.0 * remaining)
+                self.add(self.a / ramp_jerk, -ramp_jerk)
                 break
             predicted = self.v + self.a * step_s
             wanted = max(min(capability(predicted), capability(self.v)), min_acceleration)
             j = min(max((wanted - self.a) / step_s, -jerk), jerk)
             a_end = self.a + j * step_s
             v_end = self.v + step_s * (self.a + 0.5 * j * step_s)
-            if self.a > 0.0 and target_speed - v_end <= a_end * a_end / (2.0 * jerk):
-                # The ramp-down to zero acceleration must start within this step: hold the
-                # acceleration until exactly that point, then ramp down at full jerk.
-                hold = (remaining - self.a * self.a / (2.0 * jerk)) / self.a
-                self.add(max(hold, 0.0), 0.0)
-                self.add(self.a / jerk, -jerk)
+            if target_speed - v_end <= a_end * a_end / (2.0 * jerk):
+                # The ramp-down to zero acceleration must start within this step.
+                if self.a <= 0.0:
+                    # From zero acceleration: a symmetric triangle ends exactly at the target.
+                    peak = math.sqrt(remaining * jerk)
+                    self.add(peak / jerk, jerk)
+                    self.add(peak / jerk, -jerk)
+                else:
+                    # Hold the acceleration until exactly that point, then ramp down.
+                    hold = (remaining - self.a * self.a / (2.0 * jerk)) / self.a
+                    self.add(max(hold, 0.0), 0.0)
+                    self.add(self.a / jerk, -jerk)
                 break
             self.add(step_s, j)
         self.v, self.a = target_speed, 0.0

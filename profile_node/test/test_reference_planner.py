@@ -62,11 +62,29 @@ def test_next_stop_and_distance_to_go(plan):
     assert plan.next_stop(1e9) is second
 
 
+def end_of_segments(builder):
+    last = builder.segments[-1]
+    return last.at(last.t0 + last.duration)
+
+
 def test_s_curve_speed_change_distance_is_exact():
     builder = TrajectoryBuilder()
     builder.speed_change(50.0, 0.5, 0.2)
-    assert builder.x == pytest.approx(speed_change_distance(0.0, 50.0, 0.5, 0.2), rel=1e-12)
-    assert builder.v == 50.0
+    x, v, a = end_of_segments(builder)
+    assert x == pytest.approx(speed_change_distance(0.0, 50.0, 0.5, 0.2), rel=1e-12)
+    assert v == pytest.approx(50.0, abs=1e-9) and a == pytest.approx(0.0, abs=1e-12)
     short = TrajectoryBuilder()
     short.speed_change(0.5, 0.5, 0.2)  # too small to reach the acceleration limit
     assert max(abs(s.a0) for s in short.segments) < 0.5
+
+
+@pytest.mark.parametrize('target', [0.001, 0.004, 0.02, 0.05, 0.08, 0.12, 0.5, 3.0, 30.0, 80.0])
+def test_traction_phase_ends_exactly_at_any_target_speed(target):
+    jerk = 0.1
+    builder = TrajectoryBuilder()
+    builder.accelerate_to(target, lambda v: 0.4 - 0.003 * v, jerk, 0.02)
+    x, v, a = end_of_segments(builder)
+    assert v == pytest.approx(target, rel=1e-9, abs=1e-9)
+    assert a == pytest.approx(0.0, abs=1e-9)
+    assert max(abs(s.jerk) for s in builder.segments) <= jerk + 1e-12
+    assert max(s.a0 for s in builder.segments) <= 0.4 + 1e-9

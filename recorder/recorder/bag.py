@@ -24,16 +24,20 @@ from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 import yaml
+import zstandard
 
 from recorder.definitions import DefinitionNotFound, full_definition
 
 log = logging.getLogger(__name__)
 
-# What the mcap library raises on damaged data, depending on where the damage is.
-READ_ERRORS = (McapError, ValueError, EOFError, KeyError, struct.error)
+# What the mcap library and its decompressors raise on damaged data, depending on where the
+# damage is.
+READ_ERRORS = (McapError, ValueError, EOFError, KeyError, struct.error, zstandard.ZstdError,
+               RuntimeError)
 
 METADATA_FILE = 'metadata.yaml'
-ROSBAG2_METADATA_VERSION = 9
+# Version 8: offered_qos_profiles as one YAML string with numeric policies (version 9 lists them).
+ROSBAG2_METADATA_VERSION = 8
 DEFAULT_CHUNK_SIZE = 256 * 1024
 DEFAULT_FLUSH_PERIOD_S = 0.5
 
@@ -74,6 +78,10 @@ class BagWriter:
     def __init__(self, folder: Path, compression: str = 'zstd',
                  chunk_size: int = DEFAULT_CHUNK_SIZE,
                  flush_period_s: float = DEFAULT_FLUSH_PERIOD_S):
+        kinds = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
+                 'none': CompressionType.NONE}
+        if compression not in kinds:
+            raise BagError(f"compression '{compression}' is not one of {', '.join(kinds)}")
         self.folder = Path(folder)
         if self.folder.exists() and any(self.folder.iterdir()):
             raise BagError(f'{self.folder} exists and is not empty: choose another output folder')
@@ -83,10 +91,6 @@ class BagWriter:
             self._file: BinaryIO = open(self.path, 'wb')
         except OSError as error:
             raise BagError(f'cannot create {self.folder}: {error.strerror}') from None
-        kinds = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
-                 'none': CompressionType.NONE}
-        if compression not in kinds:
-            raise BagError(f"compression '{compression}' is not one of {', '.join(kinds)}")
         self._writer = Writer(self._file, chunk_size=chunk_size, compression=kinds[compression])
         self._writer.start(profile='ros2', library='ato-emulator recorder')
         self.flush_period_s = flush_period_s
@@ -215,7 +219,7 @@ def read_messages(path: Path, topics: list[str] | None = None) -> Iterator[BagMe
     file = resolve(path)
     try:
         with open(file, 'rb') as stream:
-            reader = make_reader(stream)
+            reader = make_reader(stream, validate_crcs=True)  # damage is an error, not data
             try:
                 summary = reader.get_summary()
             except READ_ERRORS as error:
@@ -223,9 +227,19 @@ def read_messages(path: Path, topics: list[str] | None = None) -> Iterator[BagMe
             if summary is None:
                 raise BagError(f'{file} has no summary section: it was not closed (a killed '
                                f'recording?); recover it with: ros2 run recorder recover {file}')
+            read = 0
             for schema, channel, message in reader.iter_messages(topics=topics):
+                read += 1
                 yield BagMessage(channel.topic, schema.name if schema else '', message.log_time,
                                  message.publish_time, message.data, channel, schema)
+            # The index can hide damage (a broken chunk may just yield nothing): count.
+            expected = sum(count for cid, count in summary.statistics.channel_message_counts
+                           .items() if topics is None or summary.channels[cid].topic in topics
+                           ) if summary.statistics else read
+            if read != expected:
+                raise BagError(f'{file} is damaged: {expected - read} of {expected} messages '
+                               f'could not be read; recover what it holds with: '
+                               f'ros2 run recorder recover {file}')
     except BagError:
         raise
     except READ_ERRORS as error:
@@ -235,9 +249,12 @@ def read_messages(path: Path, topics: list[str] | None = None) -> Iterator[BagMe
 
 
 def _explain(file: Path, error: Exception) -> BagError:
-    size = file.stat().st_size if file.exists() else 0
-    with open(file, 'rb') as stream:
-        head = stream.read(8)
+    try:
+        size = file.stat().st_size
+        with open(file, 'rb') as stream:
+            head = stream.read(8)
+    except OSError as os_error:
+        return BagError(f'{file}: cannot read: {os_error.strerror}')
     if not head.startswith(b'\x89MCAP'):
         return BagError(f'{file} is not an MCAP file (it does not start with the MCAP magic)')
     return BagError(f'{file} ({size} bytes) is truncated or corrupt: {type(error).__name__}: '
@@ -267,50 +284,62 @@ def bag_info(path: Path) -> BagInfo:
 def recover(path: Path) -> tuple[BagInfo, int]:
     """Rewrite what a damaged (e.g. SIGKILLed) MCAP holds into a valid bag at the same place.
 
-    Reads records in file order until the data ends or breaks; the damaged file is kept next to
-    it as ``.damaged``. Returns the new bag's info and the number of bytes that could not be read.
+    Reads records in file order until the data ends or breaks, writes them to a new file, and
+    only then moves the damaged file aside (as ``.damaged``) and the new one into its place, so a
+    failure half-way leaves the original untouched. Returns the new bag's info and the number of
+    bytes that could not be read.
     """
     file = resolve(path)
     damaged = file.with_name(file.name + '.damaged')
     if damaged.exists():
         raise BagError(f'{damaged} exists already: move it away first')
-    file.replace(damaged)
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
     messages: list[Message] = []
     consumed = 0
-    with open(damaged, 'rb') as stream:
-        reader = StreamReader(stream, skip_magic=False, emit_chunks=False)
-        try:
-            for record in reader.records:
-                if isinstance(record, Schema):
-                    schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, Message):
-                    messages.append(record)
-                consumed = stream.tell()
-        except READ_ERRORS as error:
-            log.info('stopped reading %s: %s', damaged, error)
-    lost = damaged.stat().st_size - consumed
-    folder = file.parent
-    temporary = folder / (file.name + '.recovering')
-    with open(temporary, 'wb') as out:
-        writer = Writer(out, compression=CompressionType.ZSTD)
-        writer.start(profile='ros2', library='ato-emulator recorder (recovered)')
-        schema_ids = {sid: writer.register_schema(s.name, s.encoding, s.data)
-                      for sid, s in schemas.items()}
-        channel_ids = {cid: writer.register_channel(c.topic, c.message_encoding,
-                                                    schema_ids.get(c.schema_id, 0), c.metadata)
-                       for cid, c in channels.items()}
-        counts: dict[int, int] = {}
-        for m in sorted(messages, key=lambda m: m.log_time):
-            if m.channel_id in channel_ids:
-                writer.add_message(channel_ids[m.channel_id], m.log_time, m.data,
-                                   m.publish_time, m.sequence)
-                counts[m.channel_id] = counts.get(m.channel_id, 0) + 1
-        writer.finish()
-    temporary.replace(file)
+    try:
+        with open(file, 'rb') as stream:
+            reader = StreamReader(stream, skip_magic=False, emit_chunks=False)
+            try:
+                for record in reader.records:
+                    if isinstance(record, Schema):
+                        schemas[record.id] = record
+                    elif isinstance(record, Channel):
+                        channels[record.id] = record
+                    elif isinstance(record, Message):
+                        messages.append(record)
+                    consumed = stream.tell()
+            except READ_ERRORS as error:
+                log.info('stopped reading %s: %s', file, error)
+        lost = file.stat().st_size - consumed
+    except OSError as error:
+        raise BagError(f'{file}: cannot read: {error.strerror}') from None
+    temporary = file.with_name(file.name + '.recovering')
+    counts: dict[int, int] = {}
+    try:
+        with open(temporary, 'wb') as out:
+            writer = Writer(out, compression=CompressionType.ZSTD)
+            writer.start(profile='ros2', library='ato-emulator recorder (recovered)')
+            schema_ids = {sid: writer.register_schema(s.name, s.encoding, s.data)
+                          for sid, s in schemas.items()}
+            channel_ids = {cid: writer.register_channel(c.topic, c.message_encoding,
+                                                        schema_ids.get(c.schema_id, 0),
+                                                        c.metadata)
+                           for cid, c in channels.items()}
+            for m in sorted(messages, key=lambda m: m.log_time):
+                if m.channel_id in channel_ids:
+                    writer.add_message(channel_ids[m.channel_id], m.log_time, m.data,
+                                       m.publish_time, m.sequence)
+                    counts[m.channel_id] = counts.get(m.channel_id, 0) + 1
+            writer.finish()
+            out.flush()
+            os.fsync(out.fileno())
+        file.replace(damaged)
+        temporary.replace(file)
+    except OSError as error:
+        temporary.unlink(missing_ok=True)
+        raise BagError(f'cannot write the recovered bag next to {file}: {error.strerror}; '
+                       'the damaged file is unchanged') from None
     times = [m.log_time for m in messages] or [0]
     topics = {c.topic: TopicInfo(c.topic, schemas[c.schema_id].name if c.schema_id in schemas
                                  else '', c.metadata.get('offered_qos_profiles', ''),

@@ -120,7 +120,9 @@ def load_run(bag: Path) -> RunData:
 
 
 def run_metrics(data: RunData) -> RunMetrics:
-    return compute_metrics(data.stamps_ns / 1e9, data.positions, data.speeds, data.applied,
+    # A state carries the force applied up to it; the force held after sample k is in k+1.
+    held = np.append(data.applied[1:], data.applied[-1:])
+    return compute_metrics(data.stamps_ns / 1e9, data.positions, data.speeds, held,
                            data.ref_positions, data.ref_speeds, data.stops)
 
 

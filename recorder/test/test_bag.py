@@ -150,3 +150,18 @@ def test_offered_qos_round_trip_keeps_latched_topics_latched():
         DurabilityPolicy.VOLATILE
     mixed = qos_to_yaml([latched, QoSProfile(depth=5)])
     assert qos_from_yaml(mixed).durability == DurabilityPolicy.VOLATILE
+
+
+def test_a_corrupt_chunk_gives_a_clear_error_and_recover_keeps_the_original_safe(tmp_path):
+    write_bag(tmp_path / 'run', count=2000, chunk_size=4096).close()
+    file = bag_file(tmp_path / 'run')
+    data = bytearray(file.read_bytes())
+    middle = len(data) // 2
+    data[middle:middle + 200] = bytes(200)
+    file.write_bytes(bytes(data))
+    with pytest.raises(BagError, match='(truncated or corrupt|is damaged).*recover'):
+        list(read_messages(tmp_path / 'run'))
+    info, _ = recover(tmp_path / 'run')
+    assert 0 < info.message_count < 2000
+    assert (file.parent / (file.name + '.damaged')).read_bytes() == bytes(data)
+    assert len(list(read_messages(tmp_path / 'run'))) == info.message_count

@@ -52,6 +52,11 @@ def test_train_does_not_roll_backwards_and_needs_breakaway_force():
     model = make_model('point_mass', scenario.train, scenario.line)
     state = model.step(model.initial_state(0.0, 0.0), 10.0, (0.0,))
     assert state[1] == 0.0 and state[0] == 0.0
+    # on the 5 per mille climb it takes the grade force plus the constant Davis term to start
+    holding = scenario.train.mass_kg * 9.80665 * math.sin(math.atan(0.005)) + \
+        scenario.train.davis.a_n
+    assert model.step(model.initial_state(0.0, 0.0), 10.0, (0.99 * holding,))[1] == 0.0
+    assert model.step(model.initial_state(0.0, 0.0), 10.0, (1.01 * holding,))[1] > 0.0
     state = model.step(model.initial_state(0.0, 1.0), 60.0, (-200e3,))
     assert state[1] == 0.0
 

@@ -105,9 +105,10 @@ class ControlLaw(ABC):
 
     @abstractmethod
     def reset(self, measurement: Measurement, reference: ReferencePoint,
-              last_force_n: float) -> None:
+              last_force_n: float | None) -> None:
         """Start (or take over) control from this state; ``last_force_n`` is what was
-        commanded last, so a law with an integrator can start from it (bumpless transfer)."""
+        commanded last (None before the first command), so a law with an integrator can start
+        from it (bumpless transfer)."""
 
     @abstractmethod
     def step(self, measurement: Measurement, reference: ReferencePoint) -> LawOutput:

@@ -60,9 +60,19 @@ class PidLaw(ControlLaw):
             self.integral = min(max(self.integral, -bound), bound)
 
     def reset(self, measurement, reference, last_force_n):
-        base, per_action = self._unbounded_parts(measurement, reference)
         ki = self.settings.ki_position
-        self.integral = (last_force_n - base) / per_action / ki if ki > 0.0 else 0.0
+        if last_force_n is None or ki <= 0.0:
+            self.integral = 0.0  # nothing to take over from
+            return
+        base, per_action = self._unbounded_parts(measurement, reference)
+        self.integral = (last_force_n - base) / per_action / ki
+        self._clamp_integral()
+
+    def update_settings(self, settings) -> None:
+        # Keep the integral action ki*I across a change of ki, so a gain change is bumpless.
+        old_ki, new_ki = self.settings.ki_position, settings.ki_position
+        self.integral = self.integral * old_ki / new_ki if old_ki > 0.0 and new_ki > 0.0 else 0.0
+        super().update_settings(settings)
         self._clamp_integral()
 
     def step(self, measurement, reference):
@@ -77,5 +87,7 @@ class PidLaw(ControlLaw):
         saturated_low = commanded_n > wanted_n
         if (saturated_high and error > 0.0) or (saturated_low and error < 0.0):
             return  # integrating would push further into the limit
+        if self.settings.ki_position <= 0.0:
+            return  # no integral action: do not store a state that a later ki would release
         self.integral += error * self.dt
         self._clamp_integral()
