@@ -16,8 +16,8 @@ def config(domain_id, tmp_path, name, **kwargs):
 
 
 @pytest.fixture(scope='module')
-def pid_run(tmp_path_factory):
-    return run_lockstep(StackConfig(scenario='short_line', domain_id=190,
+def pid_run(tmp_path_factory, session_domain):
+    return run_lockstep(StackConfig(scenario='short_line', domain_id=session_domain,
                                     log_dir=tmp_path_factory.mktemp('pid'),
                                     plant_params=dict(NOISY_PLANT)))
 
@@ -54,6 +54,8 @@ def test_diagnostics_name_the_law_and_report_errors(pid_run):
     plant_status = [values for _, name, values, _ in pid_run.diagnostics
                     if name == 'train_plant_node: simulation']
     assert plant_status and plant_status[-1]['rejected_commands'] == '0'
+    assert plant_status[-1]['atp_interventions'] == '0'   # the ATO stays under the curve
+    assert plant_status[-1]['watchdog'] == 'normal'
 
 
 def test_two_lockstep_runs_give_identical_state_sequences(pid_run, tmp_path, domain_id):

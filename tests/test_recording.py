@@ -24,9 +24,10 @@ LOOP_TOPICS = ['/clock', '/train/state', '/train/state/measured', '/ato/referenc
 
 
 @pytest.fixture(scope='module')
-def recorded(tmp_path_factory):
+def recorded(tmp_path_factory, session_domain):
     folder = tmp_path_factory.mktemp('recorded')
-    outcome = run_lockstep(StackConfig(scenario='short_line', domain_id=191, end_time_s=200.0,
+    outcome = run_lockstep(StackConfig(scenario='short_line', domain_id=session_domain,
+                                       end_time_s=200.0,
                                        log_dir=folder / 'logs', record_to=folder / 'bag'))
     return outcome, folder / 'bag'
 

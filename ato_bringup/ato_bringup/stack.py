@@ -189,6 +189,7 @@ class Stack:
 
     def start_process(self, name: str, params: dict, args: list[str] = ()) -> subprocess.Popen:
         package, executable = EXECUTABLES[name]
+        self.config.log_dir.mkdir(parents=True, exist_ok=True)
         log = self.config.log_dir / f'{name}.log'
         self.logs[name] = log
         with open(log, 'ab') as out:

@@ -24,8 +24,10 @@ from ato_common.ros import (MessageError, command_from_msg, diagnostic_status, q
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import TrainState, nanoseconds, seconds
 from train_plant_node.models import MODELS
-from train_plant_node.simulation import (CommandRejected, SensorSettings, TrainSimulation,
-                                         control_period_ns)
+from ato_common import units
+from ato_common.validation import ConfigError
+from train_plant_node.simulation import (NORMAL, CommandRejected, SafetySettings,
+                                         SensorSettings, TrainSimulation, control_period_ns)
 
 PARAMS = (
     Param('scenario', DEFAULT_SCENARIO, 'built-in scenario name or path to a scenario YAML file'),
@@ -54,6 +56,12 @@ PARAMS = (
     Param('sensor_speed_noise_mps', 0.0, 'standard deviation of speed measurement noise, m/s',
           minimum=0.0, maximum=10.0),
     Param('seed', 0, 'seed of the sensor noise', minimum=0, maximum=2**31 - 1),
+    Param('watchdog_periods', 3, 'control periods without a valid command before service '
+          'braking', minimum=1, maximum=1000),
+    Param('emergency_periods', 10, 'control periods without a valid command before emergency '
+          'braking', minimum=1, maximum=10000),
+    Param('overspeed_margin_kmh', 5.0, 'ATP: emergency brake intervention above the permitted '
+          'speed plus this margin, km/h', minimum=0.0, maximum=100.0),
 )
 
 DIAGNOSTIC_PERIOD_S = 1.0
@@ -70,10 +78,18 @@ class TrainPlantNode(Node):
         self.period_ns = (control_period_ns(rate) if self.lockstep
                           else control_period_ns(p['real_time_rate_hz']))
         self.end_ns = nanoseconds(p['end_time_s'])
+        if p['emergency_periods'] < p['watchdog_periods']:
+            raise ConfigError(f"emergency_periods ({p['emergency_periods']}) must not be below "
+                              f"watchdog_periods ({p['watchdog_periods']})")
+        self.control_period_ns = control_period_ns(rate)
         self.sim = TrainSimulation(
             self.scenario, p['model'],
             SensorSettings(p['sensor_position_noise_m'], p['sensor_speed_noise_mps'], p['seed']),
+            SafetySettings(p['watchdog_periods'], p['emergency_periods'],
+                           units.kmh_to_mps(p['overspeed_margin_kmh'])),
             max_substep_s=p['max_substep_s'])
+        self.last_valid_command_wall = time.monotonic()
+        self.safety_state = (NORMAL, False)
         self.finished = False
         self.started = False
         self.last_rejection = ''
@@ -126,6 +142,11 @@ class TrainPlantNode(Node):
         self.measured_pub.publish(measured_msg)
         self.steps_published += 1
         self.last_publish_wall = time.monotonic()
+        safety_state = (self.sim.watchdog, self.sim.atp_intervention)
+        if safety_state != self.safety_state:  # report a safety reaction at once
+            self.safety_state = safety_state
+            self.log_safety()
+            self.next_diagnostic_ns = 0
         if self.sim.stamp_ns >= self.next_diagnostic_ns:
             self.publish_diagnostics()
             self.next_diagnostic_ns = self.sim.stamp_ns + nanoseconds(DIAGNOSTIC_PERIOD_S)
@@ -137,15 +158,38 @@ class TrainPlantNode(Node):
         msg.points[0].time_from_start = to_duration(seconds(state.stamp_ns))
         return msg
 
+    def safety_message(self) -> str:
+        sim = self.sim
+        if sim.atp_intervention:
+            return (f'ATP emergency brake intervention: {units.mps_to_kmh(sim._speed()):.1f} km/h '
+                    f'over the permitted {units.mps_to_kmh(sim.permitted_speed()):.0f} km/h')
+        if sim.watchdog != NORMAL:
+            return (f'command watchdog: {sim.watchdog} after {sim.missed_periods} control '
+                    'periods without a valid command')
+        return ''
+
+    def log_safety(self) -> None:
+        message = self.safety_message()
+        if message:
+            self.get_logger().error(message)
+        else:
+            self.get_logger().info('safety functions released: the ATO is in control again')
+
     def publish_diagnostics(self) -> None:
-        level = DiagnosticStatus.WARN if self.last_rejection else DiagnosticStatus.OK
+        safety = self.safety_message()
+        level = (DiagnosticStatus.ERROR if safety else
+                 DiagnosticStatus.WARN if self.last_rejection else DiagnosticStatus.OK)
         status = diagnostic_status(
             'train_plant_node: simulation', self.scenario.train.name, level,
-            self.last_rejection or 'running',
+            safety or self.last_rejection or 'running',
             {'time_s': self.sim.time_s, 'commanded_n': list(self.sim.commanded),
              'applied_n': list(self.sim.applied),
              'rejected_commands': self.sim.rejected_commands,
-             'steps_published': self.steps_published})
+             'steps_published': self.steps_published,
+             'watchdog': self.sim.watchdog, 'missed_periods': self.sim.missed_periods,
+             'atp_intervention': self.sim.atp_intervention,
+             'atp_interventions': self.sim.atp_interventions,
+             'permitted_speed_mps': self.sim.permitted_speed()})
         self.diag_pub.publish(DiagnosticArray(header=self._header(), status=[status]))
 
     def _header(self) -> Header:
@@ -171,6 +215,10 @@ class TrainPlantNode(Node):
             if time.monotonic() - self.last_publish_wall >= self.params['resend_period_s']:
                 self.publish_step()  # the command for this step has not come: say it again
         else:
+            missed = int((time.monotonic() - self.last_valid_command_wall) * 1e9
+                         // self.control_period_ns)
+            if missed > 0:
+                self.sim.command_missed(missed)
             # Keep simulated time on the wall clock: a late timer tick is caught up with
             # several fixed steps (at most a second's worth), and the last state is published.
             behind_ns = self.get_clock().now().nanoseconds - self.wall_start_ns - self.sim.stamp_ns
@@ -187,6 +235,7 @@ class TrainPlantNode(Node):
             if self.lockstep and command.stamp_ns != self.stamp_ns():
                 return  # a re-sent or late command for another step
             self.sim.apply_command(command.forces)
+            self.last_valid_command_wall = time.monotonic()
             if self.last_rejection:
                 self.get_logger().info('valid commands again')
                 self.last_rejection = ''
@@ -198,6 +247,8 @@ class TrainPlantNode(Node):
             self.publish_diagnostics()
             if self.lockstep and self._stamp_of(msg) != self.stamp_ns():
                 return
+            if self.lockstep:
+                self.sim.command_missed()  # this step's command was not valid
         if self.lockstep:
             self.advance()
 

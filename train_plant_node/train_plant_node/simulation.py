@@ -23,6 +23,18 @@ class CommandRejected(ValueError):
 
 
 @dataclass(frozen=True)
+class SafetySettings:
+    """What the on-board safety functions of the plant do (see ``TrainSimulation``)."""
+
+    watchdog_periods: int = 3      # control periods without a valid command before service braking
+    emergency_periods: int = 10    # ... before emergency braking
+    overspeed_margin_mps: float = 5.0 / 3.6  # ATP intervention above the permitted speed + this
+
+
+NORMAL, SERVICE_BRAKE, EMERGENCY_BRAKE = 'normal', 'service brake', 'emergency brake'
+
+
+@dataclass(frozen=True)
 class SensorSettings:
     position_noise_m: float = 0.0   # standard deviation of white noise on each measurement
     speed_noise_mps: float = 0.0
@@ -30,8 +42,19 @@ class SensorSettings:
 
 
 class TrainSimulation:
+    """The plant with its safety functions, which override the ATO command:
+
+    - command watchdog: after ``watchdog_periods`` control periods without a valid command the
+      train is service-braked, after ``emergency_periods`` emergency-braked; a valid command
+      ends it;
+    - ATP supervision: above the permitted speed (the line's static limit) plus the margin, an
+      emergency brake intervention that the ATO cannot override until the train is back at or
+      under the permitted speed.
+    """
+
     def __init__(self, scenario: Scenario, model_name: str = 'point_mass',
-                 sensors: SensorSettings = SensorSettings(), **model_options):
+                 sensors: SensorSettings = SensorSettings(),
+                 safety: SafetySettings = SafetySettings(), **model_options):
         self.scenario = scenario
         self.model: PlantModel = make_model(model_name, scenario.train, scenario.line,
                                             **model_options)
@@ -43,6 +66,10 @@ class TrainSimulation:
         self.commanded = (0.0,) * n
         self.applied = (0.0,) * n
         self.rejected_commands = 0
+        self.safety = safety
+        self.missed_periods = 0
+        self.atp_intervention = False
+        self.atp_interventions = 0
 
     @property
     def time_s(self) -> float:
@@ -68,19 +95,57 @@ class TrainSimulation:
         if not all(math.isfinite(f) for f in values):
             self.rejected_commands += 1
             raise CommandRejected(f'non-finite force in {list(values)}')
-        # Physical limits: the traction characteristic and the emergency brake, for the whole
-        # train; each actuator gets its share.
-        traction = self.scenario.train.traction
-        highest = traction.max_traction_at(self._speed())
-        lowest = -traction.max_emergency_brake_force_n
-        share = 1.0 / len(names)
         self.commanded = values
-        self.applied = tuple(min(max(f, lowest * share), highest * share) for f in values)
+        self.missed_periods = 0
+        self._update_applied()
         return self.applied
+
+    def command_missed(self, periods: int | None = None) -> None:
+        """A control period passed without a valid command (the watchdog counts it); or, with
+        ``periods``, that many have passed since the last valid one."""
+        self.missed_periods = self.missed_periods + 1 if periods is None else periods
+        self._update_applied()
+
+    @property
+    def watchdog(self) -> str:
+        if self.missed_periods >= self.safety.emergency_periods:
+            return EMERGENCY_BRAKE
+        if self.missed_periods >= self.safety.watchdog_periods:
+            return SERVICE_BRAKE
+        return NORMAL
+
+    def permitted_speed(self) -> float:
+        return self.scenario.line.speed_limit_mps(float(self.state[0]))
+
+    def _update_applied(self) -> None:
+        """The force the actuators apply: the command within the physical limits (traction
+        characteristic, emergency brake), unless a safety function overrides it."""
+        traction = self.scenario.train.traction
+        n = len(self.model.actuator_names)
+        share = 1.0 / n
+        if self.atp_intervention or self.watchdog == EMERGENCY_BRAKE:
+            self.applied = (-traction.max_emergency_brake_force_n * share,) * n
+        elif self.watchdog == SERVICE_BRAKE:
+            self.applied = (-traction.max_service_brake_force_n * share,) * n
+        else:
+            highest = traction.max_traction_at(self._speed())
+            lowest = -traction.max_emergency_brake_force_n
+            self.applied = tuple(min(max(f, lowest * share), highest * share)
+                                 for f in self.commanded)
+
+    def _supervise(self) -> None:
+        speed, permitted = self._speed(), self.permitted_speed()
+        if not self.atp_intervention and speed > permitted + self.safety.overspeed_margin_mps:
+            self.atp_intervention = True
+            self.atp_interventions += 1
+        elif self.atp_intervention and speed <= permitted:
+            self.atp_intervention = False
+        self._update_applied()
 
     def advance(self, duration_ns: int) -> None:
         self.state = self.model.step(self.state, seconds(duration_ns), self.applied)
         self.stamp_ns += duration_ns
+        self._supervise()
 
     def truth(self) -> TrainState:
         positions, speeds, accelerations, forces = self.model.outputs(self.state, self.applied)

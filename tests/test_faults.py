@@ -1,0 +1,108 @@
+"""Fail-safe reactions over rclpy: command watchdog, ATP supervision, a controller killed and
+restarted in real time."""
+
+import math
+import signal
+
+import pytest
+from sensor_msgs.msg import JointState
+
+from ato_bringup.stack import Stack, StackConfig
+from ato_common.ros import qos_profile, to_time, topic
+
+
+def plant_status(monitor):
+    return [(stamp, message, values) for stamp, name, values, message in monitor.diagnostics
+            if name == 'train_plant_node: simulation']
+
+
+def test_lockstep_watchdog_brakes_on_invalid_commands_and_recovers(tmp_path, domain_id):
+    config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path)
+    with Stack(config) as stack:
+        pub = stack.node.create_publisher(JointState, topic('command').name,
+                                          qos_profile(topic('command').qos))
+        stack.start_process('plant', {'wait_for_subscribers': 1, 'watchdog_periods': 2,
+                                      'emergency_periods': 4})
+        monitor = stack.monitor
+
+        def send(stamp_ns, effort):
+            assert stack.spin_until(lambda: monitor.last_stamp_ns == stamp_ns, 120.0)
+            msg = JointState(name=['traction'], effort=[effort])
+            msg.header.stamp = to_time(stamp_ns)
+            pub.publish(msg)
+            assert stack.spin_until(lambda: monitor.last_stamp_ns > stamp_ns, 30.0)
+
+        for k in range(20):
+            send(k * 100_000_000, 250e3)  # get moving
+        for k in range(20, 26):
+            send(k * 100_000_000, math.nan)
+        send(26 * 100_000_000, 250e3)
+        stack.spin_until(lambda: any('released' in m or 'running' in m
+                                     for _, m, _ in plant_status(monitor)[-1:]), 10.0)
+        traction = 300e3
+        forces = {k // 100_000_000: s.forces[0] for k, s in monitor.complete_samples()}
+        # states carry the force applied up to them
+        assert forces[21] == 250e3                       # first invalid: still the last command
+        assert forces[23] == -0.9 * 510e3                 # service brake (0.9 m/s^2 x 510 t)
+        assert forces[26] == -1.2 * 510e3                 # emergency brake
+        assert forces[27] == pytest.approx(min(250e3, traction))  # valid again: released
+        messages = [m for _, m, _ in plant_status(monitor)]
+        assert any('watchdog: service brake' in m for m in messages)
+        assert any('watchdog: emergency brake' in m for m in messages)
+
+
+def test_atp_intervention_cannot_be_overridden_by_the_ato(tmp_path, domain_id):
+    line = tmp_path / 'slow.yaml'
+    line.write_text(
+        'name: slow\ntrain: {preset: crh3_luo_xu}\n'
+        'line: {name: slow, length_m: 20000, stations: [{name: A, position_m: 0}, '
+        '{name: B, position_m: 19000}], speed_limits: [{start_m: 0, speed_kmh: 30}]}\n'
+        'planning: {max_acceleration_mps2: 0.3, service_deceleration_mps2: 0.5, '
+        'max_jerk_mps3: 0.3}\n')
+    config = StackConfig(scenario=str(line), domain_id=domain_id, log_dir=tmp_path / 'logs')
+    with Stack(config) as stack:
+        pub = stack.node.create_publisher(JointState, topic('command').name,
+                                          qos_profile(topic('command').qos))
+        stack.start_process('plant', {'scenario': str(line), 'wait_for_subscribers': 1})
+        monitor = stack.monitor
+        for k in range(900):  # full traction all the way: the ATO tries to overspeed
+            assert stack.spin_until(lambda: monitor.last_stamp_ns == k * 100_000_000, 120.0)
+            msg = JointState(name=['traction'], effort=[300e3])
+            msg.header.stamp = to_time(k * 100_000_000)
+            pub.publish(msg)
+        stack.spin_for(0.5)
+        states = monitor.complete_samples()
+        speeds = [s.speeds[0] for _, s in states]
+        assert max(speeds) * 3.6 < 36.0
+        assert any(s.forces[0] == -1.2 * 510e3 for _, s in states)
+        status = plant_status(monitor)
+        assert any(m.startswith('ATP emergency brake intervention') for _, m, _ in status)
+        assert int(status[-1][2]['atp_interventions']) >= 1
+
+
+def test_controller_killed_and_restarted_in_real_time(tmp_path, domain_id):
+    config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path,
+                         lockstep=False)
+    with Stack(config) as stack:
+        stack.start()
+        monitor = stack.monitor
+        assert stack.spin_until(lambda: monitor.counts['command'] > 0, 120.0)
+        stack.spin_for(3.0)
+        stack.processes['controller'].send_signal(signal.SIGKILL)
+        stack.processes['controller'].wait()
+        assert stack.spin_until(lambda: any('emergency brake' in m
+                                            for _, m, _ in plant_status(monitor)), 30.0)
+        # the states published with that report show the emergency brake applied
+        assert stack.spin_until(
+            lambda: monitor.complete_samples()[-1][1].forces[0] == -1.2 * 510e3, 10.0)
+        commands_before = monitor.counts['command']
+        stack.start_process('controller', stack.node_params()['controller'])
+        assert stack.spin_until(lambda: monitor.counts['command'] > commands_before + 30, 120.0)
+        stack.spin_for(1.0)
+        assert plant_status(monitor)[-1][1] == 'running'  # released, the ATO drives again
+        latest = monitor.complete_samples()[-1][1]
+        assert latest.forces[0] > -0.9 * 510e3
+        assert all(math.isfinite(v) for _, s in monitor.complete_samples()
+                   for v in s.positions + s.speeds)
+        codes = stack.stop()
+    assert codes['plant'] == 0 and codes['profile'] == 0
