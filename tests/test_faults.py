@@ -106,3 +106,24 @@ def test_controller_killed_and_restarted_in_real_time(tmp_path, domain_id):
                    for v in s.positions + s.speeds)
         codes = stack.stop()
     assert codes['plant'] == 0 and codes['profile'] == 0
+
+
+def test_controller_commands_nothing_on_a_stale_measurement(tmp_path, domain_id):
+    config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path,
+                         lockstep=False)
+    with Stack(config) as stack:
+        stack.start()
+        monitor = stack.monitor
+        assert stack.spin_until(lambda: monitor.counts['command'] > 10, 120.0)
+        stack.processes['plant'].send_signal(signal.SIGKILL)
+        stack.processes['plant'].wait()
+
+        def stale_reported():
+            return any(name == 'ato_controller_node: law' and 'stale' in message
+                       for _, name, _, message in monitor.diagnostics)
+        assert stack.spin_until(stale_reported, 30.0)
+        commands = monitor.counts['command']
+        stack.spin_for(1.5)
+        assert monitor.counts['command'] == commands  # nothing commanded on an old measurement
+        codes = stack.stop(['controller', 'profile'])
+    assert codes == {'controller': 0, 'profile': 0}

@@ -42,6 +42,9 @@ NODE_PARAMS = (
           '(false: on a wall-clock timer)'),
     Param('wait_for_subscribers', 0, 'lockstep: command nothing before ato/command has this '
           'many subscribers (so a monitor or recorder misses nothing)', minimum=0, maximum=100),
+    Param('stale_after_s', 0.5, 'real time: a measurement older than this is stale; the '
+          'controller then commands nothing (and the plant watchdog brakes), s', minimum=0.01,
+          maximum=60.0, read_only=False),
     Param('bumpless_time_constant_s', 3.0, 'decay time of the command step on a law switch, s',
           minimum=0.01, maximum=600.0, read_only=False),
     Param('diagnostics_period_s', 1.0, 'period of the diagnostics, s of (simulated) time',
@@ -107,6 +110,8 @@ class AtoControllerNode(Node):
         self.step_times_s: list[float] = []
         self.period_warning_given = False
         self.input_fault = ''
+        self.state_received_wall = 0.0
+        self.stale_reported_wall = 0.0
 
         self.command_pub = self.create_publisher(JointState, topic('command').name,
                                                  qos_profile(topic('command').qos))
@@ -168,6 +173,7 @@ class AtoControllerNode(Node):
             self.try_step(state.stamp_ns)
         else:
             self.states = {0: state}
+            self.state_received_wall = time.monotonic()
 
     def on_reference(self, msg: JointTrajectory) -> None:
         try:
@@ -211,6 +217,13 @@ class AtoControllerNode(Node):
         state, reference = self.states.get(0), self.references.get(0)
         if state is None or reference is None:
             return
+        age = time.monotonic() - self.state_received_wall
+        if age > self.params['stale_after_s']:
+            # No command on an old measurement: the plant's watchdog takes the train to a stop.
+            if time.monotonic() - self.stale_reported_wall >= 1.0:
+                self.stale_reported_wall = time.monotonic()
+                self.report_stale(age)
+            return
         now_ns = self.get_clock().now().nanoseconds
         self.step(now_ns, state, Reference(now_ns, (reference_now(reference, now_ns),)),
                   seconds(now_ns))
@@ -230,6 +243,16 @@ class AtoControllerNode(Node):
         if stamp_ns >= self.next_diagnostic_ns:
             self.publish_diagnostics(stamp_ns)
             self.next_diagnostic_ns = stamp_ns + int(self.params['diagnostics_period_s'] * 1e9)
+
+    def report_stale(self, age_s: float) -> None:
+        message = (f'measurement stale for {age_s:.1f} s (limit {self.params["stale_after_s"]:g} '
+                   's): commanding nothing')
+        self.get_logger().warning(message)
+        status = diagnostic_status('ato_controller_node: law', self.host.law.name,
+                                   DiagnosticStatus.ERROR, message,
+                                   {'law': self.host.law.name, 'measurement_age_s': age_s})
+        self.diag_pub.publish(DiagnosticArray(
+            header=Header(stamp=self.get_clock().now().to_msg()), status=[status]))
 
     def publish_diagnostics(self, stamp_ns: int) -> None:
         r = self.last_result

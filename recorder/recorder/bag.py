@@ -101,6 +101,7 @@ class BagWriter:
         self.start_ns: int | None = None
         self.end_ns = 0
         self.closed = False
+        self.failed = False
         self.warnings: list[str] = []
 
     def add_topic(self, topic: str, type_name: str, offered_qos_profiles: str = '') -> None:
@@ -123,12 +124,24 @@ class BagWriter:
             topic, 'cdr', schema_id, {'offered_qos_profiles': offered_qos_profiles})
         self.topics[topic] = TopicInfo(topic, type_name, offered_qos_profiles)
 
+    def _failed(self, error: OSError) -> BagError:
+        self.failed = True
+        return BagError(f'cannot write {self.path}: {error.strerror}; the recording stopped. '
+                        f'The file holds what was flushed before; it is not a closed bag (no '
+                        f'metadata.yaml): ros2 run recorder recover {self.folder}')
+
     def write(self, topic: str, log_time_ns: int, data: bytes,
               publish_time_ns: int | None = None) -> None:
+        """Add one message; BagError if the file cannot be written (a full disk)."""
+        if self.failed:
+            raise BagError(f'{self.path}: the recording stopped after a write error')
         info = self.topics[topic]
-        self._writer.add_message(self._channels[topic], log_time=log_time_ns, data=data,
-                                 publish_time=log_time_ns if publish_time_ns is None
-                                 else publish_time_ns, sequence=info.message_count)
+        try:
+            self._writer.add_message(self._channels[topic], log_time=log_time_ns, data=data,
+                                     publish_time=log_time_ns if publish_time_ns is None
+                                     else publish_time_ns, sequence=info.message_count)
+        except OSError as error:
+            raise self._failed(error) from None
         info.message_count += 1
         if self.start_ns is None or log_time_ns < self.start_ns:
             self.start_ns = log_time_ns
@@ -139,17 +152,34 @@ class BagWriter:
 
     def flush(self, now: float | None = None) -> None:
         """Close the open chunk and push it to the file (what a SIGKILL cannot take back)."""
-        self._writer.flush()
+        if self.failed or self.closed:
+            return
+        try:
+            self._writer.flush()
+        except OSError as error:
+            raise self._failed(error) from None
         self._last_flush = time.monotonic() if now is None else now
 
     def close(self) -> BagInfo:
+        """Finish the file and write metadata.yaml; after a write error only release the file
+        (no metadata.yaml: an unfinished bag must not look valid) and raise BagError."""
         if self.closed:
             return self.info()
-        self._writer.finish()
-        self._file.flush()
-        os.fsync(self._file.fileno())
-        self._file.close()
         self.closed = True
+        if not self.failed:
+            try:
+                self._writer.finish()
+                self._file.flush()
+                os.fsync(self._file.fileno())
+            except OSError as error:
+                self._failed(error)
+        try:
+            self._file.close()
+        except OSError:
+            pass  # already failed: the error below says so
+        if self.failed:
+            raise BagError(f'{self.path} could not be finished after a write error: recover '
+                           f'what it holds with: ros2 run recorder recover {self.folder}')
         info = self.info()
         write_metadata(info)
         return info

@@ -32,12 +32,14 @@ class RecorderNode(Node):
         self.wanted = set(topics) if topics else None
         self.subscribed: dict[str, object] = {}
         self.received = 0
+        self.finished = False  # run_node stops spinning when True
+        self.exit_code = 0
         self.discover()
         # Wall-clock timers: with use_sim_time a ROS-time timer would wait for /clock, which a
         # lockstep plant does not start before the recorder has subscribed.
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(discovery_period_s, self.discover, clock=steady)
-        self.create_timer(writer.flush_period_s, self.writer.flush, clock=steady)
+        self.create_timer(writer.flush_period_s, self.flush, clock=steady)
         self.get_logger().info(f'recording {"all topics" if self.wanted is None else sorted(self.wanted)}'
                                f' to {writer.path}')
 
@@ -68,14 +70,36 @@ class RecorderNode(Node):
         write, clock = self.writer.write, self.get_clock()
 
         def on_message(data: bytes) -> None:
-            write(topic, clock.now().nanoseconds, data)
+            if self.finished:
+                return
+            try:
+                write(topic, clock.now().nanoseconds, data)
+            except BagError as error:
+                self.stop_on_error(error)
+                return
             self.received += 1
         return on_message
 
+    def flush(self) -> None:
+        try:
+            self.writer.flush()
+        except BagError as error:
+            self.stop_on_error(error)
+
+    def stop_on_error(self, error: BagError) -> None:
+        """A write error (a full disk): say what and where, stop, exit non-zero."""
+        self.get_logger().error(str(error))
+        self.finished = True
+        self.exit_code = 1
+
     def destroy_node(self) -> None:
-        info = self.writer.close()
-        self.get_logger().info(f'closed {info.path}: {info.message_count} messages on '
-                               f'{len(info.topics)} topics, {info.duration_s:.1f} s')
+        try:
+            info = self.writer.close()
+            self.get_logger().info(f'closed {info.path}: {info.message_count} messages on '
+                                   f'{len(info.topics)} topics, {info.duration_s:.1f} s')
+        except BagError as error:
+            self.get_logger().error(str(error))
+            self.exit_code = 1
         super().destroy_node()
 
 
@@ -106,7 +130,11 @@ def main(args=None) -> int:
         return run_node(lambda: RecorderNode(writer, options.topics, options.discovery_period),
                         args)
     finally:
-        writer.close()
+        if not writer.closed:  # the node never came up
+            try:
+                writer.close()
+            except BagError as error:
+                print(f'error: {error}', file=sys.stderr)
 
 
 if __name__ == '__main__':

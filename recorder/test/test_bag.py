@@ -165,3 +165,18 @@ def test_a_corrupt_chunk_gives_a_clear_error_and_recover_keeps_the_original_safe
     assert 0 < info.message_count < 2000
     assert (file.parent / (file.name + '.damaged')).read_bytes() == bytes(data)
     assert len(list(read_messages(tmp_path / 'run'))) == info.message_count
+
+
+def test_a_full_disk_stops_the_recording_with_a_clear_error_and_no_valid_looking_bag(tmp_path):
+    import os
+    writer = write_bag(tmp_path / 'run', count=10, chunk_size=1 << 20)
+    full = os.open('/dev/full', os.O_WRONLY)
+    os.dup2(full, writer._file.fileno())  # from now on every write fails with ENOSPC
+    os.close(full)
+    with pytest.raises(BagError, match='No space left on device.*recover'):
+        for k in range(10, 20000):
+            writer.write('/train/state', k * 100_000_000, state_bytes(k))
+        writer.flush()
+    with pytest.raises(BagError, match='could not be finished'):
+        writer.close()
+    assert not (tmp_path / 'run' / 'metadata.yaml').exists()
