@@ -127,3 +127,43 @@ def test_controller_commands_nothing_on_a_stale_measurement(tmp_path, domain_id)
         assert monitor.counts['command'] == commands  # nothing commanded on an old measurement
         codes = stack.stop(['controller', 'profile'])
     assert codes == {'controller': 0, 'profile': 0}
+
+
+def test_controller_never_commands_nan_on_a_failed_sensor(tmp_path, domain_id):
+    """A test node plays the plant: the measured speed turns NaN (a failed sensor) and back."""
+    from rosgraph_msgs.msg import Clock
+    from trajectory_msgs.msg import JointTrajectory
+    from ato_common.ros import state_to_msg
+    from ato_common.types import TrainState
+
+    config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path)
+    with Stack(config) as stack:
+        node = stack.node
+        clock_pub = node.create_publisher(Clock, '/clock', qos_profile(topic('clock').qos))
+        state_pub = node.create_publisher(JointTrajectory, topic('state_measured').name,
+                                          qos_profile(topic('state_measured').qos))
+        params = stack.node_params()
+        stack.start_process('profile', {**params['profile'], 'wait_for_subscribers': 1})
+        stack.start_process('controller', {**params['controller'], 'wait_for_subscribers': 1})
+        monitor = stack.monitor
+        assert stack.spin_until(lambda: state_pub.get_subscription_count() >= 1
+                                and clock_pub.get_subscription_count() >= 2, 120.0)
+        speeds = [0.0] * 5 + [math.nan] * 10 + [math.inf] * 5 + [0.5] * 5
+        for k, speed in enumerate(speeds):
+            stamp = k * 100_000_000
+            state = TrainState(stamp, ('train',), (0.0,), (speed,), (0.0,), (0.0,))
+            for _ in range(200):  # like the plant: say it again until the command comes
+                clock_pub.publish(Clock(clock=to_time(stamp)))
+                state_pub.publish(state_to_msg(state))
+                if stack.spin_until(lambda: stamp in monitor.samples
+                                    and monitor.samples[stamp].command, 0.2):
+                    break
+            else:
+                pytest.fail(f'no command for step {k}')
+        stack.spin_for(1.5)
+        commands = [monitor.samples[k * 100_000_000].command[0] for k in range(len(speeds))]
+        assert all(math.isfinite(c) for c in commands)
+        assert commands[5:20] == [commands[4]] * 15   # held while the sensor is failed
+        faults = [message for _, name, _, message in monitor.diagnostics
+                  if name == 'ato_controller_node: law' and 'non-finite' in message]
+        assert faults
