@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import platform
 import time
@@ -23,6 +24,7 @@ from ato_bringup.runner import run_lockstep
 from ato_bringup.stack import StackConfig
 from recorder.bag import bag_info
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
+from ato_common.trains import train_preset
 from ato_common.types import nanoseconds
 from ato_controller_node.host import ControllerHost
 from ato_controller_node.laws import LAWS
@@ -66,11 +68,14 @@ def law_step_times(scenario_name: str) -> dict[str, np.ndarray]:
     return times
 
 
-def plant_speed(scenario_name: str, simulated_s: float = 600.0) -> float:
+def plant_speed(scenario_name: str, model: str = 'point_mass', train: str | None = None,
+                simulated_s: float = 600.0) -> float:
     scenario = load_scenario(scenario_name)
-    sim = TrainSimulation(scenario)
+    if train is not None:
+        scenario = dataclasses.replace(scenario, train=train_preset(train))
+    sim = TrainSimulation(scenario, model)
     period_ns = nanoseconds(1.0 / scenario.run.controller_rate_hz)
-    sim.apply_command((200e3,))
+    sim.apply_command((100e3,) * len(sim.actuator_names))
     started = time.perf_counter()
     while sim.time_s < simulated_s:
         sim.advance(period_ns)
@@ -103,6 +108,8 @@ def main() -> int:
               f'{durations.max() * 1e6:7.1f} us   ({durations.size} steps)')
     print('\nplant model alone (one core)')
     print(f'  point_mass  {plant_speed(args.scenario):9.0f}x real time at 10 Hz steps')
+    print(f'  multi_car   {plant_speed(args.scenario, "multi_car", "crh2_4car_mao"):9.0f}x real '
+          'time at 10 Hz steps (CRH2 4-car unit, exact coupler dynamics, ETD2RK)')
     return 0
 
 

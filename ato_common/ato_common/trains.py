@@ -63,6 +63,26 @@ class TractionCharacteristic:
 
 
 @dataclass(frozen=True)
+class CarParameters:
+    """One car of a multi-car model (Mao, Tao, Jiang & Yan eqs 1-7), SI per kg of the car."""
+
+    name: str
+    mass_kg: float
+    a_mps2: float        # constant resistance per kg
+    b_per_s: float       # speed-proportional resistance per kg
+    c_per_m: float = 0.0  # aerodynamic resistance per kg (lead car only in the paper)
+    powered: bool = False
+
+
+@dataclass(frozen=True)
+class Coupler:
+    """Spring-damper between consecutive cars."""
+
+    stiffness_n_per_m: float
+    damping_n_s_per_m: float
+
+
+@dataclass(frozen=True)
 class TrainParameters:
     name: str
     description: str
@@ -73,6 +93,9 @@ class TrainParameters:
     actuator_names: tuple[str, ...] = ('traction',)
     length_m: float = 200.0
     sources: Mapping[str, str] = field(default_factory=dict)
+    cars: tuple[CarParameters, ...] = ()      # for multi-car models, lead car first
+    couplers: tuple[Coupler, ...] = ()        # len(cars) - 1 of them
+    car_length_m: float = 25.0
 
 
 def _crh3_luo_xu() -> TrainParameters:
@@ -131,9 +154,44 @@ def _crh380a_tan() -> TrainParameters:
     )
 
 
+def _crh2_4car_mao() -> TrainParameters:
+    # Table II of Mao, Tao, Jiang & Yan; a, b, c are per tonne with V in km/h (the printed SI-like
+    # units are a slip: 0.88 + 0.00744 V + 0.000114 V^2 N/kN times g gives these numbers).
+    masses_t = (42.8, 48.0, 46.5, 42.0)
+    a_n_per_t = (8.63, 9.03, 9.03, 8.63)
+    b_n_per_t_kmh = (0.07295, 0.08015, 0.08015, 0.07295)
+    c_n_per_t_kmh2 = 0.00112
+    cars = []
+    for i, (m, a, b) in enumerate(zip(masses_t, a_n_per_t, b_n_per_t_kmh)):
+        a_si, b_si, c_si = units.davis_per_tonne_to_per_kg(a, b, c_n_per_t_kmh2)
+        cars.append(CarParameters(f'car_{i + 1}', units.tonnes_to_kg(m), a_si, b_si,
+                                  c_si if i == 0 else 0.0, powered=i in (1, 2)))
+    couplers = (Coupler(800e6, 8e4), Coupler(600e6, 6e4), Coupler(800e6, 8e4))
+    mass = sum(c.mass_kg for c in cars)
+    davis = DavisResistance(sum(c.a_mps2 * c.mass_kg for c in cars),
+                            sum(c.b_per_s * c.mass_kg for c in cars),
+                            cars[0].c_per_m * cars[0].mass_kg)
+    return TrainParameters(
+        name='crh2_4car_mao',
+        description='CRH2 4-car unit, power on cars 2 and 3, as simulated by Mao, Tao, Jiang & Yan',
+        mass_kg=mass, davis=davis, davis_nominal=davis,
+        traction=TractionCharacteristic(
+            max_traction_force_n=mass * 0.6, max_traction_power_w=units.kw_to_w(2400.0),
+            max_service_brake_force_n=mass * 0.9, max_emergency_brake_force_n=mass * 1.2),
+        actuator_names=('car_2', 'car_3'), length_m=100.0, cars=tuple(cars),
+        couplers=couplers, car_length_m=25.0,
+        sources={
+            'masses, resistance, couplers': 'Mao, Tao, Jiang & Yan, Table II (units corrected '
+                                            'as in shared/papers/README.md)',
+            'max_traction_power_w': 'half of the 4.8 MW of an 8-car CRH2A (two such units)',
+            'max_traction_force_n, braking': 'suite assumption: 0.6, 0.9 and 1.2 m/s^2',
+        })
+
+
 TRAIN_PRESETS = {
     'crh3_luo_xu': _crh3_luo_xu,
     'crh380a_tan': _crh380a_tan,
+    'crh2_4car_mao': _crh2_4car_mao,
 }
 
 

@@ -80,7 +80,8 @@ class TrainSimulation:
         return self.model.actuator_names
 
     def _speed(self) -> float:
-        return float(self.state[1]) if len(self.state) == 2 else float(np.mean(self.state[1::2]))
+        """The lead car's speed (the state's second half holds the speeds)."""
+        return float(self.state[len(self.state) // 2])
 
     def apply_command(self, forces: Sequence[float]) -> tuple[float, ...]:
         """Validate and saturate a command; it is then held until the next one (zero-order hold).
@@ -115,7 +116,7 @@ class TrainSimulation:
         return NORMAL
 
     def permitted_speed(self) -> float:
-        return self.scenario.line.speed_limit_mps(float(self.state[0]))
+        return self.scenario.line.speed_limit_mps(float(self.state[0]))  # at the lead car
 
     def _update_applied(self) -> None:
         """The force the actuators apply: the command within the physical limits (traction

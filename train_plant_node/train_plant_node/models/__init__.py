@@ -34,8 +34,14 @@ def _point_mass(train: TrainParameters, line: Line, **options) -> PlantModel:
     return PointMassModel(train, line, **options)
 
 
+def _multi_car(train: TrainParameters, line: Line, **options) -> PlantModel:
+    from train_plant_node.models.multi_car import MultiCarModel
+    return MultiCarModel(train, line, **options)
+
+
 MODELS: dict[str, Callable[..., PlantModel]] = {
     'point_mass': _point_mass,
+    'multi_car': _multi_car,
 }
 
 

@@ -1,0 +1,93 @@
+"""The multi-car model: exact coupler dynamics, steady running, agreement with a tight
+reference solution."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from ato_common.scenario import parse_scenario
+from ato_common.trains import CarParameters, Coupler, train_preset
+from train_plant_node.models.multi_car import MultiCarModel
+from train_plant_node.simulation import TrainSimulation
+
+
+def flat_line(preset='crh2_4car_mao'):
+    return parse_scenario({
+        'name': 'flat', 'train': {'preset': preset},
+        'line': {'name': 'flat', 'length_m': 1e6,
+                 'stations': [{'name': 'A', 'position_m': 0}, {'name': 'B', 'position_m': 9e5}],
+                 'speed_limits': [{'start_m': 0, 'speed_kmh': 400}]},
+        'planning': {'max_acceleration_mps2': 0.5, 'service_deceleration_mps2': 0.5,
+                     'max_jerk_mps3': 0.5}})
+
+
+def two_cars(k=7e8, d=0.0, m1=45e3, m2=50e3):
+    base = train_preset('crh2_4car_mao')
+    return base.__class__(**{**base.__dict__, 'cars': (
+        CarParameters('car_1', m1, 0.0, 0.0, 0.0, powered=True),
+        CarParameters('car_2', m2, 0.0, 0.0, 0.0)), 'couplers': (Coupler(k, d),),
+        'actuator_names': ('car_1',)})
+
+
+def test_free_two_car_coupler_oscillates_at_the_analytic_frequency():
+    k, m1, m2 = 7e8, 45e3, 50e3
+    model = MultiCarModel(two_cars(k, 0.0, m1, m2), flat_line().line)
+    omega = math.sqrt(k * (1.0 / m1 + 1.0 / m2))
+    assert 16.0 < omega / (2 * math.pi) < 39.0  # the coupler modes of the notes
+    state = model.initial_state(1000.0, 0.0)
+    state[0] += 0.002  # a 2 mm extension, released
+    period = 2 * math.pi / omega
+    after = model.step(state, period, (0.0,))
+    half = model.step(state, period / 2, (0.0,))
+    assert after[0] - after[1] == pytest.approx(0.002, abs=1e-9)
+    assert half[0] - half[1] == pytest.approx(-0.002, abs=1e-9)
+
+
+def test_four_car_unit_runs_steadily_with_bounded_constant_spacing():
+    scenario = flat_line()
+    train = scenario.train
+    model = MultiCarModel(train, scenario.line)
+    v = 60.0
+    total = sum(c.mass_kg * (c.a_mps2 + c.b_per_s * v + c.c_per_m * v * v) for c in train.cars)
+    state = model.initial_state(0.0, v)
+    extensions = []
+    for _ in range(3000):
+        state = model.step(state, 0.1, (total / 2, total / 2))
+        extensions.append(state[:3] - state[1:4])
+    speeds = state[4:]
+    assert np.allclose(speeds, v, atol=1e-6)  # cars 1 and 3 (and all) at the same speed
+    late = np.array(extensions[-100:])
+    assert np.max(np.abs(late)) < 1e-3 and np.ptp(late, axis=0).max() < 1e-9
+
+
+def test_agrees_with_a_tight_reference_solution():
+    scenario = flat_line()
+    model = MultiCarModel(scenario.train, scenario.line)
+    forces = (30e3, 30e3)
+    x0 = model.initial_state(100.0, 30.0)
+    reference = solve_ivp(lambda t, y: model.derivative(y, forces), (0.0, 20.0), x0,
+                          method='DOP853', rtol=1e-12, atol=1e-12, max_step=0.004)
+    x = x0
+    for _ in range(200):
+        x = model.step(x, 0.1, forces)
+    assert np.max(np.abs(reference.y[4:, -1] - x[4:])) < 1e-6
+
+
+def test_the_simulation_drives_the_powered_cars_and_reports_every_car():
+    sim = TrainSimulation(flat_line(), 'multi_car')
+    assert sim.actuator_names == ('car_2', 'car_3')
+    sim.apply_command((40e3, 40e3))
+    for _ in range(100):
+        sim.advance(100_000_000)
+    truth = sim.truth()
+    assert truth.car_names == ('car_1', 'car_2', 'car_3', 'car_4')
+    assert truth.forces == (0.0, 40e3, 40e3, 0.0)
+    assert all(s > 0 for s in truth.speeds)
+    assert truth.positions[0] - truth.positions[3] == pytest.approx(75.0, abs=0.01)
+
+
+def test_a_single_mass_train_is_refused_with_the_reason():
+    with pytest.raises(ValueError, match='no multi-car description'):
+        MultiCarModel(train_preset('crh3_luo_xu'), flat_line().line)
