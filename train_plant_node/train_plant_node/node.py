@@ -220,12 +220,12 @@ class TrainPlantNode(Node):
             if missed > 0:
                 self.sim.command_missed(missed)
             # Keep simulated time on the wall clock: a late timer tick is caught up with
-            # several fixed steps (at most a second's worth), and the last state is published.
+            # several fixed steps (at most a second's worth), each published, so the state
+            # stream has no holes.
             behind_ns = self.get_clock().now().nanoseconds - self.wall_start_ns - self.sim.stamp_ns
             steps = min(max(behind_ns // self.period_ns, 1), nanoseconds(1.0) // self.period_ns)
-            for _ in range(steps - 1):
-                self.sim.advance(self.period_ns)
-            self.advance()
+            for _ in range(steps):
+                self.advance()
 
     def on_command(self, msg: JointState) -> None:
         if not self.started or self.finished:
