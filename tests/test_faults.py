@@ -5,38 +5,24 @@ import math
 import signal
 
 import pytest
-from sensor_msgs.msg import JointState
 
 from ato_bringup.stack import Stack, StackConfig
 from ato_common.ros import qos_profile, to_time, topic
-
-
-def plant_status(monitor):
-    return [(stamp, message, values) for stamp, name, values, message in monitor.diagnostics
-            if name == 'train_plant_node: simulation']
+from plant_driver import ControllerStandIn, plant_status
 
 
 def test_lockstep_watchdog_brakes_on_invalid_commands_and_recovers(tmp_path, domain_id):
     config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path)
     with Stack(config) as stack:
-        pub = stack.node.create_publisher(JointState, topic('command').name,
-                                          qos_profile(topic('command').qos))
+        controller = ControllerStandIn(stack)
         stack.start_process('plant', {'wait_for_subscribers': 1, 'watchdog_periods': 2,
                                       'emergency_periods': 4})
         monitor = stack.monitor
-
-        def send(stamp_ns, effort):
-            assert stack.spin_until(lambda: monitor.last_stamp_ns == stamp_ns, 120.0)
-            msg = JointState(name=['traction'], effort=[effort])
-            msg.header.stamp = to_time(stamp_ns)
-            pub.publish(msg)
-            assert stack.spin_until(lambda: monitor.last_stamp_ns > stamp_ns, 30.0)
-
         for k in range(20):
-            send(k * 100_000_000, 250e3)  # get moving
+            controller.answer(k * 100_000_000, [250e3])  # get moving
         for k in range(20, 26):
-            send(k * 100_000_000, math.nan)
-        send(26 * 100_000_000, 250e3)
+            controller.answer(k * 100_000_000, [math.nan])
+        controller.answer(26 * 100_000_000, [250e3])
         stack.spin_until(lambda: any('released' in m or 'running' in m
                                      for _, m, _ in plant_status(monitor)[-1:]), 10.0)
         traction = 300e3
@@ -61,15 +47,11 @@ def test_atp_intervention_cannot_be_overridden_by_the_ato(tmp_path, domain_id):
         'max_jerk_mps3: 0.3}\n')
     config = StackConfig(scenario=str(line), domain_id=domain_id, log_dir=tmp_path / 'logs')
     with Stack(config) as stack:
-        pub = stack.node.create_publisher(JointState, topic('command').name,
-                                          qos_profile(topic('command').qos))
+        controller = ControllerStandIn(stack)
         stack.start_process('plant', {'scenario': str(line), 'wait_for_subscribers': 1})
         monitor = stack.monitor
         for k in range(900):  # full traction all the way: the ATO tries to overspeed
-            assert stack.spin_until(lambda: monitor.last_stamp_ns == k * 100_000_000, 120.0)
-            msg = JointState(name=['traction'], effort=[300e3])
-            msg.header.stamp = to_time(k * 100_000_000)
-            pub.publish(msg)
+            controller.answer(k * 100_000_000, [300e3])
         stack.spin_for(0.5)
         states = monitor.complete_samples()
         speeds = [s.speeds[0] for _, s in states]

@@ -8,10 +8,9 @@ import xml.etree.ElementTree as ET
 
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
 import pytest
-from sensor_msgs.msg import JointState
 
 from ato_bringup.stack import EXECUTABLES, Stack, StackConfig, executable_path
-from ato_common.ros import qos_profile, to_time, topic
+from plant_driver import ControllerStandIn, plant_status
 
 PACKAGES = ['ato_common', 'train_plant_node', 'profile_node', 'ato_controller_node',
             'ato_bringup']
@@ -60,31 +59,18 @@ def test_an_unknown_controller_at_start_is_refused_with_the_valid_names(domain_i
 def test_plant_rejects_bad_commands_and_keeps_running(tmp_path, domain_id):
     config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path)
     with Stack(config) as stack:
-        command_pub = stack.node.create_publisher(JointState, topic('command').name,
-                                                  qos_profile(topic('command').qos))
+        controller = ControllerStandIn(stack)
         stack.start_process('plant', {'scenario': 'short_line', 'wait_for_subscribers': 1})
         monitor = stack.monitor
-
-        def plant_status():
-            return [(message, values) for _, name, values, message in monitor.diagnostics
-                    if name == 'train_plant_node: simulation']
-
-        def send(stamp_ns, names, efforts):
-            assert stack.spin_until(lambda: monitor.last_stamp_ns == stamp_ns, 120.0)
-            msg = JointState(name=names, effort=efforts)
-            msg.header.stamp = to_time(stamp_ns)
-            command_pub.publish(msg)
-            assert stack.spin_until(lambda: monitor.last_stamp_ns > stamp_ns, 30.0)
-
-        send(0, ['traction'], [math.nan])
-        send(100_000_000, ['traction', 'extra'], [1.0, 2.0])
-        send(200_000_000, ['brake'], [1.0])
-        send(300_000_000, ['traction'], [250e3])
-        stack.spin_until(lambda: len(plant_status()) >= 4, 10.0)
-        messages = [m for m, _ in plant_status()]
+        controller.answer(0, [math.nan])
+        controller.answer(100_000_000, [1.0, 2.0], ['traction', 'extra'])
+        controller.answer(200_000_000, [1.0], ['brake'])
+        controller.answer(300_000_000, [250e3])
+        stack.spin_until(lambda: len(plant_status(monitor)) >= 4, 10.0)
+        messages = [m for _, m, _ in plant_status(monitor)]
         assert any('not finite' in m for m in messages)
         assert any('do not match the actuators' in m for m in messages)
-        assert plant_status()[-1][1]['rejected_commands'] == '3'
+        assert plant_status(monitor)[-1][2]['rejected_commands'] == '3'
         states = monitor.complete_samples()
         assert [k for k, _ in states] == [0, 100_000_000, 200_000_000, 300_000_000, 400_000_000]
         assert states[-1][1].forces == (250e3,)  # the first valid command is applied

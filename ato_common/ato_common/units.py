@@ -33,10 +33,6 @@ def kw_to_w(power_kw: float) -> float:
     return power_kw * 1000.0
 
 
-def km_to_m(length_km: float) -> float:
-    return length_km * 1000.0
-
-
 def joules_to_kwh(energy_j: float) -> float:
     return energy_j / 3.6e6
 

@@ -19,8 +19,8 @@ from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_common.params import Param, ParameterTable
-from ato_common.ros import (MessageError, command_from_msg, diagnostic_status, qos_profile,
-                            run_node, state_to_msg, to_duration, to_time, topic)
+from ato_common.ros import (MessageError, command_from_msg, diagnostic_status, from_time,
+                            qos_profile, run_node, state_to_msg, to_duration, to_time, topic)
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import TrainState, nanoseconds, seconds
 from train_plant_node.models import MODELS
@@ -245,15 +245,12 @@ class TrainPlantNode(Node):
             self.last_rejection = f'rejected command: {error}; holding the previous one'
             self.get_logger().warning(self.last_rejection, throttle_duration_sec=1.0)
             self.publish_diagnostics()
-            if self.lockstep and self._stamp_of(msg) != self.stamp_ns():
+            if self.lockstep and from_time(msg.header.stamp) != self.stamp_ns():
                 return
             if self.lockstep:
                 self.sim.command_missed()  # this step's command was not valid
         if self.lockstep:
             self.advance()
-
-    def _stamp_of(self, msg) -> int:
-        return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
 
     def advance(self) -> None:
         self.sim.advance(self.period_ns)
