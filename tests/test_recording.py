@@ -112,6 +112,9 @@ def test_sigkill_loses_at_most_the_last_second(tmp_path, domain_id):
         stack.start()
         monitor = stack.monitor
         assert stack.spin_until(lambda: monitor.counts['command'] > 0, 120.0)
+        # the window starts when the recorder has subscribed to the state (its start-up varies)
+        assert stack.spin_until(lambda: 'recording /train/state ' in stack.log_tail('recorder',
+                                                                                    200), 60.0)
         stack.spin_for(4.0)
         killed_at_ns = monitor.last_stamp_ns
         monitor_samples = monitor.complete_samples()
