@@ -161,7 +161,7 @@ class TrainPlantNode(Node):
     def safety_message(self) -> str:
         sim = self.sim
         if sim.atp_intervention:
-            return (f'ATP emergency brake intervention: {units.mps_to_kmh(sim._speed()):.1f} km/h '
+            return (f'ATP emergency brake intervention: {units.mps_to_kmh(sim.lead_speed()):.1f} km/h '
                     f'over the permitted {units.mps_to_kmh(sim.permitted_speed()):.0f} km/h')
         if sim.watchdog != NORMAL:
             return (f'command watchdog: {sim.watchdog} after {sim.missed_periods} control '
