@@ -241,9 +241,9 @@ class MultiCarModel:
                                                         boundary), p, boundary))
                 h, p, boundary = min(crossings)
                 x1 = self._etdrk4(x, t, h, forces, accels, mm, env, cache=False)
-                for _ in range(4):  # Newton on the crossing time, with the car's speed
+                for _ in range(3):  # Newton on the crossing time, with the car's speed
                     miss = float(x1[p]) - boundary
-                    if abs(miss) < 1e-9 or x1[n + p] == 0.0:
+                    if abs(miss) < 1e-8 or x1[n + p] == 0.0:
                         break
                     h = min(max(h - miss / float(x1[n + p]), 0.0), end - t)
                     x1 = self._etdrk4(x, t, h, forces, accels, mm, env, cache=False)
