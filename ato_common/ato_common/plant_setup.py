@@ -18,9 +18,9 @@ are converted here, through :mod:`ato_common.units`. Schema (all keys optional):
       abrupt_changes:              # Tan et al. 4.3: the grade is 30 per mille for 1000 <= t < 1100
         - {start_s: 1000, end_s: 1100, grade_per_mille: 30}
       disturbance: {kind: fast, amplitude_n: 8900, omega_rad_per_s: 1.0}   # Liu & Li Case 3
-      actuators: {time_constant_s: 0.5, rate_limit_n_per_s: 1.0e5}
+      actuators: {time_constant_s: 0.5, rate_limit_n_per_s: 1.0e+5}
       failures:                    # Mao et al. 2017 eqs (13)-(20)
-        - {actuator: motor_2, kind: stuck, start_s: 600, end_s: 1000, force_n: 2.0e5}
+        - {actuator: motor_2, kind: stuck, start_s: 600, end_s: 1000, force_n: 2.0e+5}
       sensors:
         seed: 1
         speed: {noise_std: 0.01, bias: 0.0, quantum: 0.0, dropout_probability: 0.0,
@@ -460,3 +460,35 @@ def parse_plant_setup(data, train: TrainParameters, where: str = 'plant') -> Pla
         sensors=_sensors(f.section('sensors'), car_names_of(train)))
     f.reject_unknown()
     return setup
+
+
+def parse_failure_injection(text: str, actuator_names: Sequence[str], now_s: float,
+                            where: str = 'inject_failure'
+                            ) -> tuple[tuple[ActuatorFailure, ...], tuple[str, ...]]:
+    """A run-time failure injection: YAML (or JSON) text of one failure mapping or a list of
+    them, as in ``plant.failures``; ``start_s`` defaults to now and must not be in the past;
+    ``kind: healthy`` repairs the actuator now. Returns (failures, repaired actuators)."""
+    import yaml
+    try:
+        data = yaml.safe_load(text) if text.strip() else []
+    except yaml.YAMLError as error:
+        raise ConfigError(f'{where}: not valid YAML: {error}') from None
+    items = Fields({'failures': data if isinstance(data, list) else [data]}, '').items('failures')
+    repaired, rest = [], []
+    for i, item in enumerate(items):
+        item.where = f'{where}[{i}]'
+        if item.has('kind') and item.text('kind') == 'healthy':
+            name = item.text('actuator')
+            if name not in actuator_names:
+                raise ConfigError(f"{item.where}.actuator: unknown actuator '{name}'; valid: "
+                                  f"{', '.join(actuator_names)}")
+            item.reject_unknown()
+            repaired.append(name)
+        else:
+            rest.append(item)
+    failures = parse_failures(rest, actuator_names, default_start_s=now_s)
+    late = [f for f in failures if f.start_s < now_s]
+    if late:
+        raise ConfigError(f'{where}: start_s {late[0].start_s:g} is in the past (now '
+                          f'{now_s:g} s)')
+    return failures, tuple(repaired)

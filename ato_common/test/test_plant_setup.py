@@ -135,3 +135,21 @@ def test_sensors_and_actuators_parse():
 def test_bad_plant_sections_are_rejected_naming_the_field(plant, message):
     with pytest.raises(ConfigError, match=message):
         parse_plant_setup(plant, MAO)
+
+
+def test_run_time_failure_injection_defaults_to_now_and_can_repair():
+    from ato_common.plant_setup import parse_failure_injection
+    failures, repaired = parse_failure_injection(
+        '{actuator: motor_3, kind: stuck, force_n: 1.5e+5}', MAO.actuator_names, 42.0)
+    assert failures[0].start_s == 42.0 and failures[0].force_n == 1.5e5 and not repaired
+    failures, repaired = parse_failure_injection(
+        '[{actuator: motor_1, kind: healthy}, {actuator: motor_2, kind: loss, start_s: 50}]',
+        MAO.actuator_names, 42.0)
+    assert repaired == ('motor_1',) and failures[0].kind == 'loss'
+    assert parse_failure_injection('', MAO.actuator_names, 1.0) == ((), ())
+    for text, message in (('{actuator: motor_1, kind: loss, start_s: 3}', 'in the past'),
+                          ('{actuator: x, kind: healthy}', "unknown actuator 'x'"),
+                          ('[unclosed', 'not valid YAML'),
+                          ('{actuator: motor_1, kind: stuck}', r'inject_failure\[0\].force_n')):
+        with pytest.raises(ConfigError, match=message):
+            parse_failure_injection(text, MAO.actuator_names, 42.0)
