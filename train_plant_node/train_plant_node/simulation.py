@@ -134,8 +134,10 @@ class TrainSimulation:
 
     def surroundings(self, time_s: float | None = None) -> Surroundings:
         """The mode, abrupt change, varying resistance and disturbance in force now."""
-        t = self.time_s if time_s is None else time_s
         setup = self.setup
+        if self._env is not None and not setup.modes and not setup.abrupt_changes:
+            return self._env  # nothing switches: the same all run
+        t = self.time_s if time_s is None else time_s
         key = (setup.mode_index(t, self.lead_position()), setup.abrupt_change(t))
         if key != self._env_key:
             self._env_key = key
@@ -263,6 +265,16 @@ class TrainSimulation:
         t = self.time_s
         duration = seconds(duration_ns)
         end = t + duration
+        if self._instant_actuators and duration <= self.model.max_substep_s and \
+                self.setup.disturbance.kind != 'random' and not any(
+                t + EVENT_TOLERANCE_S < e < end - EVENT_TOLERANCE_S for e in self._events):
+            # One integration step and nothing switches within it: the general loop's result,
+            # without its bookkeeping.
+            self.state = self.model.step(self.state, duration, self._actuate(t, duration), t,
+                                         self.surroundings(t))
+            self.stamp_ns += duration_ns
+            self._supervise()
+            return
         substeps = max(1, math.ceil(duration / self.model.max_substep_s - 1e-9))
         h_nominal = duration / substeps
         events = [e for e in self._events if t + EVENT_TOLERANCE_S < e < end - EVENT_TOLERANCE_S]

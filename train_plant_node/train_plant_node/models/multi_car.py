@@ -54,6 +54,26 @@ def phi_functions(matrix: np.ndarray, order: int = 3) -> list[np.ndarray]:
     return [e[:m, m * k:m * (k + 1)] for k in range(order + 1)]
 
 
+def scalar_phi(z: np.ndarray, k: int) -> np.ndarray:
+    """phi_k of complex scalars: the closed form, or its Taylor series near 0 (cancellation)."""
+    z = np.asarray(z, dtype=complex)
+    out = np.empty_like(z)
+    small = np.abs(z) < 0.5
+    zs = z[small]
+    series = np.zeros_like(zs)
+    term = np.full_like(zs, 1.0 / math.factorial(k))
+    for j in range(1, 25):
+        series += term
+        term = term * zs / (j + k)
+    out[small] = series
+    zl = z[~small]
+    value = np.exp(zl)
+    for j in range(k):
+        value = (value - 1.0 / math.factorial(j)) / zl
+    out[~small] = value
+    return out
+
+
 class _ModeMatrices:
     """Per-mode car parameters and the linear dynamics."""
 
@@ -97,24 +117,51 @@ class _ModeMatrices:
         self.total_mass = float(np.sum(self.masses))
         self._propagators: dict[float, tuple] = {}
 
+    def _balancing(self):
+        """Positions scaled by the highest coupler frequency against speeds, so that matrix
+        functions are computed to full relative accuracy: phi_k(D^-1 A D h) = D^-1 phi_k(A h) D."""
+        n = self.A.shape[0] // 2
+        omega = math.sqrt(float(np.max(np.abs(self.A[n:, :n])))) or 1.0
+        scale = np.concatenate([np.full(n, 1.0 / omega), np.ones(n)])
+        return scale, self.A * scale[None, :] / scale[:, None]
+
+    def _phis_by_eigenvectors(self, h: float):
+        """[phi_0..phi_3](A h) and [phi_0, phi_1](A h/2) from the eigen-decomposition of the
+        balanced A (a few small products instead of two matrix exponentials): for the odd step
+        lengths of line-boundary crossings. None if A is (nearly) defective."""
+        if not hasattr(self, '_eigen'):
+            scale, balanced = self._balancing()
+            values, vectors = np.linalg.eig(balanced)
+            self._eigen = None
+            if np.linalg.cond(vectors) < 1e8:
+                self._eigen = (values, vectors * scale[:, None],
+                               np.linalg.inv(vectors) / scale[None, :])
+        if self._eigen is None:
+            return None
+        values, left, right = self._eigen
+
+        def matrices(z, order):
+            return [np.real((left * scalar_phi(z, k)[None, :]) @ right) for k in range(order + 1)]
+        return matrices(values * h, 3), matrices(values * (h / 2), 1)
+
     def propagators(self, h: float, cache: bool = True):
         """ETDRK4 matrices for step h; only the velocity columns of the nonlinear-term maps are
-        kept (the non-linear term has no position rows)."""
+        kept (the non-linear term has no position rows). Cached step lengths: from the matrix
+        exponential of the balanced augmented matrix; others: from eigenvectors."""
         found = self._propagators.get(h)
         if found is not None:
             return found
         n = self.A.shape[0] // 2
-        # Balance positions against speeds (scale by the highest coupler frequency) so that the
-        # exponential of the augmented matrix is computed to full relative accuracy:
-        # phi_k(D^-1 A D h) = D^-1 phi_k(A h) D.
-        omega = math.sqrt(float(np.max(np.abs(self.A[n:, :n])))) or 1.0
-        scale = np.concatenate([np.full(n, 1.0 / omega), np.ones(n)])
-        balanced = self.A * scale[None, :] / scale[:, None]
+        by_eigenvectors = None if cache else self._phis_by_eigenvectors(h)
+        if by_eigenvectors is not None:
+            (e_full, phi1, phi2, phi3), (e_half, phi1_half) = by_eigenvectors
+        else:
+            scale, balanced = self._balancing()
 
-        def unbalanced(phis):
-            return [p * scale[:, None] / scale[None, :] for p in phis]
-        e_half, phi1_half = unbalanced(phi_functions(balanced * (h / 2), 1))
-        e_full, phi1, phi2, phi3 = unbalanced(phi_functions(balanced * h, 3))
+            def unbalanced(phis):
+                return [p * scale[:, None] / scale[None, :] for p in phis]
+            e_half, phi1_half = unbalanced(phi_functions(balanced * (h / 2), 1))
+            e_full, phi1, phi2, phi3 = unbalanced(phi_functions(balanced * h, 3))
         v = slice(n, 2 * n)
         # Cox & Matthews (2002) eq (26): f1 = phi1 - 3 phi2 + 4 phi3, f2 = phi2 - 2 phi3,
         # f3 = -phi2 + 4 phi3 (their h^-2 L^-3 forms, written with phi functions).
@@ -177,16 +224,20 @@ class MultiCarModel:
         """Specific forces outside the exact linear part (velocity rows), m/s^2; the actuator
         forces are included here (constant over the step, so phi_1 integrates them exactly)."""
         n = self.n
-        fa, fb, fc, fl, dist = env.factors(time_s) if env.time_varying else (
-            env.resistance_factor, env.resistance_factor, env.resistance_factor, 1.0, 0.0)
-        specific_dist = dist / mm.total_mass
-        out = [0.0] * n
-        a, b, c, inv = mm.a, mm.b, mm.c, mm.inverse_mass
-        extra = mm.extra
-        for p in range(n):
-            v = float(state[n + p])
-            out[p] = (-fa * a[p] * math.tanh(v / STANDSTILL_SPEED_MPS) - (fb - 1.0) * b[p] * v
-                      - fc * c[p] * v * abs(v) - fl * line_accels[p] - extra + specific_dist)
+        speeds = state[n:].tolist()  # Python floats: faster than numpy on four elements
+        a, b, c = mm.a, mm.b, mm.c
+        tanh = math.tanh
+        if env.time_varying:
+            fa, fb, fc, fl, dist = env.factors(time_s)
+            base = dist / mm.total_mass - mm.extra
+            out = [base - fa * a[p] * tanh(v / STANDSTILL_SPEED_MPS) - (fb - 1.0) * b[p] * v
+                   - fc * c[p] * v * abs(v) - fl * line_accels[p] for p, v in enumerate(speeds)]
+        else:
+            r = env.resistance_factor
+            extra = mm.extra
+            out = [-r * (a[p] * tanh(v / STANDSTILL_SPEED_MPS) + c[p] * v * abs(v))
+                   - (r - 1.0) * b[p] * v - line_accels[p] - extra for p, v in enumerate(speeds)]
+        inv = mm.inverse_mass
         for force, p in zip(forces, self._powered):
             out[p] += force * inv[p]
         return np.array(out)
@@ -196,12 +247,20 @@ class MultiCarModel:
 
     def _segment_indices(self, state) -> list[int]:
         n = self.n
-        return [self.segments.index(float(state[p]) - self._offsets[p],
-                                    float(state[n + p]) < 0.0) for p in range(n)]
+        values = state.tolist()
+        index = self.segments.index
+        return [index(values[p] - self._offsets[p], values[n + p] < 0.0) for p in range(n)]
 
     def _etdrk4(self, x, t: float, h: float, forces, line_accels, mm, env, cache: bool = True):
-        """Cox & Matthews (2002) ETDRK4, eqs (26)."""
+        """Cox & Matthews (2002) ETDRK4, eqs (26). The line forces of the step are given, so
+        the non-linear term does not depend on positions; a uniform shift of the positions is
+        invariant under the linear part (unstretched couplers), so the step runs relative to
+        the lead car's position: no round-off from positions of tens of kilometres."""
         e_half, p_half, e_full, f1, f2, f3 = mm.propagators(h, cache)
+        n = self.n
+        shift = float(x[0])
+        x = x.copy()
+        x[:n] -= shift
         nl = self._nonlinear
         n_x = nl(x, t, forces, line_accels, mm, env)
         ex = e_half @ x
@@ -211,7 +270,9 @@ class MultiCarModel:
         n_b = nl(b, t + h / 2, forces, line_accels, mm, env)
         c = e_half @ a + p_half @ (2.0 * n_b - n_x)
         n_c = nl(c, t + h, forces, line_accels, mm, env)
-        return e_full @ x + f1 @ n_x + f2 @ (n_a + n_b) + f3 @ n_c
+        out = e_full @ x + f1 @ n_x + f2 @ (n_a + n_b) + f3 @ n_c
+        out[:n] += shift
+        return out
 
     def step(self, state: np.ndarray, duration_s: float, forces: Sequence[float],
              time_s: float = 0.0, env: Surroundings | None = None) -> np.ndarray:
