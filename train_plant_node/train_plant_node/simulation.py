@@ -212,15 +212,16 @@ class TrainSimulation:
         physical limits (traction characteristic, emergency brake), unless a safety function
         overrides it."""
         traction = self.scenario.train.traction
-        n = len(self.model.actuator_names)
+        n = len(self.commanded)
         share = 1.0 / n
-        if self.atp_intervention or self.watchdog == EMERGENCY_BRAKE:
+        watchdog = self.watchdog
+        if self.atp_intervention or watchdog == EMERGENCY_BRAKE:
             return [-traction.max_emergency_brake_force_n * share] * n
-        if self.watchdog == SERVICE_BRAKE:
+        if watchdog == SERVICE_BRAKE:
             return [-traction.max_service_brake_force_n * share] * n
         highest = traction.max_traction_at(self.lead_speed()) * share
         lowest = -traction.max_emergency_brake_force_n * share
-        return [min(max(f, lowest), highest) for f in self.commanded]
+        return [lowest if f < lowest else highest if f > highest else f for f in self.commanded]
 
     def _failed(self, drive: Sequence[float], time_s: float, h: float = 0.0) -> tuple:
         failures = self.active_failures(time_s) if self.failures else {}
