@@ -405,8 +405,11 @@ def parse_failures(items: Sequence[Fields], actuator_names: Sequence[str],
 
 def _quantity_sensor(f: Fields, car_names: Sequence[str]) -> QuantitySensor:
     cars = []
-    for i, name in enumerate(f.raw('failed_cars') or []):
-        if name not in car_names:
+    names = f.raw('failed_cars') or []
+    if not isinstance(names, list):
+        raise ConfigError(f'{f.where}.failed_cars: must be a list of car names, got {names!r}')
+    for i, name in enumerate(names):
+        if not isinstance(name, str) or name not in car_names:
             raise ConfigError(f"{f.where}.failed_cars[{i}]: unknown car {name!r}; valid: "
                               f"{', '.join(car_names)}")
         cars.append(name)

@@ -153,3 +153,24 @@ def test_run_time_failure_injection_defaults_to_now_and_can_repair():
                           ('{actuator: motor_1, kind: stuck}', r'inject_failure\[0\].force_n')):
         with pytest.raises(ConfigError, match=message):
             parse_failure_injection(text, MAO.actuator_names, 42.0)
+
+
+def test_any_plant_section_gives_a_setup_or_a_config_error():
+    from hypothesis import given, settings, strategies as st
+    leaves = st.none() | st.booleans() | st.integers(-5, 5) | st.floats() | st.text(max_size=5)
+    values = st.recursive(leaves, lambda inner: st.lists(inner, max_size=3) | st.dictionaries(
+        st.sampled_from(['a', 'kind', 'from_s', 'actuator', 'failed_cars', 'speed', 'modes',
+                         'failures', 'sensors', 'amplitude', 'force_n', 'start_s']), inner,
+        max_size=4), max_leaves=12)
+    sections = st.dictionaries(st.sampled_from(
+        ['resistance_variation', 'modes', 'abrupt_changes', 'disturbance', 'actuators',
+         'failures', 'sensors']), values, max_size=3)
+
+    @settings(max_examples=150, deadline=None)
+    @given(sections)
+    def check(data):
+        try:
+            assert isinstance(parse_plant_setup(data, MAO), PlantSetup)
+        except ConfigError:
+            pass
+    check()

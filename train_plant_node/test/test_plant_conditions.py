@@ -173,3 +173,32 @@ def test_energy_balance_of_the_point_mass():
     kinetic = 0.5 * sim.scenario.train.mass_kg * sim.lead_speed() ** 2
     assert sim.lead_position() > 10000  # all the line's features were crossed
     assert traction + disturbance - resistance - line == pytest.approx(kinetic, rel=1e-6)
+
+
+def test_multi_car_modes_by_region_scale_every_car_and_failures_hit_a_power_car():
+    # a tunnel region doubling the aerodynamic term, then a climbing region with a heavier train
+    train_davis = scenario('crh2_4car_mao').train.davis
+    plant = {'modes': [
+        {'from_m': 0},
+        {'from_m': 400, 'davis_n': {'a': train_davis.a_n, 'b': train_davis.b_n_s_per_m,
+                                    'c': 2 * train_davis.c_n_s2_per_m2}},
+        {'from_m': 800, 'mass_kg': 200e3, 'grade_sine': 0.01}],
+        'failures': [{'actuator': 'car_3', 'kind': 'loss', 'start_s': 5}]}
+    sim = TrainSimulation(scenario('crh2_4car_mao', plant), 'multi_car')
+    sim.state = sim.model.initial_state(0.0, 40.0)
+    trace = run(sim, 30, (12e3, 12e3), lambda s: (s.mode_index(), s.truth(), s.applied))
+    assert {m for m, _, _ in trace} == {0, 1, 2}
+    cars = sim.scenario.train.cars
+    for mode_index, truth, applied in trace:
+        mode = sim.setup.modes[mode_index]
+        ratio_m = mode.mass_kg / sim.scenario.train.mass_kg
+        ratio_c = mode.davis.c_n_s2_per_m2 / train_davis.c_n_s2_per_m2
+        # coupler forces cancel in the sum: sum m_p a_p = F - resistances - mode's grade
+        momentum_rate = sum(c.mass_kg * ratio_m * a for c, a in zip(cars, truth.accelerations))
+        resistance = sum(c.mass_kg * (c.a_mps2 * math.tanh(v / 0.01) + c.b_per_s * v
+                                      + ratio_c * c.c_per_m * v * abs(v))
+                         for c, v in zip(cars, truth.speeds))
+        expected = sum(applied) - resistance - mode.mass_kg * G * mode.grade_sine
+        assert momentum_rate == pytest.approx(expected, abs=1e-6 * mode.mass_kg), mode_index
+        assert truth.forces == (0.0, applied[0], applied[1], 0.0)
+    assert trace[48][2] == (12e3, 12e3) and trace[49][2] == (12e3, 0.0)  # at 4.9 s, at 5 s
