@@ -14,6 +14,7 @@ import yaml
 
 from ato_common import units
 from ato_common.line import Line, parse_line
+from ato_common.plant_setup import PlantSetup, parse_plant_setup
 from ato_common.trains import TRAIN_PRESETS, TrainParameters, train_preset
 from ato_common.validation import ConfigError, Fields
 
@@ -48,6 +49,7 @@ class Scenario:
     line: Line
     planning: PlanningLimits
     run: RunSettings
+    plant: PlantSetup = PlantSetup()  # what varies, actuators, failures, sensors
 
 
 def builtin_scenarios() -> list[str]:
@@ -119,6 +121,6 @@ def parse_scenario(data, origin: str = '<memory>') -> Scenario:
     scenario = Scenario(
         name=f.text('name'), description=f.text('description', ''),
         source=f.text('source', 'suite'), origin=origin, train=train, line=line,
-        planning=planning, run=run)
+        planning=planning, run=run, plant=parse_plant_setup(f.raw('plant'), train, 'plant'))
     f.reject_unknown()
     return scenario
