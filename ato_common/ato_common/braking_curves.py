@@ -235,6 +235,13 @@ class SpeedSupervision:
             return 0.0
         return max(min(lowest, ceiling), 0.0)
 
+    def binding_target(self, position_m: float) -> Target | None:
+        """The target whose permitted curve is the permitted speed at a position (None where
+        the MRSP is)."""
+        speeds = [c(position_m) for c in self.curves['permitted']]
+        lowest = min(range(len(speeds)), key=speeds.__getitem__)
+        return self.targets[lowest] if speeds[lowest] < self.mrsp(position_m) else None
+
     def permitted_speed(self, position_m: float) -> float:
         """min(MRSP, the permitted curves of every target), m/s; 0 beyond the SvL."""
         return self.curve('permitted', position_m)

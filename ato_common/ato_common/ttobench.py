@@ -559,3 +559,58 @@ def restrict(limits: PiecewiseConstant, start: float, end: float, speed: float,
             starts.append(x)
             merged.append(v)
     return PiecewiseConstant(starts, merged)
+
+
+def scenario_data(track: str | Path, train: str | Path, journey: str | Path | None = None,
+                  dwell_s: float = 30.0) -> dict:
+    """A scenario (the mapping :func:`ato_common.scenario.parse_scenario` reads) running a
+    TTOBench track with a TTOBench train. The planning limits are starting values for the user
+    to edit: the train's comfort acceleration where it gives one, else 0.5 m/s^2; 70 % of the
+    lower of its comfort and (lowest) service deceleration, so that the supervision's service
+    curve stays above the plan; jerk 0.5 m/s^3; margin 2 km/h."""
+    loaded = load_train(train)
+    service = loaded.parameters.traction.max_service_brake_force_n / loaded.parameters.mass_kg
+    if loaded.braking is not None:
+        service = min(d for _, d in loaded.braking.service)
+    deceleration = 0.7 * min(loaded.max_deceleration_mps2 or service, service)
+    data = {
+        'name': f'{Path(track).stem}__{Path(train).stem}',
+        'description': f'TTOBench track {Path(track).name} with train {Path(train).name}',
+        'source': 'TTOBench (Kouzoupis, Pendharkar & Corman 2023, BSD-2)',
+        'train': {'ttobench': str(train)},
+        'line': {'ttobench': str(track), 'dwell_s': dwell_s},
+        'planning': {'max_acceleration_mps2': round(min(loaded.max_acceleration_mps2 or 0.5,
+                                                        2.0), 3),
+                     'service_deceleration_mps2': round(min(deceleration, 2.0), 3),
+                     'max_jerk_mps3': 0.5, 'speed_margin_kmh': 2.0},
+    }
+    if journey is not None:
+        data['journey'] = {'ttobench': str(journey)}
+    return data
+
+
+def main(argv=None) -> int:
+    """``python -m ato_common.ttobench TRACK TRAIN [--journey J] [--dwell S]``: print a scenario
+    YAML running them (save it, edit the planning limits, run it with SCENARIO=file)."""
+    import argparse
+    import sys
+
+    import yaml
+    parser = argparse.ArgumentParser(description=main.__doc__)
+    parser.add_argument('track')
+    parser.add_argument('train')
+    parser.add_argument('--journey')
+    parser.add_argument('--dwell', type=float, default=30.0, help='dwell at intermediate stops, s')
+    args = parser.parse_args(argv)
+    try:
+        data = scenario_data(Path(args.track).resolve(), Path(args.train).resolve(),
+                             Path(args.journey).resolve() if args.journey else None, args.dwell)
+    except ConfigError as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 2
+    yaml.safe_dump(data, sys.stdout, sort_keys=False)
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -206,7 +206,7 @@ def leg_sections(scenario: Scenario, mrsp, start: float, end: float,
 def highest_speed_braking_within(distance: float, v_to: float, deceleration: float,
                                  jerk: float, top: float) -> float:
     """Highest speed <= top from which the S-curve braking to v_to fits into ``distance``."""
-    if speed_change_distance(top, v_to, deceleration, jerk) <= distance:
+    if top <= v_to or speed_change_distance(top, v_to, deceleration, jerk) <= distance:
         return top
     low, high = v_to, top
     for _ in range(50):
@@ -317,8 +317,10 @@ def plan_reference(scenario: Scenario) -> Plan:
                                    key=lambda t: (t.location_m, t.kind)))
             return Plan(trajectory, stops, supervision, targets)
         _, position, leg = violation
-        ahead = [t for t in supervision.legs[leg].targets if t.location_m >= position]
-        target = ahead[0]
+        target = supervision.legs[leg].binding_target(position)
+        if target is None:
+            raise PlanningError(f'{scenario.origin}: the target exceeds the static limit near '
+                                f'{position:.0f} m (leg {leg})')
         if target.kind == 'speed_decrease':
             extra_m[target.location_m] = max(100.0, 2.0 * extra_m.get(target.location_m, 0.0))
         else:
