@@ -181,7 +181,8 @@ class SpeedSupervision:
     """The supervision of one movement authority: MRSP, targets, the braking curves of each."""
 
     def __init__(self, line: Line, settings: SupervisionSettings, train_length_m: float,
-                 start_m: float, stopping_point_m: float, final: bool = True):
+                 start_m: float, stopping_point_m: float, final: bool = True,
+                 stop_name: str = ''):
         self.settings = settings
         self.start_m = start_m
         self.mrsp = most_restrictive_speed_profile(line.speed_limit_mps, line.length_m,
@@ -198,7 +199,7 @@ class SpeedSupervision:
             if previous is not None and v < previous and start_m < s < stopping_point_m:
                 self.targets.append(Target('speed_decrease', s, v))
             previous = v
-        self.targets.append(Target(kind, stopping_point_m, 0.0))
+        self.targets.append(Target(kind, stopping_point_m, 0.0, stop_name))
         top = max(self.mrsp.values) + units.kmh_to_mps(DV_EBI_KMH[1]) + CURVE_HEADROOM_MPS
         self.curves: dict[str, list[DecelerationCurve]] = {name: [] for name in CURVE_NAMES}
         for target in self.targets:
@@ -254,19 +255,21 @@ class RunSupervision:
     STOP_WINDOW_M = 0.5
 
     def __init__(self, line: Line, settings: SupervisionSettings, train_length_m: float,
-                 stations_m: Sequence[float]):
+                 stations_m: Sequence[float], names: Sequence[str] = ()):
         self.stations_m = list(stations_m)
+        names = list(names) or [''] * len(stations_m)
         self.legs = [SpeedSupervision(line, settings, train_length_m, origin, destination,
-                                      final=i == len(stations_m) - 2)
+                                      final=i == len(stations_m) - 2, stop_name=names[i + 1])
                      for i, (origin, destination) in enumerate(zip(stations_m, stations_m[1:]))]
 
     @classmethod
     def for_scenario(cls, scenario) -> 'RunSupervision':
         """The run of a scenario (:class:`ato_common.scenario.Scenario`): from its initial
         station through every later one."""
-        stations = [s.position_m for s in scenario.line.stations
+        stations = [s for s in scenario.line.stations
                     if s.position_m >= scenario.run.initial_position_m - 1e-9]
-        return cls(scenario.line, scenario.supervision, scenario.train.length_m, stations)
+        return cls(scenario.line, scenario.supervision, scenario.train.length_m,
+                   [s.position_m for s in stations], [s.name for s in stations])
 
     def leg_at(self, position_m: float) -> int:
         passed = bisect_right(self.stations_m, position_m + self.STOP_WINDOW_M) - 1
