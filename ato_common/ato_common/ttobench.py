@@ -602,9 +602,11 @@ def main(argv=None) -> int:
     parser.add_argument('--journey')
     parser.add_argument('--dwell', type=float, default=30.0, help='dwell at intermediate stops, s')
     args = parser.parse_args(argv)
+    from ato_common.scenario import parse_scenario
     try:
         data = scenario_data(Path(args.track).resolve(), Path(args.train).resolve(),
                              Path(args.journey).resolve() if args.journey else None, args.dwell)
+        parse_scenario(data)  # every file valid before anything is written
     except ConfigError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
