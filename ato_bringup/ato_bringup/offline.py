@@ -6,6 +6,7 @@ command is held while the plant advances one period."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import time
 
 import numpy as np
 
@@ -20,6 +21,9 @@ from train_plant_node.simulation import SensorSettings, TrainSimulation
 
 @dataclass
 class OfflineRun:
+    """One closed-loop run, sampled at every control instant. Lead-car arrays are 1-D; the
+    ``car_*`` arrays have one column per car and ``actuator_forces`` one per actuator."""
+
     scenario: Scenario
     plan: Plan
     times_s: np.ndarray
@@ -28,12 +32,22 @@ class OfflineRun:
     forces: np.ndarray
     ref_positions: np.ndarray
     ref_speeds: np.ndarray
+    ref_accelerations: np.ndarray
+    car_positions: np.ndarray
+    car_speeds: np.ndarray
+    actuator_forces: np.ndarray
+    step_times_s: np.ndarray
     laws: list[str] = field(default_factory=list)
     estimates: list[dict] = field(default_factory=list)
+    faults: list[str] = field(default_factory=list)
 
     def metrics(self) -> RunMetrics:
         return compute_metrics(self.times_s, self.positions, self.speeds, self.forces,
                                self.ref_positions, self.ref_speeds, stop_samples(self.plan))
+
+    def estimate(self, key: str) -> np.ndarray:
+        """One reported estimate over the run (NaN where the law did not report it)."""
+        return np.array([e.get(key, np.nan) for e in self.estimates])
 
 
 def stop_samples(plan: Plan) -> list[StopSample]:
@@ -48,16 +62,20 @@ def run_end_time_s(scenario: Scenario, plan: Plan) -> float:
 
 def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
                 switches: dict[float, str] | None = None,
-                sensors: SensorSettings = SensorSettings()) -> OfflineRun:
+                sensors: SensorSettings = SensorSettings(), model: str = 'point_mass',
+                end_time_s: float | None = None, **model_options) -> OfflineRun:
+    """Run ``controller`` on ``scenario`` with the plant ``model``; ``switches`` maps times to
+    law names selected then; ``end_time_s`` overrides the scenario's end."""
     plan = plan_reference(scenario)
     period_ns = nanoseconds(1.0 / scenario.run.controller_rate_hz)
-    sim = TrainSimulation(scenario, sensors=sensors)
+    sim = TrainSimulation(scenario, model, sensors=sensors, **model_options)
     host = ControllerHost(TrainKnowledge.of(scenario.train), seconds(period_ns), controller,
                           settings)
-    steps = int(run_end_time_s(scenario, plan) * 1e9 // period_ns)
+    end = end_time_s if end_time_s is not None else run_end_time_s(scenario, plan)
+    steps = int(end * 1e9 // period_ns)
     pending = sorted((switches or {}).items())
-    rows = []
-    laws, estimates = [], []
+    rows, car_positions, car_speeds, actuator_forces, step_times = [], [], [], [], []
+    laws, estimates, faults = [], [], []
     for _ in range(steps + 1):
         t = sim.time_s
         while pending and pending[0][0] <= t:
@@ -65,14 +83,21 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
         truth = sim.truth()
         measured = sim.measured(truth)
         reference = plan.trajectory.at(t)
-        result = host.step(Measurement(t, measured.positions[0], measured.speeds[0]), reference)
+        started = time.perf_counter()
+        mode = scenario.plant.mode_index(t, measured.positions[0])
+        result = host.step(Measurement.from_state(t, measured, mode), reference)
+        step_times.append(time.perf_counter() - started)
         sim.apply_command(result.forces_n)
         applied = sim.truth()
         rows.append((t, truth.positions[0], truth.speeds[0], sum(applied.forces),
-                     reference.position, reference.speed))
+                     reference.position, reference.speed, reference.acceleration))
+        car_positions.append(truth.positions)
+        car_speeds.append(truth.speeds)
+        actuator_forces.append(sim.applied)
         laws.append(result.law)
         estimates.append(dict(result.estimates))
+        faults.append(result.fault)
         sim.advance(period_ns)
     data = np.array(rows)
-    return OfflineRun(scenario, plan, data[:, 0], data[:, 1], data[:, 2], data[:, 3], data[:, 4],
-                      data[:, 5], laws, estimates)
+    return OfflineRun(scenario, plan, *data.T, np.array(car_positions), np.array(car_speeds),
+                      np.array(actuator_forces), np.array(step_times), laws, estimates, faults)

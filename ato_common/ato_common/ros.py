@@ -95,6 +95,7 @@ def reference_to_msg(reference: Reference) -> JointTrajectory:
         point.positions = [r.position]
         point.velocities = [r.speed]
         point.accelerations = [r.acceleration]
+        point.effort = [r.jerk]  # the reference's jerk (m/s^3) rides in the effort field
         point.time_from_start = to_duration(r.time_s - t0)
         points.append(point)
     msg.points = points
@@ -112,8 +113,12 @@ def reference_from_msg(msg: JointTrajectory, time_origin_s: float = 0.0) -> Refe
     for p in msg.points:
         if not (len(p.positions) == len(p.velocities) == len(p.accelerations) == 1):
             raise MessageError('each reference point needs one position, velocity and acceleration')
+        if len(p.effort) > 1:
+            raise MessageError(f'a reference point carries at most one jerk (effort), got '
+                               f'{len(p.effort)}')
         points.append(ReferencePoint(t0 + from_duration(p.time_from_start), p.positions[0],
-                                     p.velocities[0], p.accelerations[0]))
+                                     p.velocities[0], p.accelerations[0],
+                                     p.effort[0] if p.effort else 0.0))
     return Reference(stamp_ns, tuple(points))
 
 

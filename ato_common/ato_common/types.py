@@ -32,10 +32,14 @@ class TrainState:
 
 @dataclass(frozen=True)
 class ReferencePoint:
+    """The target at ``time_s``: x*, v*, a* and the jerk a*' (some laws need v*'', e.g.
+    Mao et al. eq 51; the reference is piecewise-constant jerk, so it is exact)."""
+
     time_s: float
     position: float
     speed: float
     acceleration: float
+    jerk: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,6 @@
 """Runs the selected law each period: switching with bumpless transfer, saturation to the
-actuator limits, guard against non-finite output, and the split over actuators.
+actuator limits, guard against missing or non-finite input and output, the check that the law
+fits the train and the running plant, and the split over actuators.
 
 Bumpless transfer: on a switch the new law is reset from the current state and told the last
 command; whatever step remains between the last command and the new law's first output is
@@ -15,6 +16,10 @@ from typing import Any, Mapping
 from ato_common.types import ReferencePoint
 from ato_controller_node.laws import LAWS, law_class
 from ato_controller_node.laws.base import ControlLaw, Measurement, TrainKnowledge, validated_settings
+
+#: the estimate under which a law that observes the speed reports it (m/s); used for the
+#: traction limit when the speed is not measured
+SPEED_ESTIMATE_KEY = 'speed_hat_mps'
 
 
 class LawRejected(ValueError):
@@ -43,9 +48,11 @@ class ControllerHost:
         self.bumpless_time_constant_s = bumpless_time_constant_s
         self._settings = {name: validated_settings(cls.Settings, (settings or {}).get(name, {}))
                           for name, cls in LAWS.items()}
+        self.measured_cars: int | None = None  # cars the plant measures, once seen
         self.law: ControlLaw = self._make(law)
         self.started = False
         self.last_force_n = 0.0
+        self.last_forces_n = (0.0,) * len(train.actuator_names)
         self._offset_n = 0.0
         self._has_commanded = False
         self.faults = 0
@@ -56,7 +63,7 @@ class ControllerHost:
         except KeyError as error:
             raise LawRejected(error.args[0]) from None
         law = cls(self.train, self.dt, self._settings[name])
-        reason = law.fits(self.train)
+        reason = law.fits(self.train, self.measured_cars)
         if reason:
             raise LawRejected(reason)
         return law
@@ -84,46 +91,82 @@ class ControllerHost:
 
     def step(self, measurement: Measurement, reference: ReferencePoint) -> StepResult:
         law = self.law
-        inputs = (measurement.position, measurement.speed, reference.position, reference.speed,
-                  reference.acceleration)
-        if not all(math.isfinite(x) for x in inputs):
+        if measurement.car_positions:
+            self.measured_cars = measurement.car_count
+        reason = law.fits(self.train, self.measured_cars)
+        if reason:
+            self.faults += 1
+            return self._held(law, f'{reason}; holding the last command', reference,
+                              measurement)
+        missing = self._missing_input(law, measurement, reference)
+        if missing:
             # Hold the last command and leave the law untouched: a non-finite value must not
             # reach its integrators or estimates.
             self.faults += 1
-            return self._held(law, 'non-finite measurement or reference; holding the last '
-                              'command', reference, measurement)
+            return self._held(law, f'{missing}; holding the last command', reference,
+                              measurement)
         if not self.started:
             law.reset(measurement, reference,
                       self.last_force_n if self._has_commanded else None)
         output = law.step(measurement, reference)
-        if not math.isfinite(output.force_n):
+        n = len(self.train.actuator_names)
+        if output.forces_n is not None and len(output.forces_n) != n:
+            self.faults += 1
+            return self._held(law, f'{law.name} returned {len(output.forces_n)} forces for {n} '
+                              'actuators; holding the last command', reference, measurement)
+        if not all(math.isfinite(f) for f in (output.force_n, *(output.forces_n or ()))):
             self.faults += 1
             return self._held(law, f'{law.name} produced a non-finite force; holding the last '
                               'command', reference, measurement)
-        fault = ''
-        wanted = output.force_n
         if not self.started:
             # Nothing to be bumpless to before the first command.
-            self._offset_n = self.last_force_n - wanted if self._has_commanded else 0.0
+            self._offset_n = self.last_force_n - output.force_n if self._has_commanded else 0.0
             self.started = True
         else:
             self._offset_n *= math.exp(-self.dt / self.bumpless_time_constant_s)
-        wanted += self._offset_n
-        lowest, highest = self.train.traction.limits_at(measurement.speed)
-        total = min(max(wanted, lowest), highest)
-        law.after_saturation(wanted - self._offset_n, total - self._offset_n)
-        self.last_force_n = total
+        offset_each = self._offset_n / n
+        law_each = output.forces_n if output.forces_n is not None else (output.force_n / n,) * n
+        wanted_each = [f + offset_each for f in law_each]
+        lowest, highest = self.train.actuator_limits_at(self._speed_for_limits(
+            measurement, reference, output.estimates))
+        forces = tuple(min(max(f, lowest), highest) for f in wanted_each)
+        total, wanted = sum(forces), sum(wanted_each)
+        law.after_saturation(wanted - self._offset_n, total - self._offset_n,
+                             tuple(f - offset_each for f in forces))
+        self.last_force_n, self.last_forces_n = total, forces
         self._has_commanded = True
-        return self._result(total, wanted, law, dict(output.estimates), reference, measurement,
-                            fault)
+        return self._result(total, forces, wanted, law, dict(output.estimates), reference,
+                            measurement, '')
 
-    def _result(self, total, wanted, law, estimates, reference, measurement, fault):
-        share = total / len(self.train.actuator_names)
-        return StepResult(total, (share,) * len(self.train.actuator_names), wanted,
-                          total != wanted, law.name, estimates,
+    @staticmethod
+    def _missing_input(law: ControlLaw, measurement: Measurement,
+                       reference: ReferencePoint) -> str:
+        """Why the law cannot step on these inputs ('' if it can)."""
+        if not all(math.isfinite(x) for x in (reference.position, reference.speed,
+                                              reference.acceleration, reference.jerk)):
+            return 'non-finite reference'
+        for quantity in law.requires:
+            values = measurement.values_of(quantity)
+            if not values or not all(math.isfinite(x) for x in values):
+                return f'{law.name} needs the measured {quantity.replace("_", " ")}, which is ' \
+                       'not available (NaN or missing)'
+        return ''
+
+    @staticmethod
+    def _speed_for_limits(measurement: Measurement, reference: ReferencePoint,
+                          estimates: Mapping[str, float]) -> float:
+        """The speed at which the traction limit (power hyperbola) is taken: the measured one,
+        else a law's own estimate, else the reference's."""
+        for speed in (measurement.speed, estimates.get(SPEED_ESTIMATE_KEY, math.nan)):
+            if math.isfinite(speed):
+                return speed
+        return reference.speed
+
+    def _result(self, total, forces, wanted, law, estimates, reference, measurement, fault):
+        return StepResult(total, forces, wanted, total != wanted, law.name, estimates,
                           reference.speed - measurement.speed,
                           reference.position - measurement.position, fault)
 
     def _held(self, law, fault, reference, measurement) -> StepResult:
-        return self._result(self.last_force_n, self.last_force_n, law, {}, reference,
-                            measurement, fault)
+        return self._result(self.last_force_n, self.last_forces_n, self.last_force_n, law, {},
+                            reference, measurement, fault)

@@ -54,7 +54,7 @@ NODE_PARAMS = (
 
 def reference_now(reference: Reference, now_ns: int) -> ReferencePoint:
     """Real time: the latest reference brought forward to now along its preview (from the last
-    preview point not after now, with its speed and acceleration)."""
+    preview point not after now, with its speed, acceleration and jerk)."""
     elapsed = seconds(now_ns - reference.stamp_ns)
     t0 = reference.points[0].time_s
     base = reference.points[0]
@@ -62,9 +62,10 @@ def reference_now(reference: Reference, now_ns: int) -> ReferencePoint:
         if point.time_s - t0 <= elapsed:
             base = point
     dt = elapsed - (base.time_s - t0)
+    a, j = base.acceleration, base.jerk
     return ReferencePoint(base.time_s + dt,
-                          base.position + dt * (base.speed + 0.5 * dt * base.acceleration),
-                          base.speed + dt * base.acceleration, base.acceleration)
+                          base.position + dt * (base.speed + dt * (a / 2.0 + dt * j / 6.0)),
+                          base.speed + dt * (a + dt * j / 2.0), a + dt * j, j)
 
 
 def gain_params() -> list[Param]:
@@ -110,6 +111,7 @@ class AtoControllerNode(Node):
         self.step_times_s: list[float] = []
         self.period_warning_given = False
         self.input_fault = ''
+        self.last_fault_logged = ''
         self.state_received_wall = 0.0
         self.stale_reported_wall = 0.0
 
@@ -231,8 +233,14 @@ class AtoControllerNode(Node):
     # --- the step -----------------------------------------------------------------------------
     def step(self, stamp_ns: int, state, reference, time_s: float) -> None:
         started = time.perf_counter()
-        measurement = Measurement(time_s, state.positions[0], state.speeds[0])
+        # The operating mode is known on board (line data), as the indicators chi_i of
+        # Mao et al. 2017 assume; taken at the lead car's measured position.
+        mode = self.scenario.plant.mode_index(time_s, state.positions[0])
+        measurement = Measurement.from_state(time_s, state, mode)
         result = self.host.step(measurement, reference.now)
+        if result.fault and result.fault != self.last_fault_logged:
+            self.get_logger().error(result.fault)
+        self.last_fault_logged = result.fault
         self.step_times_s.append(time.perf_counter() - started)
         msg = command_to_msg(Command(stamp_ns, self.train.actuator_names, result.forces_n,
                                      result.law))

@@ -1,19 +1,26 @@
 """The one interface every control law implements, and what a law is told about the train.
 
 A law sees sampled measurements and the reference at a fixed period ``dt``; it keeps its own
-state (integrators, parameter estimates) and returns the total traction/brake force it wants.
-Saturation to the actuator limits is applied by the host, which tells the law what was actually
-commanded so that its adaptation or integrator does not wind up.
+state (integrators, parameter estimates) and returns the force it wants: one total force that
+the host shares equally over the actuators, or one force per actuator. Saturation to the
+actuator limits is applied by the host, which tells the law what was actually commanded so that
+its adaptation or integrator does not wind up.
+
+A law declares what it needs of the running plant: the measured quantities (``requires``), the
+number of cars whose measurements it uses (``cars``) and the number of actuators it drives
+(``actuators``); the host refuses a law that does not fit, with the reason.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field, fields, replace
+import math
 from typing import Any, ClassVar, Mapping
 
-from ato_common.trains import DavisResistance, TractionCharacteristic, TrainParameters
-from ato_common.types import ReferencePoint
+from ato_common.trains import (CarParameters, Coupler, DavisResistance, TractionCharacteristic,
+                               TrainParameters)
+from ato_common.types import ReferencePoint, TrainState
 
 
 @dataclass(frozen=True)
@@ -24,25 +31,63 @@ class TrainKnowledge:
     nominal_davis: DavisResistance
     traction: TractionCharacteristic
     actuator_names: tuple[str, ...]
+    cars: tuple[CarParameters, ...] = ()    # nominal per-car data of a multi-car train
+    couplers: tuple[Coupler, ...] = ()
 
     @classmethod
     def of(cls, train: TrainParameters) -> 'TrainKnowledge':
-        return cls(train.mass_kg, train.davis_nominal, train.traction, train.actuator_names)
+        return cls(train.mass_kg, train.davis_nominal, train.traction, train.actuator_names,
+                   train.cars, train.couplers)
+
+    def actuator_limits_at(self, speed: float) -> tuple[float, float]:
+        """(lowest, highest) force of one actuator: an equal share of the train's limits."""
+        lowest, highest = self.traction.limits_at(speed)
+        n = len(self.actuator_names)
+        return lowest / n, highest / n
+
+
+#: the measured quantities a law may require (see ``ControlLaw.requires``)
+MEASURED_QUANTITIES = ('position', 'speed', 'acceleration', 'car_positions', 'car_speeds')
 
 
 @dataclass(frozen=True)
 class Measurement:
-    """Sampled lead-car measurements used by single-mass laws (SI)."""
+    """One sample of what the sensors measured (SI). ``position``, ``speed`` and
+    ``acceleration`` are the lead car's; NaN means not measured (a failed or dropped-out
+    sensor). ``car_positions``/``car_speeds`` hold every car, lead first (one entry for a
+    single-mass plant). ``mode`` is the index of the known operating mode of a piecewise-constant
+    plant (the indicators chi_i of Mao et al. 2017), 0 when the plant has no modes."""
 
     time_s: float
     position: float
     speed: float
+    acceleration: float = math.nan
+    car_positions: tuple[float, ...] = ()
+    car_speeds: tuple[float, ...] = ()
+    mode: int = 0
+
+    @classmethod
+    def from_state(cls, time_s: float, state: TrainState, mode: int = 0) -> 'Measurement':
+        return cls(time_s, state.positions[0], state.speeds[0], state.accelerations[0],
+                   tuple(state.positions), tuple(state.speeds), mode)
+
+    @property
+    def car_count(self) -> int:
+        return max(1, len(self.car_positions))
+
+    def values_of(self, quantity: str) -> tuple[float, ...]:
+        value = getattr(self, quantity)
+        return value if isinstance(value, tuple) else (value,)
 
 
 @dataclass(frozen=True)
 class LawOutput:
+    """The total force wanted (N) and, from a law that drives each actuator itself
+    (``ControlLaw.actuators`` set), one force per actuator summing to it."""
+
     force_n: float
     estimates: Mapping[str, float] = field(default_factory=dict)
+    forces_n: tuple[float, ...] | None = None
 
 
 def setting(default: float, *, minimum: float, maximum: float, units: str, description: str):
@@ -87,17 +132,30 @@ class ControlLaw(ABC):
     Settings: ClassVar[type]
     #: number of actuators the law drives; None: one total force, shared by the host
     actuators: ClassVar[int | None] = None
+    #: measured quantities the law uses (of MEASURED_QUANTITIES); a NaN in one of them makes
+    #: the host hold the last command instead of stepping the law
+    requires: ClassVar[tuple[str, ...]] = ('position', 'speed')
+    #: number of cars whose measurements the law uses; None: the lead car only
+    cars: ClassVar[int | None] = None
 
     def __init__(self, train: TrainKnowledge, dt: float, settings=None):
         self.train = train
         self.dt = dt
         self.settings = settings if settings is not None else self.Settings()
 
-    def fits(self, train: TrainKnowledge) -> str | None:
-        """None if the law can drive this train, else the reason it cannot."""
+    def fits(self, train: TrainKnowledge, measured_cars: int | None = None) -> str | None:
+        """None if the law can drive this train (and the running plant, which measures
+        ``measured_cars`` cars; None before its first measurement), else the reason."""
         if self.actuators is not None and self.actuators != len(train.actuator_names):
             return (f'{self.name} drives {self.actuators} actuators but the train has '
                     f'{len(train.actuator_names)} ({", ".join(train.actuator_names)})')
+        if self.cars is not None:
+            if len(train.cars) != self.cars:
+                return (f'{self.name} needs a {self.cars}-car train model but the train has '
+                        f'{len(train.cars) or "no"} per-car data')
+            if measured_cars is not None and measured_cars != self.cars:
+                return (f'{self.name} needs the measurements of {self.cars} cars but the plant '
+                        f'publishes {measured_cars} (run the plant with model:=multi_car)')
         return None
 
     def update_settings(self, settings) -> None:
@@ -115,5 +173,7 @@ class ControlLaw(ABC):
         """The total force wanted now (N); what was actually commanded comes back through
         ``after_saturation`` in the same period."""
 
-    def after_saturation(self, wanted_n: float, commanded_n: float) -> None:
-        """Told what was actually commanded (after limits), once per step, after ``step``."""
+    def after_saturation(self, wanted_n: float, commanded_n: float,
+                         commanded_forces_n: tuple[float, ...] = ()) -> None:
+        """Told what was actually commanded (after limits), once per step, after ``step``:
+        the total and the force of each actuator."""

@@ -1,0 +1,104 @@
+"""The host's side of the law interface: per-actuator output and limits, required inputs, and
+the refusal of a law that does not fit the train or the running plant."""
+
+from dataclasses import dataclass
+import math
+
+import pytest
+
+from ato_common.scenario import load_scenario
+from ato_common.trains import train_preset
+from ato_common.types import ReferencePoint
+from ato_controller_node import host as host_module
+from ato_controller_node.host import ControllerHost, LawRejected
+from ato_controller_node.laws import LAWS
+from ato_controller_node.laws.base import ControlLaw, LawOutput, Measurement, TrainKnowledge
+
+
+@dataclass(frozen=True)
+class _NoSettings:
+    pass
+
+
+class _PerActuatorProbe(ControlLaw):
+    """Drives two actuators with fixed, unequal forces; records what the host reports back."""
+
+    name = 'probe_two_cars'
+    summary = 'test probe'
+    Settings = _NoSettings
+    actuators = 2
+    cars = 4
+    requires = ('car_speeds',)
+    wanted = (1e9, -5e3)
+
+    def reset(self, measurement, reference, last_force_n):
+        self.reported = None
+
+    def step(self, measurement, reference):
+        return LawOutput(sum(self.wanted), {}, self.wanted)
+
+    def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=()):
+        self.reported = (wanted_n, commanded_n, commanded_forces_n)
+
+
+@pytest.fixture
+def probe_registered(monkeypatch):
+    monkeypatch.setitem(LAWS, _PerActuatorProbe.name, _PerActuatorProbe)
+    monkeypatch.setattr(host_module, 'LAWS', LAWS)
+
+
+def four_car_measurement(speed=20.0, cars=4):
+    return Measurement(0.0, 0.0, speed, 0.0, tuple(-25.0 * i for i in range(cars)),
+                       (speed,) * cars)
+
+
+def test_per_actuator_forces_are_saturated_each_and_reported_back(probe_registered):
+    train = TrainKnowledge.of(train_preset('crh2_4car_mao'))
+    host = ControllerHost(train, 0.1, _PerActuatorProbe.name)
+    result = host.step(four_car_measurement(), ReferencePoint(0.0, 0.0, 20.0, 0.0))
+    lowest, highest = train.actuator_limits_at(20.0)
+    assert result.forces_n == (highest, -5e3)
+    assert result.total_force_n == pytest.approx(highest - 5e3)
+    assert result.saturated
+    wanted, commanded, forces = host.law.reported
+    assert wanted == pytest.approx(1e9 - 5e3) and commanded == pytest.approx(highest - 5e3)
+    assert forces == (highest, -5e3)
+
+
+def test_a_law_needing_four_cars_is_refused_on_a_single_mass_plant(probe_registered):
+    train = TrainKnowledge.of(train_preset('crh2_4car_mao'))
+    host = ControllerHost(train, 0.1, 'pid')
+    host.step(four_car_measurement(cars=1), ReferencePoint(0.0, 0.0, 20.0, 0.0))
+    with pytest.raises(LawRejected, match='needs the measurements of 4 cars but the plant '
+                                          'publishes 1'):
+        host.check(_PerActuatorProbe.name)
+    host.step(four_car_measurement(cars=4), ReferencePoint(0.0, 0.0, 20.0, 0.0))
+    host.check(_PerActuatorProbe.name)
+
+
+def test_a_law_is_refused_on_a_train_without_per_car_data(probe_registered):
+    train = TrainKnowledge.of(load_scenario('short_line').train)
+    with pytest.raises(LawRejected, match='drives 2 actuators but the train has 1'):
+        ControllerHost(train, 0.1, _PerActuatorProbe.name)
+
+
+def test_missing_required_input_holds_the_command_and_names_it(probe_registered):
+    train = TrainKnowledge.of(train_preset('crh2_4car_mao'))
+    host = ControllerHost(train, 0.1, _PerActuatorProbe.name)
+    ref = ReferencePoint(0.0, 0.0, 20.0, 0.0)
+    first = host.step(four_car_measurement(), ref)
+    failed = Measurement(0.1, 0.0, math.nan, 0.0, (0.0, -25.0, -50.0, -75.0),
+                         (20.0, math.nan, 20.0, 20.0))
+    held = host.step(failed, ref)
+    assert 'needs the measured car speeds' in held.fault
+    assert held.forces_n == first.forces_n
+
+
+def test_pid_ignores_a_missing_acceleration_but_not_a_missing_speed():
+    train = TrainKnowledge.of(load_scenario('short_line').train)
+    host = ControllerHost(train, 0.1, 'pid')
+    ref = ReferencePoint(0.0, 0.0, 10.0, 0.0, 0.01)
+    assert not host.step(Measurement(0.0, 0.0, 10.0, math.nan), ref).fault
+    assert 'needs the measured speed' in host.step(Measurement(0.1, 1.0, math.nan), ref).fault
+    assert 'non-finite reference' in host.step(
+        Measurement(0.2, 1.0, 10.0), ReferencePoint(0.2, 0.0, 10.0, 0.0, math.nan)).fault
