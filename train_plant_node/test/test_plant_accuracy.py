@@ -27,5 +27,5 @@ def test_multi_car_speed_error_below_1e_6():
     worst, sim = compare('crh2_4car_mao', 'multi_car', 40.0, 1.0,
                          lambda t, n: ((10e3 + 5e3 * math.sin(0.3 * t)),
                                        (8e3 + 6e3 * math.cos(0.2 * t))))
-    assert min(sim.truth().positions) > 710, sim.truth().positions
+    assert min(sim.truth().positions) > 1100, sim.truth().positions
     assert worst < 1e-6

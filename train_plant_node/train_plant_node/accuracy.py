@@ -16,8 +16,8 @@ from train_plant_node.simulation import TrainSimulation
 
 
 def accuracy_scenario(preset: str) -> Scenario:
-    """A line whose forces jump at segment boundaries in its first 2.4 km, and a slowly
-    varying aerodynamic coefficient (Luo & Xu eq 34)."""
+    """A line whose forces jump at segment boundaries in its first 2.4 km (and vary inside a
+    transition curve), and a slowly varying aerodynamic coefficient (Luo & Xu eq 34)."""
     return parse_scenario({
         'name': 'acc', 'train': {'preset': preset},
         'line': {'name': 'l', 'length_m': 1e5,
@@ -25,7 +25,9 @@ def accuracy_scenario(preset: str) -> Scenario:
                  'speed_limits': [{'start_m': 0, 'speed_kmh': 400}],
                  'gradients': [{'start_m': 0, 'per_mille': 0}, {'start_m': 700, 'per_mille': 9},
                                {'start_m': 2100, 'per_mille': -6}],
-                 'curves': [{'start_m': 1200, 'length_m': 500, 'radius_m': 3000}],
+                 'curves': [{'start_m': 900, 'length_m': 200, 'radius_m': 5000,
+                             'end_radius_m': 2000},   # a transition: force linear in position
+                            {'start_m': 1200, 'length_m': 500, 'radius_m': 3000}],
                  'tunnels': [{'start_m': 1500, 'length_m': 900}]},
         'planning': {'max_acceleration_mps2': 0.5, 'service_deceleration_mps2': 0.5,
                      'max_jerk_mps3': 0.5},

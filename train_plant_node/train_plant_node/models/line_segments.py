@@ -1,7 +1,7 @@
-"""The line's specific force is piecewise constant in position (grades, curves and tunnels start
-and end at given positions). The models look it up once per segment and split an integration step
-where a car crosses a segment boundary, so that no integration stage straddles a jump of the
-force: the step stays at its full order on any line."""
+"""The line's specific force between consecutive feature boundaries (grade changes, curve and
+tunnel ends) is constant, or linear in position inside a transition curve. The models look a
+segment up once per step and split an integration step where a car crosses a boundary, so that
+no integration stage straddles a jump of the force: the step keeps its full order on any line."""
 
 from __future__ import annotations
 
@@ -19,10 +19,19 @@ class LineSegments:
         for feature in (*line.curves, *line.tunnels):
             bounds.update((feature.start_m, feature.start_m + feature.length_m))
         self.bounds = sorted(bounds)
-        samples = [self.bounds[0] - 1.0 if self.bounds else 0.0] + self.bounds
-        # Per segment: g sin(grade) and the curve + tunnel part, m/s^2 (line.py's rules).
-        self.grade = [gravity * line.grade_sine(s) for s in samples]
-        self.other = [line.line_force_per_kg(s, gravity) - g for s, g in zip(samples, self.grade)]
+        starts = [self.bounds[0] - 1.0 if self.bounds else 0.0] + self.bounds
+        ends = self.bounds + [starts[-1] + 1.0]
+        self.starts = starts
+        # Per segment: g sin(grade), and the curve + tunnel part at the segment's start with its
+        # slope per metre (non-zero in a transition curve), m/s^2 (line.py's rules).
+        self.grade = [gravity * line.grade_sine(s) for s in starts]
+        self.other = [line.line_force_per_kg(s, gravity) - g for s, g in zip(starts, self.grade)]
+        self.slope = []
+        for s, e, g, o in zip(starts, ends, self.grade, self.other):
+            mid = 0.5 * (s + e)
+            self.slope.append((line.line_force_per_kg(mid, gravity) - g - o) / (mid - s))
+        self.slope = [0.0 if abs(k) < 1e-15 else k for k in self.slope]
+        self.has_slopes = any(self.slope)
         self.gravity = gravity
 
     def index(self, position: float, moving_back: bool = False) -> int:
@@ -30,10 +39,16 @@ class LineSegments:
                             else position + BOUNDARY_NUDGE_M)
 
     def accel(self, index: int, grade_override_sine: float | None, line_factor: float) -> float:
-        """Specific line force of a segment, m/s^2 (positive opposes forward motion)."""
+        """Specific line force at a segment's start, m/s^2 (positive opposes forward motion)."""
         grade = (self.grade[index] if grade_override_sine is None
                  else self.gravity * grade_override_sine)
         return line_factor * (grade + self.other[index])
+
+    def accel_at(self, index: int, position: float, grade_override_sine: float | None) -> float:
+        """Specific line force at a position inside segment ``index``, m/s^2."""
+        base = self.accel(index, grade_override_sine, 1.0)
+        slope = self.slope[index]
+        return base + slope * (position - self.starts[index]) if slope else base
 
     def boundary_between(self, index_from: int, index_to: int) -> float:
         """The first boundary crossed going from one segment towards another."""

@@ -219,11 +219,15 @@ class MultiCarModel:
     def positions(self, state: np.ndarray) -> np.ndarray:
         return state[:self.n] - self.offsets
 
-    def _nonlinear(self, state, time_s: float, forces: Sequence[float], line_accels,
+    def _nonlinear(self, state, time_s: float, forces: Sequence[float], line,
                    mm: _ModeMatrices, env: Surroundings) -> np.ndarray:
         """Specific forces outside the exact linear part (velocity rows), m/s^2; the actuator
         forces are included here (constant over the step, so phi_1 integrates them exactly)."""
         n = self.n
+        line_accels, slopes, anchors = line
+        if slopes is not None:  # transition curves: the force follows each car's position
+            line_accels = [g + k * (z - z0) if k else g for g, k, z, z0
+                           in zip(line_accels, slopes, state[:n].tolist(), anchors)]
         speeds = state[n:].tolist()  # Python floats: faster than numpy on four elements
         a, b, c = mm.a, mm.b, mm.c
         tanh = math.tanh
@@ -242,8 +246,15 @@ class MultiCarModel:
             out[p] += force * inv[p]
         return np.array(out)
 
-    def _line_accels(self, indices, env: Surroundings) -> list[float]:
-        return [self.segments.accel(i, env.grade_override_sine, 1.0) for i in indices]
+    def _line(self, indices, env: Surroundings, shift: float = 0.0):
+        """Each car's line force in its segment: (at the segment start, slope per metre or
+        None if all are constant, where the slope is anchored in the state's coordinates)."""
+        segments = self.segments
+        accels = [segments.accel(i, env.grade_override_sine, 1.0) for i in indices]
+        if not segments.has_slopes or not any(segments.slope[i] for i in indices):
+            return accels, None, None
+        return (accels, [segments.slope[i] for i in indices],
+                [segments.starts[i] + o - shift for i, o in zip(indices, self._offsets)])
 
     def _segment_indices(self, state) -> list[int]:
         n = self.n
@@ -251,7 +262,7 @@ class MultiCarModel:
         index = self.segments.index
         return [index(values[p] - self._offsets[p], values[n + p] < 0.0) for p in range(n)]
 
-    def _etdrk4(self, x, t: float, h: float, forces, line_accels, mm, env, cache: bool = True):
+    def _etdrk4(self, x, t: float, h: float, forces, indices, mm, env, cache: bool = True):
         """Cox & Matthews (2002) ETDRK4, eqs (26). The line forces of the step are given, so
         the non-linear term does not depend on positions; a uniform shift of the positions is
         invariant under the linear part (unstretched couplers), so the step runs relative to
@@ -261,15 +272,16 @@ class MultiCarModel:
         shift = float(x[0])
         x = x.copy()
         x[:n] -= shift
+        line = self._line(indices, env, shift)
         nl = self._nonlinear
-        n_x = nl(x, t, forces, line_accels, mm, env)
+        n_x = nl(x, t, forces, line, mm, env)
         ex = e_half @ x
         a = ex + p_half @ n_x
-        n_a = nl(a, t + h / 2, forces, line_accels, mm, env)
+        n_a = nl(a, t + h / 2, forces, line, mm, env)
         b = ex + p_half @ n_a
-        n_b = nl(b, t + h / 2, forces, line_accels, mm, env)
+        n_b = nl(b, t + h / 2, forces, line, mm, env)
         c = e_half @ a + p_half @ (2.0 * n_b - n_x)
-        n_c = nl(c, t + h, forces, line_accels, mm, env)
+        n_c = nl(c, t + h, forces, line, mm, env)
         out = e_full @ x + f1 @ n_x + f2 @ (n_a + n_b) + f3 @ n_c
         out[:n] += shift
         return out
@@ -289,8 +301,7 @@ class MultiCarModel:
             h = h_max if end - t > h_max * (1.0 - 1e-9) else end - t
             cached = h == h_max
             indices = self._segment_indices(x)
-            accels = self._line_accels(indices, env)
-            x1 = self._etdrk4(x, t, h, forces, accels, mm, env, cached)
+            x1 = self._etdrk4(x, t, h, forces, indices, mm, env, cached)
             after = self._segment_indices(x1)
             if after != indices:  # a car reaches another segment: stop the step there
                 crossings = []
@@ -301,13 +312,13 @@ class MultiCarModel:
                                                         float(x1[p]), float(x1[n + p]), h,
                                                         boundary), p, boundary))
                 h, p, boundary = min(crossings)
-                x1 = self._etdrk4(x, t, h, forces, accels, mm, env, cache=False)
+                x1 = self._etdrk4(x, t, h, forces, indices, mm, env, cache=False)
                 for _ in range(3):  # Newton on the crossing time, with the car's speed
                     miss = float(x1[p]) - boundary
                     if abs(miss) < 1e-8 or x1[n + p] == 0.0:
                         break
                     h = min(max(h - miss / float(x1[n + p]), 0.0), end - t)
-                    x1 = self._etdrk4(x, t, h, forces, accels, mm, env, cache=False)
+                    x1 = self._etdrk4(x, t, h, forces, indices, mm, env, cache=False)
             x, t = x1, t + h
         return x
 
@@ -320,7 +331,7 @@ class MultiCarModel:
         indices = self._segment_indices(state)
         out = mm.A @ state
         out[n:] += self._nonlinear(state, time_s, [float(f) for f in forces],
-                                   self._line_accels(indices, env), mm, env)
+                                   self._line(indices, env), mm, env)
         return out
 
     def outputs(self, state: np.ndarray, forces: Sequence[float], time_s: float = 0.0,

@@ -80,20 +80,30 @@ class PointMassModel:
                      env: Surroundings | None = None) -> float:
         env = env or self.nominal
         segment = self.segments.index(position)
-        line_accel = self.segments.accel(segment, env.grade_override_sine, 1.0)
+        line_accel = self.segments.accel_at(segment, position, env.grade_override_sine)
         return self._parts(speed, force, line_accel, time_s, env)[0]
 
-    def _rk4(self, s: float, v: float, t: float, h: float, force: float, line_accel: float,
+    def _rk4(self, s: float, v: float, t: float, h: float, force: float, segment: int,
              env: Surroundings):
         """One classical RK4 step of (s, v) and of the work integrals (powers P v)."""
         parts = self._parts
-        a1, r1, l1, d1 = parts(v, force, line_accel, t, env)
+        segments = self.segments
+        override = env.grade_override_sine
+        if segments.slope[segment]:  # a transition curve: the force follows the position
+            def line(position):
+                return segments.accel_at(segment, position, override)
+        else:
+            constant = segments.accel(segment, override, 1.0)
+
+            def line(position):
+                return constant
+        a1, r1, l1, d1 = parts(v, force, line(s), t, env)
         v2 = max(v + 0.5 * h * a1, 0.0)
-        a2, r2, l2, d2 = parts(v2, force, line_accel, t + 0.5 * h, env)
+        a2, r2, l2, d2 = parts(v2, force, line(s + 0.5 * h * v), t + 0.5 * h, env)
         v3 = max(v + 0.5 * h * a2, 0.0)
-        a3, r3, l3, d3 = parts(v3, force, line_accel, t + 0.5 * h, env)
+        a3, r3, l3, d3 = parts(v3, force, line(s + 0.5 * h * v2), t + 0.5 * h, env)
         v4 = max(v + h * a3, 0.0)
-        a4, r4, l4, d4 = parts(v4, force, line_accel, t + h, env)
+        a4, r4, l4, d4 = parts(v4, force, line(s + h * v3), t + h, env)
         w = h / 6.0
         s_new = s + w * (v + 2.0 * v2 + 2.0 * v3 + v4)
         v_new = max(v + w * (a1 + 2.0 * a2 + 2.0 * a3 + a4), 0.0)
@@ -116,13 +126,12 @@ class PointMassModel:
         while end - t > 1e-12 * max(1.0, abs(end)):
             h = h_max if end - t > h_max * (1.0 - 1e-9) else end - t
             segment = segments.index(s)
-            line_accel = segments.accel(segment, env.grade_override_sine, 1.0)
-            s1, v1, work = self._rk4(s, v, t, h, force, line_accel, env)
+            s1, v1, work = self._rk4(s, v, t, h, force, segment, env)
             after = segments.index(s1)
             if after != segment:  # the train reaches the next segment within this step
                 boundary = segments.boundary_between(segment, after)
                 h = crossing_time(s, v, s1, v1, h, boundary)
-                s1, v1, work = self._rk4(s, v, t, h, force, line_accel, env)
+                s1, v1, work = self._rk4(s, v, t, h, force, segment, env)
                 s1 = boundary  # on it, within the step's error: continue in the next segment
             s, v, t = s1, v1, t + h
             for i, w in enumerate(work):
