@@ -251,10 +251,14 @@ class PlantSetup:
     sensors: SensorSetup = SensorSetup()
 
     def mode_index(self, time_s: float, position_m: float) -> int:
-        """Index of the active mode (Mao et al. 2017's known indicators chi_i); 0 without modes."""
+        """Index of the active mode (Mao et al. 2017's known indicators chi_i); 0 without modes.
+        Region modes need a finite position: a NaN one (not measured) raises ValueError."""
         if len(self.modes) < 2:
             return 0
         key = time_s if self.mode_switch == 'time' else position_m
+        if not math.isfinite(key):
+            raise ValueError(f'mode_index: the {self.mode_switch} must be finite to find the '
+                             f'mode, got {key}')
         return max(bisect_right([m.start for m in self.modes], key) - 1, 0)
 
     def abrupt_change(self, time_s: float) -> AbruptChange | None:

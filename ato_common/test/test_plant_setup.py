@@ -68,6 +68,8 @@ def test_modes_by_region_switch_on_position():
     assert setup.mode_switch == 'position'
     assert setup.mode_index(9999.0, 4999.0) == 0 and setup.mode_index(0.0, 5000.0) == 1
     assert setup.modes[1].davis.c_n_s2_per_m2 == 12
+    with pytest.raises(ValueError, match='position must be finite'):
+        setup.mode_index(1.0, math.nan)  # a position not measured has no region
 
 
 def test_luo_xu_time_varying_resistance_and_tan_abrupt_change():

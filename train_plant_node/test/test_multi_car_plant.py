@@ -1,11 +1,10 @@
-"""The multi-car model: exact coupler dynamics, steady running, agreement with a tight
-reference solution."""
+"""The multi-car model: exact coupler dynamics, steady running (agreement with a tight
+reference solution: test_plant_accuracy.py)."""
 
 import math
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 
 from ato_common.scenario import parse_scenario
 from ato_common.trains import CarParameters, Coupler, train_preset
@@ -60,19 +59,6 @@ def test_four_car_unit_runs_steadily_with_bounded_constant_spacing():
     assert np.allclose(speeds, v, atol=1e-6)  # cars 1 and 3 (and all) at the same speed
     late = np.array(extensions[-100:])
     assert np.max(np.abs(late)) < 1e-3 and np.ptp(late, axis=0).max() < 1e-9
-
-
-def test_agrees_with_a_tight_reference_solution():
-    scenario = flat_line()
-    model = MultiCarModel(scenario.train, scenario.line)
-    forces = (30e3, 30e3)
-    x0 = model.initial_state(100.0, 30.0)
-    reference = solve_ivp(lambda t, y: model.derivative(y, forces), (0.0, 20.0), x0,
-                          method='DOP853', rtol=1e-12, atol=1e-12, max_step=0.004)
-    x = x0
-    for _ in range(200):
-        x = model.step(x, 0.1, forces)
-    assert np.max(np.abs(reference.y[4:, -1] - x[4:])) < 1e-6
 
 
 def test_the_simulation_drives_the_powered_cars_and_reports_every_car():
