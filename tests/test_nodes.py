@@ -48,6 +48,15 @@ def test_a_malformed_scenario_stops_the_node_before_it_starts(tmp_path, name, do
     assert 'Traceback' not in result.stderr
 
 
+def test_the_multi_car_model_with_a_single_mass_train_is_refused_at_start(domain_id):
+    result = subprocess.run([executable_path(*EXECUTABLES['plant']), '--ros-args', '-p',
+                             'model:=multi_car'], capture_output=True, text=True, timeout=60,
+                            env=dict(os.environ, ROS_DOMAIN_ID=str(domain_id)))
+    assert result.returncode == 2
+    assert "model multi_car: train 'crh3_luo_xu' has no multi-car description" in result.stderr
+    assert 'Traceback' not in result.stderr
+
+
 def test_an_unknown_controller_at_start_is_refused_with_the_valid_names(domain_id):
     result = subprocess.run([executable_path(*EXECUTABLES['controller']), '--ros-args', '-p',
                              'controller:=bogus'], capture_output=True, text=True, timeout=60,

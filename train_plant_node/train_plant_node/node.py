@@ -90,12 +90,16 @@ class TrainPlantNode(Node):
             raise ConfigError(f"emergency_periods ({p['emergency_periods']}) must not be below "
                               f"watchdog_periods ({p['watchdog_periods']})")
         self.control_period_ns = control_period_ns(rate)
-        self.sim = TrainSimulation(
-            self.scenario, p['model'],
-            SensorSettings(p['sensor_position_noise_m'], p['sensor_speed_noise_mps'], p['seed']),
-            SafetySettings(p['watchdog_periods'], p['emergency_periods'],
-                           units.kmh_to_mps(p['overspeed_margin_kmh'])),
-            max_substep_s=p['max_substep_s'])
+        try:
+            self.sim = TrainSimulation(
+                self.scenario, p['model'],
+                SensorSettings(p['sensor_position_noise_m'], p['sensor_speed_noise_mps'],
+                               p['seed']),
+                SafetySettings(p['watchdog_periods'], p['emergency_periods'],
+                               units.kmh_to_mps(p['overspeed_margin_kmh'])),
+                max_substep_s=p['max_substep_s'])
+        except ValueError as error:  # e.g. multi_car with a train that has no car description
+            raise ConfigError(f"model {p['model']}: {error}") from None
         self.last_valid_command_wall = time.monotonic()
         self.safety_state = (NORMAL, False)
         self.finished = False
