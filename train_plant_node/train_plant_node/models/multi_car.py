@@ -196,11 +196,7 @@ class MultiCarModel:
         self.segments = LineSegments(line, gravity)
         self.nominal = Surroundings(nominal_mode(train), 0)
         self._modes: dict[int, _ModeMatrices] = {}
-        nominal = self.mode_matrices(self.nominal)
-        self.A = nominal.A
-        self.B = np.zeros((2 * n, len(self._powered)))
-        for column, i in enumerate(self._powered):
-            self.B[n + i, column] = 1.0 / nominal.masses[i]
+        self.A = self.mode_matrices(self.nominal).A  # the nominal linear dynamics
 
     def mode_matrices(self, env: Surroundings) -> _ModeMatrices:
         found = self._modes.get(env.mode_key)
