@@ -50,10 +50,16 @@ PASSING_POINT_RESTRICTION_M = 1.0
 
 
 def default_ttobench_dir() -> Path:
-    """``$TTOBENCH_DIR``, else ``shared/ttobench`` beside the repository."""
+    """``$TTOBENCH_DIR``, else the first ``shared/ttobench`` found in a folder above the
+    working directory or this module (the samples sit beside the repository)."""
     if os.environ.get('TTOBENCH_DIR'):
         return Path(os.environ['TTOBENCH_DIR'])
-    return Path(__file__).resolve().parents[2].parent / 'shared' / 'ttobench'
+    for start in (Path.cwd(), Path(__file__).resolve()):
+        for folder in (start, *start.parents):
+            candidate = folder / 'shared' / 'ttobench'
+            if candidate.is_dir():
+                return candidate
+    return Path.cwd().parent / 'shared' / 'ttobench'
 
 
 # Unit conversions to SI, by the unit string the file declares.
