@@ -467,6 +467,12 @@ class TTOBenchJourney:
             i += 1
         return tuple(stations)
 
+    def earliest_departure_s(self, position_m: float) -> float | None:
+        """The lower time bound of the last stopping point at a position (the departure)."""
+        times = [p.earliest_s for p in self.timing_points
+                 if p.is_stopping_point and p.position_m == position_m]
+        return times[-1] if times else None
+
     def passing_speed_bounds(self) -> tuple[tuple[float, float], ...]:
         """(position, highest speed) of every passing point with an upper speed bound."""
         return tuple((p.position_m, p.highest_speed_mps) for p in self.timing_points

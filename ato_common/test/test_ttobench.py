@@ -209,3 +209,31 @@ def test_the_scenario_command_writes_a_runnable_scenario(tmp_path, capsys):
     assert main([str(tmp_path / 'nope.json'), str(TRAINS[0])]) == 2
     assert 'line.ttobench: no such file' in capsys.readouterr().err
     assert math.isfinite(scenario.train.mass_kg)
+
+
+def test_a_journey_timetable_holds_departures_and_reports_its_windows(tmp_path):
+    from profile_node.planner import plan_reference
+    write(tmp_path, 'track.json', TRACK)
+    journey = copy.deepcopy(JOURNEY)
+    journey['timing points']['values'] = [[0, 0, 0, 0, 0], [3500, None, None, 10, 60],
+                                          [6000, 300, 330, 0, 0], [6000, 600, None, 0, 0],
+                                          [12000, 650, 700, 0, 0]]
+    write(tmp_path, 'journey.json', journey)
+    scenario = load_scenario_file(tmp_path, {'line': {'ttobench': 'track.json'},
+                                             'journey': {'ttobench': 'journey.json'}})
+    plan = plan_reference(scenario)
+    middle = plan.stops[0]
+    # the dwell is the difference of the earliest times (300 s), and the departure waits for
+    # its earliest time
+    assert middle.arrival_s < 300.0
+    assert middle.departure_s == pytest.approx(600.0)
+    checks = plan.timing
+    assert [c.point.position_m for c in checks] == [0, 3500, 6000, 6000, 12000]
+    assert checks[2].planned_s == middle.arrival_s and checks[3].planned_s == middle.departure_s
+    # arriving before the earliest arrival time is outside the window: reported
+    assert [c.within_window for c in checks[:4]] == [True, True, False, True]
+    # 6 km from a 600 s departure cannot be done by 700 s at 140 km/h: reported as missed
+    assert checks[4].planned_s > 700.0 and not checks[4].within_window
+    passing = plan.trajectory.at(checks[1].planned_s)
+    assert passing.position == pytest.approx(3500.0, abs=1e-3)
+    assert passing.speed <= 60 / 3.6 + 1e-9
