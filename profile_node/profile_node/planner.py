@@ -26,7 +26,6 @@ supervision times), the braking into that target is planned further ahead and th
 
 from __future__ import annotations
 
-from bisect import bisect_right
 from dataclasses import dataclass
 import math
 
@@ -119,6 +118,11 @@ def braking_deceleration(scenario: Scenario, descent_sine: float) -> float:
     deliver it on the steepest descent (gradient correction; uphill does not raise it)."""
     brake = scenario.train.traction.max_service_brake_force_n / scenario.train.mass_kg
     available = TRACTION_RESERVE_SHARE * brake + units.STANDARD_GRAVITY * min(descent_sine, 0.0)
+    if available < MIN_PLANNED_ACCELERATION_MPS2:
+        raise PlanningError(f'{scenario.origin}: a descent of '
+                            f'{-1000 * math.tan(math.asin(descent_sine)):.0f} per mille leaves the '
+                            'service brake less than '
+                            f'{MIN_PLANNED_ACCELERATION_MPS2} m/s^2 of deceleration')
     return min(scenario.planning.service_deceleration_mps2, available)
 
 
