@@ -23,6 +23,7 @@ from ato_common import units
 from ato_common.braking_curves import (SupervisionSettings, constant_deceleration,
                                        tabulated_deceleration)
 from ato_common.line import Line, PiecewiseConstant, parse_line
+from ato_common.plant_setup import PlantSetup, parse_plant_setup
 from ato_common.trains import TRAIN_PRESETS, TrainParameters, train_preset
 from ato_common import ttobench
 from ato_common.validation import ConfigError, Fields
@@ -59,6 +60,7 @@ class Scenario:
     planning: PlanningLimits
     run: RunSettings
     supervision: SupervisionSettings
+    plant: PlantSetup = PlantSetup()  # what varies, actuators, failures, sensors
     journey: ttobench.TTOBenchJourney | None = None  # timing points of a TTOBench journey
 
 
@@ -216,6 +218,6 @@ def parse_scenario(data, origin: str = '<memory>', base: Path | None = None) -> 
         name=f.text('name'), description=f.text('description', ''),
         source=f.text('source', 'suite'), origin=origin, train=train, line=line,
         planning=planning, run=run, supervision=_parse_supervision(f, train, loaded_train),
-        journey=journey)
+        plant=parse_plant_setup(f.raw('plant'), train, 'plant'), journey=journey)
     f.reject_unknown()
     return scenario
