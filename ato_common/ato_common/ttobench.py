@@ -34,7 +34,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import json
 import math
-import os
 from pathlib import Path
 import re
 from typing import Any
@@ -47,19 +46,6 @@ from ato_common.validation import ConfigError
 ID_PATTERN = re.compile(r'^[A-Za-z0-9_]+$')
 # Length of the speed restriction standing for a passing point's upper speed bound, m.
 PASSING_POINT_RESTRICTION_M = 1.0
-
-
-def default_ttobench_dir() -> Path:
-    """``$TTOBENCH_DIR``, else the first ``shared/ttobench`` found in a folder above the
-    working directory or this module (the samples sit beside the repository)."""
-    if os.environ.get('TTOBENCH_DIR'):
-        return Path(os.environ['TTOBENCH_DIR'])
-    for start in (Path.cwd(), Path(__file__).resolve()):
-        for folder in (start, *start.parents):
-            candidate = folder / 'shared' / 'ttobench'
-            if candidate.is_dir():
-                return candidate
-    return Path.cwd().parent / 'shared' / 'ttobench'
 
 
 # Unit conversions to SI, by the unit string the file declares.

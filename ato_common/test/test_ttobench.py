@@ -3,21 +3,22 @@
 import copy
 import json
 import math
+from pathlib import Path
 
 import pytest
 import yaml
 
 from ato_common import units
 from ato_common.scenario import load_scenario, parse_scenario
-from ato_common.ttobench import (default_ttobench_dir, load_journey, load_track, load_train,
-                                 scenario_data)
+from ato_common.ttobench import load_journey, load_track, load_train, scenario_data
 from ato_common.validation import ConfigError
 
-SAMPLES = default_ttobench_dir()
+# The BSD-2 TTOBench samples ship with the tests (tests/data/ttobench, with their licence), so
+# these tests run wherever the repository is cloned.
+SAMPLES = Path(__file__).resolve().parents[2] / 'tests' / 'data' / 'ttobench'
 TRACKS = sorted((SAMPLES / 'tracks').glob('*.json'))
 TRAINS = sorted((SAMPLES / 'trains').glob('*.json'))
-needs_samples = pytest.mark.skipif(not TRACKS or not TRAINS,
-                                   reason=f'no TTOBench samples in {SAMPLES} (set TTOBENCH_DIR)')
+assert TRACKS and TRAINS, f'the TTOBench samples are missing from {SAMPLES}'
 
 TRACK = {
     'metadata': {'id': 'T_curvy', 'library version': 'TTOBench v1.5'},
@@ -74,7 +75,6 @@ def test_a_track_converts_to_si_with_clothoids_and_tunnel_cross_sections(tmp_pat
     assert track.etcs_kt_int == pytest.approx(1.1)
 
 
-@needs_samples
 def test_a_train_converts_to_si():
     train = load_train(SAMPLES / 'trains' / 'CH_Stadler_FLIRT_TPF.json')
     p = train.parameters
@@ -172,7 +172,6 @@ def test_a_scenario_naming_a_missing_or_broken_file_says_which(tmp_path):
         load_scenario_file(tmp_path, {'line': {'ttobench': 'track.json', 'dwell': 3}})
 
 
-@needs_samples
 def test_every_sample_track_loads_and_yields_a_curve_within_its_limits_and_stops(tmp_path):
     from profile_node.planner import plan_reference
     import numpy as np
@@ -198,7 +197,6 @@ def test_every_sample_track_loads_and_yields_a_curve_within_its_limits_and_stops
             assert p.speed <= plan.permitted_speed(p.position, t) + 1e-6
 
 
-@needs_samples
 def test_the_scenario_command_writes_a_runnable_scenario(tmp_path, capsys):
     from ato_common.ttobench import main
     assert main([str(TRACKS[0]), str(TRAINS[0]), '--dwell', '15']) == 0
