@@ -319,15 +319,19 @@ class MultiCarModel:
         return x
 
     def derivative(self, state: np.ndarray, forces: Sequence[float], time_s: float = 0.0,
-                   env: Surroundings | None = None) -> np.ndarray:
-        """x' at one instant (line forces looked up at the cars' positions)."""
+                   env: Surroundings | None = None, shift: float = 0.0) -> np.ndarray:
+        """x' at one instant (line forces looked up at the cars' positions). ``state`` may hold
+        positions relative to ``shift`` (e.g. the lead car's), which keeps the coupler
+        extensions exact when the positions are tens of kilometres."""
         env = env or self.nominal
         mm = self.mode_matrices(env)
         n = self.n
-        indices = self._segment_indices(state)
+        absolute = np.array(state, dtype=float)
+        absolute[:n] += shift
+        indices = self._segment_indices(absolute)
         out = mm.A @ state
         out[n:] += self._nonlinear(state, time_s, [float(f) for f in forces],
-                                   self._line(indices, env), mm, env)
+                                   self._line(indices, env, shift), mm, env)
         return out
 
     def outputs(self, state: np.ndarray, forces: Sequence[float], time_s: float = 0.0,
