@@ -417,8 +417,7 @@ def _quantity_sensor(f: Fields, car_names: Sequence[str]) -> QuantitySensor:
             raise ConfigError(f"{f.where}.failed_cars[{i}]: unknown car {name!r}; valid: "
                               f"{', '.join(car_names)}")
         cars.append(name)
-    failed_from = f.number('failed_from_s', math.inf, minimum=0.0) if f.has('failed_from_s') \
-        else math.inf
+    failed_from = f.number('failed_from_s', math.inf, minimum=0.0)
     sensor = QuantitySensor(
         noise_std=f.number('noise_std', 0.0, minimum=0.0),
         bias=f.number('bias', 0.0),
