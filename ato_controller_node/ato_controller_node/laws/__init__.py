@@ -5,8 +5,12 @@ from __future__ import annotations
 from ato_controller_node.laws.base import ControlLaw
 from ato_controller_node.laws.luo_xu import LuoXuLaw, LuoXuProjectionLaw
 from ato_controller_node.laws.pid import PidLaw
+from ato_controller_node.laws.tan import (SecondLevelAdaptiveLaw, SecondLevelFixedLaw,
+                                          SwitchingMultipleModelLaw, WeightedMultipleModelLaw)
 
-LAWS: dict[str, type[ControlLaw]] = {law.name: law for law in (PidLaw, LuoXuLaw, LuoXuProjectionLaw)}
+LAWS: dict[str, type[ControlLaw]] = {law.name: law for law in (
+    PidLaw, LuoXuLaw, LuoXuProjectionLaw,
+    SecondLevelFixedLaw, SecondLevelAdaptiveLaw, SwitchingMultipleModelLaw, WeightedMultipleModelLaw)}
 
 
 def law_class(name: str) -> type[ControlLaw]:
