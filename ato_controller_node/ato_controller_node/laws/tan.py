@@ -109,10 +109,10 @@ class SecondLevelSettings(TanSettings):
 
 @dataclass(frozen=True)
 class AdaptiveModelSettings(SecondLevelSettings):
-    identification_gain: float = setting(1.0, minimum=0.0, maximum=1e6, units='-',
+    identification_gain: float = setting(0.1, minimum=0.0, maximum=1e6, units='-',
                                          description='gamma of the adaptive identification '
                                                      'models, Gamma = gamma diag(box width^2) '
-                                                     'in the units of theta')
+                                                     'in the units of theta (not in the paper)')
 
 
 @dataclass(frozen=True)
@@ -287,29 +287,36 @@ class SecondLevelFixedLaw(_MultipleModelLaw):
 
     def _start_weights(self) -> None:
         self.alpha = np.full(MODELS - 1, ALPHA_INITIAL)     # alpha_1..4; alpha_5 = 1 - sum
+        self._combined_error = 0.0
 
     def alphas(self) -> np.ndarray:
-        return np.append(self.alpha, 1.0 - self.alpha.sum())
+        alphas = np.empty(MODELS)
+        alphas[:MODELS - 1] = self.alpha
+        alphas[MODELS - 1] = 1.0 - self.alpha.sum()
+        return alphas
 
     def _update(self, errors, x) -> None:
         s = self.settings
         gains = self.bank.thetas[:, 0]
-        before = float(self.alphas() @ gains)
-        matrix = (errors[:MODELS - 1] - errors[MODELS - 1]).T                    # E, 2 x 4
+        matrix = errors[:MODELS - 1].T - errors[MODELS - 1][:, None]             # E, 2 x 4
         target = -errors[MODELS - 1]                                              # h = -e5
         step = self.dt * s.alpha_gain
-        # (23) alpha' = -Gamma_a E^T (E alpha - h), backward Euler (stiff, see module doc)
-        alpha = np.linalg.solve(np.eye(MODELS - 1) + step * matrix.T @ matrix,
-                                self.alpha + step * matrix.T @ target)
+        # (23) alpha' = -Gamma_a E^T (E alpha - h), backward Euler (stiff, see module doc):
+        # (I + step E^T E) alpha_new = alpha + step E^T h, solved through the 2 x 2 system
+        # (I + step E E^T) (Woodbury identity; E^T E has rank 2)
+        rhs = self.alpha + step * (target @ matrix)
+        inner = np.eye(2) + step * (matrix @ matrix.T)
+        alpha = rhs - step * (np.linalg.solve(inner, matrix @ rhs) @ matrix)
         direction = gains[:MODELS - 1] - gains[MODELS - 1]   # sum alpha_k G_k = G_5 + direction.alpha
         total = gains[MODELS - 1] + direction @ alpha
         if s.paper_freeze:
-            if before <= 0.0 or total <= 0.0:
+            if gains[MODELS - 1] + direction @ self.alpha <= 0.0 or total <= 0.0:
                 return                                # (25) as printed: alpha' = 0
         elif total < self.g_min and direction @ direction > 0.0:
             # [FIX] (25): Euclidean projection onto sum alpha_k G_k >= G_min
             alpha = alpha + (self.g_min - total) / (direction @ direction) * direction
         self.alpha = alpha
+        self._combined_error = float(np.linalg.norm(self.alphas() @ errors))   # (20)
 
     def _control(self, x, reference):
         alphas = self.alphas()
@@ -317,8 +324,7 @@ class SecondLevelFixedLaw(_MultipleModelLaw):
         force = self._controller(x, reference, theta, 1e-3 * self.g_min)
         estimates = {f'alpha_{k + 1}': float(a) for k, a in enumerate(alphas)}
         estimates.update(self._estimates(theta))
-        estimates['combined_identification_error_m'] = float(
-            np.linalg.norm(alphas @ self.bank.errors(x)))       # sum alpha_k e_k, (20)
+        estimates['combined_identification_error_m'] = self._combined_error
         return force, estimates
 
 
