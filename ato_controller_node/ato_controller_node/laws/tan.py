@@ -62,6 +62,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+import sys
 
 import numpy as np
 from scipy.linalg import expm, solve_continuous_lyapunov
@@ -245,6 +246,9 @@ class _MultipleModelLaw(ControlLaw):
             # state, as Lemma 3 requires identical initial conditions
             self.bank.reset(x)
         errors = self.bank.errors(x)
+        if not np.isfinite(errors).all():
+            self.bank.reset(x)   # overflow on absurd input: restart rather than poison
+            errors = self.bank.errors(x)
         self._update(errors, x)
         force, estimates = self._control(x, reference)
         self._last_x, self._last_time, self._last_force = x, measurement.time_s, force
@@ -306,7 +310,13 @@ class SecondLevelFixedLaw(_MultipleModelLaw):
         # (I + step E E^T) (Woodbury identity; E^T E has rank 2)
         rhs = self.alpha + step * (target @ matrix)
         inner = np.eye(2) + step * (matrix @ matrix.T)
-        alpha = rhs - step * (np.linalg.solve(inner, matrix @ rhs) @ matrix)
+        with np.errstate(all='ignore'):
+            determinant = inner[0, 0] * inner[1, 1] - inner[0, 1] * inner[1, 0]   # >= 1
+            solved = np.array([inner[1, 1], -inner[1, 0], -inner[0, 1], inner[0, 0]]).reshape(
+                2, 2) @ (matrix @ rhs) / determinant
+            alpha = rhs - step * (solved @ matrix)
+        if not np.isfinite(alpha).all():
+            return   # overflow on absurd input: keep the last combination
         direction = gains[:MODELS - 1] - gains[MODELS - 1]   # sum alpha_k G_k = G_5 + direction.alpha
         total = gains[MODELS - 1] + direction @ alpha
         if s.paper_freeze:
@@ -316,7 +326,9 @@ class SecondLevelFixedLaw(_MultipleModelLaw):
             # [FIX] (25): Euclidean projection onto sum alpha_k G_k >= G_min
             alpha = alpha + (self.g_min - total) / (direction @ direction) * direction
         self.alpha = alpha
-        self._combined_error = float(np.linalg.norm(self.alphas() @ errors))   # (20)
+        with np.errstate(all='ignore'):
+            combined = float(np.hypot(*(self.alphas() @ errors)))        # |sum alpha_k e_k|, (20)
+        self._combined_error = combined if math.isfinite(combined) else sys.float_info.max
 
     def _control(self, x, reference):
         alphas = self.alphas()
@@ -348,8 +360,11 @@ class SecondLevelAdaptiveLaw(SecondLevelFixedLaw):
         v = x[1]
         omega = np.array([self._last_force, -1.0, -v, -v * v])
         drive = errors @ self._pb                               # B^T P e_k, one per model
-        self.bank.thetas = self.bank.thetas - (self.dt * self.settings.identification_gain) * \
-            np.outer(drive, self._gamma * omega)
+        with np.errstate(all='ignore'):
+            thetas = self.bank.thetas - (self.dt * self.settings.identification_gain) * \
+                np.outer(drive, self._gamma * omega)
+        if np.isfinite(thetas).all():   # overflow on absurd input: keep the last parameters
+            self.bank.thetas = thetas
         super()._update(errors, x)
 
 
@@ -361,9 +376,15 @@ class _IndexedLaw(_MultipleModelLaw):
 
     def _indices(self, errors) -> np.ndarray:
         s = self.settings
-        squared = (errors * errors).sum(axis=1)
-        self.memory = self.memory * math.exp(-s.forgetting_per_s * self.dt) + self.dt * squared
-        return s.index_instant * squared + s.index_memory * self.memory
+        with np.errstate(all='ignore'):
+            squared = (errors * errors).sum(axis=1)
+            memory = self.memory * math.exp(-s.forgetting_per_s * self.dt) + self.dt * squared
+            index = s.index_instant * squared + s.index_memory * memory
+        if not np.isfinite(index).all():   # overflow on absurd input: forget, start again
+            self.memory = np.zeros(MODELS)
+            return self.memory.copy()
+        self.memory = memory
+        return index
 
 
 class SwitchingMultipleModelLaw(_IndexedLaw):
