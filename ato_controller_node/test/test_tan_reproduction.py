@@ -61,12 +61,12 @@ def test_second_level_fixed_models_steady_state_speed_error_below_0_02_kmh():
     run = run_offline(scenario, 'tan_second_level')
     error = speed_error_kmh(run)
     steady = steady_state_mask(run)
-    assert steady.sum() * 0.1 > 500.0          # four cruises, 580 s of steady state
-    assert error[steady].max() < 0.02           # measured 0.0024 km/h
+    assert steady.sum() * 0.1 > 500.0          # measured 880 s of steady state
+    assert error[steady].max() < 0.02           # measured 0.0002 km/h
     # measured 1.25 km/h where the 12 per mille climb ends as the reference accelerates again
     # (an abrupt parameter change, see the grade-jump test); 0.50 km/h while starting
     assert error.max() < 2.0
-    # the convex combination finds the mass: measured 441.8 t for 442 t
+    # the convex combination finds the mass: measured 440.6 t for 442 t
     assert run.estimate('mass_hat_kg')[-1] == pytest.approx(scenario.train.mass_kg, rel=0.02)
     assert abs(run.metrics().stop_errors_m['Xuzhou East']) < 0.1   # measured 0.04 m
 
@@ -84,7 +84,8 @@ def test_comparison_start_and_steady_state_rank_as_the_paper_says(comparison):
     for law in ('tan_switching_mm', 'tan_weighted_mm'):
         run = comparison[law]
         assert speed_error_kmh(run)[start].max() > 2.0 * fixed_start   # 1.4, 1.8 vs 0.50 km/h
-        assert np.abs(run.ref_positions - run.positions)[cruise].max() > 3.0 * fixed_cruise
+        # measured 1.3 m against 0.06 m
+        assert np.abs(run.ref_positions - run.positions)[cruise].max() > 5.0 * fixed_cruise
 
 
 def test_grade_jump_transients_as_measured(comparison):
