@@ -175,8 +175,8 @@ class LuoXuProjectionLaw(LuoXuLaw):
 
     def prior_distance(self, theta) -> float:
         """sqrt(g(theta)) in units of the boundary: <= 1 inside S."""
-        return math.sqrt(sum(((th - c) / w) ** 2
-                             for th, c, w in zip(theta, self.theta_prior, self._scales())))
+        ratios = [(th - c) / w for th, c, w in zip(theta, self.theta_prior, self._scales())]
+        return math.sqrt(sum(r * r for r in ratios))
 
     def _extra_estimates(self):
         return {'prior_distance': self.prior_distance(self.theta_hat)}
@@ -198,6 +198,8 @@ class LuoXuProjectionLaw(LuoXuLaw):
                 rate = [r - g * gi * along for r, g, gi in zip(raw_rate, gains, grad)]  # (24)
         theta = [th + self.dt * r for th, r in zip(self.theta_hat, rate)]
         distance = self.prior_distance(theta)
+        if not math.isfinite(distance):
+            return list(self.theta_hat)   # overflow on absurd input: keep the estimates
         if distance > 1.0 and not printed:
             # Euler stepped past the boundary: back onto it along the ray from theta*
             theta = [c + (th - c) / distance for th, c in zip(theta, self.theta_prior)]

@@ -163,11 +163,12 @@ def corner_simplex(theta_min: np.ndarray, theta_max: np.ndarray) -> np.ndarray:
 
 
 class IdentificationBank:
-    """The five identification models (17), advanced together and exactly over one period."""
+    """The five identification models (17), advanced together and exactly over one period.
+    Plain floats inside: five 2-state models are cheaper in Python than in small numpy arrays."""
 
     def __init__(self, am1: float, am2: float, dt: float, thetas: np.ndarray):
         self.am1, self.am2, self.dt = am1, am2, dt
-        self.thetas = np.array(thetas, dtype=float)      # rows (theta_G, theta_Z1..3)
+        self.thetas = thetas
         am = np.array([[0.0, 1.0], [am1, am2]])
         # exp of the augmented matrix gives Phi = e^(Am dt) and, for the B column, the ZOH and
         # FOH input matrices: int_0^dt e^(Am s) ds B and int_0^dt e^(Am (dt - s)) (s/dt) ds B
@@ -176,29 +177,58 @@ class IdentificationBank:
         augmented[:2, 2] = (0.0, dt)
         augmented[2, 3] = 1.0
         blocks = expm(augmented)
-        self._phi_t = blocks[:2, :2].T.copy()
+        self._phi = blocks[:2, :2].tolist()
         hold, ramp = blocks[:2, 2], blocks[:2, 3]
-        self._zoh = hold - ramp          # weight of the input at the start of the period
-        self._ramp = ramp                # weight of the input at its end
-        self.xhat = np.zeros((MODELS, 2))
+        self._zoh = (hold - ramp).tolist()   # weight of the input at the start of the period
+        self._ramp = ramp.tolist()           # weight of the input at its end
+        self._states = [(0.0, 0.0)] * MODELS
+
+    @property
+    def thetas(self) -> np.ndarray:
+        """One row (theta_G, theta_Z1, theta_Z2, theta_Z3) per model."""
+        return np.array(self._thetas)
+
+    @thetas.setter
+    def thetas(self, values) -> None:
+        self._thetas = [tuple(float(x) for x in row) for row in values]
+
+    def parameter_rows(self) -> list[tuple[float, float, float, float]]:
+        return self._thetas
+
+    def model_gains(self) -> list[float]:
+        """G_k = theta_Gk of each model."""
+        return [row[0] for row in self._thetas]
+
+    @property
+    def xhat(self) -> np.ndarray:
+        return np.array(self._states)
 
     def reset(self, x: tuple[float, float]) -> None:
-        self.xhat = np.tile(np.asarray(x, dtype=float), (MODELS, 1))   # xhat_k(0) = x(0)
-
-    def _inputs(self, x, force: float) -> np.ndarray:
-        """Second row of (A - Am) x + B [G_k u + Z_k(v)], one entry per model."""
-        v = x[1]
-        th = self.thetas
-        model_force = th[:, 0] * force - th[:, 1] - th[:, 2] * v - th[:, 3] * v * v   # (16)
-        return model_force - self.am1 * x[0] - self.am2 * v
+        self._states = [(float(x[0]), float(x[1]))] * MODELS          # xhat_k(0) = x(0)
 
     def advance(self, x_start, x_end, force: float) -> None:
         """(17) over one period: u held, x and Z_k(v) linear between the two samples."""
-        w0, w1 = self._inputs(x_start, force), self._inputs(x_end, force)
-        self.xhat = self.xhat @ self._phi_t + np.outer(w0, self._zoh) + np.outer(w1, self._ramp)
+        (p00, p01), (p10, p11) = self._phi
+        z0, z1 = self._zoh
+        r0, r1 = self._ramp
+        s0, v0 = x_start
+        s1, v1 = x_end
+        base0 = -self.am1 * s0 - self.am2 * v0        # (A - Am) x, second row
+        base1 = -self.am1 * s1 - self.am2 * v1
+        states = []
+        for (s, v), (g, a, b, c) in zip(self._states, self._thetas):
+            w0 = base0 + g * force - a - b * v0 - c * v0 * v0     # + B [G_k u + Z_k], (16)
+            w1 = base1 + g * force - a - b * v1 - c * v1 * v1
+            states.append((p00 * s + p01 * v + z0 * w0 + r0 * w1,
+                           p10 * s + p11 * v + z1 * w0 + r1 * w1))
+        self._states = states
+
+    def error_rows(self, x) -> list[tuple[float, float]]:
+        s, v = x
+        return [(sk - s, vk - v) for sk, vk in self._states]          # e_k = xhat_k - x
 
     def errors(self, x) -> np.ndarray:
-        return self.xhat - np.asarray(x, dtype=float)                    # e_k = xhat_k - x
+        return np.array(self.error_rows(x))
 
 
 class _MultipleModelLaw(ControlLaw):
@@ -245,10 +275,10 @@ class _MultipleModelLaw(ControlLaw):
             # first step, or a gap (a held command): (re)start the models from the measured
             # state, as Lemma 3 requires identical initial conditions
             self.bank.reset(x)
-        errors = self.bank.errors(x)
-        if not np.isfinite(errors).all():
+        errors = self.bank.error_rows(x)
+        if not all(math.isfinite(e) for row in errors for e in row):
             self.bank.reset(x)   # overflow on absurd input: restart rather than poison
-            errors = self.bank.errors(x)
+            errors = self.bank.error_rows(x)
         self._update(errors, x)
         force, estimates = self._control(x, reference)
         self._last_x, self._last_time, self._last_force = x, measurement.time_s, force
@@ -276,7 +306,7 @@ class _MultipleModelLaw(ControlLaw):
     def _start_weights(self) -> None:
         raise NotImplementedError
 
-    def _update(self, errors: np.ndarray, x) -> None:
+    def _update(self, errors: list[tuple[float, float]], x) -> None:
         raise NotImplementedError
 
     def _control(self, x, reference) -> tuple[float, dict[str, float]]:
@@ -294,47 +324,67 @@ class SecondLevelFixedLaw(_MultipleModelLaw):
         self._combined_error = 0.0
 
     def alphas(self) -> np.ndarray:
-        alphas = np.empty(MODELS)
-        alphas[:MODELS - 1] = self.alpha
-        alphas[MODELS - 1] = 1.0 - self.alpha.sum()
-        return alphas
+        return np.array(self._alpha_list())
+
+    def _alpha_list(self) -> list[float]:
+        alpha = self.alpha.tolist()
+        return alpha + [1.0 - sum(alpha)]                          # alpha_5 = 1 - sum
 
     def _update(self, errors, x) -> None:
         s = self.settings
-        gains = self.bank.thetas[:, 0]
-        matrix = errors[:MODELS - 1].T - errors[MODELS - 1][:, None]             # E, 2 x 4
-        target = -errors[MODELS - 1]                                              # h = -e5
         step = self.dt * s.alpha_gain
+        p5, v5 = errors[MODELS - 1]
+        columns = [(p - p5, v - v5) for p, v in errors[:MODELS - 1]]   # E = [e_k - e_5], 2 x 4
+        h0, h1 = -p5, -v5                                                # h = -e_5
         # (23) alpha' = -Gamma_a E^T (E alpha - h), backward Euler (stiff, see module doc):
         # (I + step E^T E) alpha_new = alpha + step E^T h, solved through the 2 x 2 system
-        # (I + step E E^T) (Woodbury identity; E^T E has rank 2)
-        rhs = self.alpha + step * (target @ matrix)
-        inner = np.eye(2) + step * (matrix @ matrix.T)
-        with np.errstate(all='ignore'):
-            determinant = inner[0, 0] * inner[1, 1] - inner[0, 1] * inner[1, 0]   # >= 1
-            solved = np.array([inner[1, 1], -inner[1, 0], -inner[0, 1], inner[0, 0]]).reshape(
-                2, 2) @ (matrix @ rhs) / determinant
-            alpha = rhs - step * (solved @ matrix)
-        if not np.isfinite(alpha).all():
+        # I + step E E^T (Woodbury identity; E^T E has rank 2, det(I + step E E^T) >= 1)
+        rhs = [a + step * (c0 * h0 + c1 * h1) for a, (c0, c1) in zip(self.alpha.tolist(), columns)]
+        e00 = sum(c0 * c0 for c0, _ in columns)
+        e11 = sum(c1 * c1 for _, c1 in columns)
+        i00, i11, i01 = 1.0 + step * e00, 1.0 + step * e11, step * sum(c0 * c1 for c0, c1 in columns)
+        y0 = sum(c0 * r for (c0, _), r in zip(columns, rhs))
+        y1 = sum(c1 * r for (_, c1), r in zip(columns, rhs))
+        # det = 1 + step tr(E E^T) + step^2 det(E E^T), the last by Lagrange's identity so that
+        # nearly parallel columns cannot cancel it below 1
+        minors = [columns[i][0] * columns[j][1] - columns[j][0] * columns[i][1]
+                  for i in range(MODELS - 1) for j in range(i + 1, MODELS - 1)]
+        gram = sum(m * m for m in minors)
+        determinant = 1.0 + step * (e00 + e11) + step * step * gram
+        if not (math.isfinite(determinant) and math.isfinite(y0) and math.isfinite(y1)):
             return   # overflow on absurd input: keep the last combination
-        direction = gains[:MODELS - 1] - gains[MODELS - 1]   # sum alpha_k G_k = G_5 + direction.alpha
-        total = gains[MODELS - 1] + direction @ alpha
+        q0 = (i11 * y0 - i01 * y1) / determinant
+        q1 = (i00 * y1 - i01 * y0) / determinant
+        alpha = [r - step * (c0 * q0 + c1 * q1) for r, (c0, c1) in zip(rhs, columns)]
+        if not all(math.isfinite(a) for a in alpha):
+            return   # overflow on absurd input: keep the last combination
+        gains = self.bank.model_gains()
+        direction = [g - gains[MODELS - 1] for g in gains[:MODELS - 1]]
+        # sum alpha_k G_k = G_5 + direction . alpha_1..4
+        total = gains[MODELS - 1] + sum(d * a for d, a in zip(direction, alpha))
         if s.paper_freeze:
-            if gains[MODELS - 1] + direction @ self.alpha <= 0.0 or total <= 0.0:
+            before = gains[MODELS - 1] + sum(d * a for d, a in zip(direction, self.alpha.tolist()))
+            if before <= 0.0 or total <= 0.0:
                 return                                # (25) as printed: alpha' = 0
-        elif total < self.g_min and direction @ direction > 0.0:
-            # [FIX] (25): Euclidean projection onto sum alpha_k G_k >= G_min
-            alpha = alpha + (self.g_min - total) / (direction @ direction) * direction
-        self.alpha = alpha
-        with np.errstate(all='ignore'):
-            combined = float(np.hypot(*(self.alphas() @ errors)))        # |sum alpha_k e_k|, (20)
+        elif total < self.g_min:
+            norm = sum(d * d for d in direction)
+            if norm > 0.0:
+                # [FIX] (25): Euclidean projection onto sum alpha_k G_k >= G_min
+                shift = (self.g_min - total) / norm
+                alpha = [a + shift * d for a, d in zip(alpha, direction)]
+        self.alpha = np.array(alpha)
+        weights = alpha + [1.0 - sum(alpha)]
+        combined = math.hypot(sum(w * e[0] for w, e in zip(weights, errors)),
+                              sum(w * e[1] for w, e in zip(weights, errors)))   # (20)
         self._combined_error = combined if math.isfinite(combined) else sys.float_info.max
 
     def _control(self, x, reference):
-        alphas = self.alphas()
-        theta = alphas @ self.bank.thetas          # sum alpha_k theta_k, so G and Z of (24)
+        alphas = self._alpha_list()
+        rows = self.bank.parameter_rows()
+        theta = [sum(a * row[i] for a, row in zip(alphas, rows)) for i in range(4)]
+        # sum alpha_k theta_k gives sum alpha_k G_k and sum alpha_k Z_k of (24)
         force = self._controller(x, reference, theta, 1e-3 * self.g_min)
-        estimates = {f'alpha_{k + 1}': float(a) for k, a in enumerate(alphas)}
+        estimates = {f'alpha_{k + 1}': a for k, a in enumerate(alphas)}
         estimates.update(self._estimates(theta))
         estimates['combined_identification_error_m'] = self._combined_error
         return force, estimates
@@ -359,7 +409,7 @@ class SecondLevelAdaptiveLaw(SecondLevelFixedLaw):
         # new errors (forward Euler); then the combination as for fixed models
         v = x[1]
         omega = np.array([self._last_force, -1.0, -v, -v * v])
-        drive = errors @ self._pb                               # B^T P e_k, one per model
+        drive = np.array(errors) @ self._pb                     # B^T P e_k, one per model
         with np.errstate(all='ignore'):
             thetas = self.bank.thetas - (self.dt * self.settings.identification_gain) * \
                 np.outer(drive, self._gamma * omega)
@@ -377,7 +427,7 @@ class _IndexedLaw(_MultipleModelLaw):
     def _indices(self, errors) -> np.ndarray:
         s = self.settings
         with np.errstate(all='ignore'):
-            squared = (errors * errors).sum(axis=1)
+            squared = np.array([p * p + v * v for p, v in errors])
             memory = self.memory * math.exp(-s.forgetting_per_s * self.dt) + self.dt * squared
             index = s.index_instant * squared + s.index_memory * memory
         if not np.isfinite(index).all():   # overflow on absurd input: forget, start again
