@@ -28,9 +28,9 @@ Theorem 2 (Section 4) replaces the theta law by the projection (24) onto the pri
 eq (20), g(theta) = (theta - theta*)^T (theta - theta*) <= M0^2, theta* = the nominal Table 2
 resistance the train's on-board prior carries (cv corrected from the printed 0.6318 to 0.06318):
 
-    theta_hat' = tau,                              inside S, or on its boundary with tau pointing in
+    theta_hat' = tau                      inside S, or on its boundary with tau pointing in
     theta_hat' = tau - Gamma grad_g grad_g^T tau / (grad_g^T Gamma grad_g)
-                                                   on the boundary with tau pointing out     (24), (26)
+                                          on the boundary with tau pointing out     (24), (26)
     tau = -Gamma phi z2,  grad_g = gradient of g at theta_hat
 
 [FIX] The branch conditions printed in (24) are swapped: it projects when (Gamma phi z2)^T grad_g
@@ -129,7 +129,7 @@ class LuoXuLaw(ControlLaw):
             return  # frozen under saturation
         s, dt = self.settings, self.dt
         gains = (s.gamma_c0, s.gamma_cv, s.gamma_ca)
-        raw_rate = [-g * p * z2 for g, p in zip(gains, phi)]                                   # (16)
+        raw_rate = [-g * p * z2 for g, p in zip(gains, phi)]                          # (16)
         self.theta_hat = self._next_theta(raw_rate, gains)
         nominal = self.train.nominal_mass_kg
         mass = self.mass_hat - dt * s.gamma_mass * specific * z2                              # (16)
@@ -196,7 +196,7 @@ class LuoXuProjectionLaw(LuoXuLaw):
             if weight > 0.0:
                 along = sum(r * gi for r, gi in zip(raw_rate, grad)) / weight
                 rate = [r - g * gi * along for r, g, gi in zip(raw_rate, gains, grad)]  # (24)
-        theta = [th + self.dt * r for th, r in zip(self.theta_hat, rate)]
+        theta = super()._next_theta(rate, gains)
         distance = self.prior_distance(theta)
         if not math.isfinite(distance):
             return list(self.theta_hat)   # overflow on absurd input: keep the estimates

@@ -5,7 +5,8 @@ Plant (5)-(8): x = (s, v), x' = A x + B [G u + Z], G = theta_G = 1/M,
 Z = phi_Z^T theta_Z, phi_Z = (-1, -v, -v^2), theta_Z = (a + g sin(grade) + 0.004 D, b, c) per kg.
 Reference model (9): x_m' = Am x_m + Bm r, Am = [[0, 1], [am1, am2]], Bm = (0, bm); the target
 curves are x_m = (s*, v*), so r = (v*' - am1 s* - am2 v*) / bm (Remark 2). Matching (10):
-k1* = (am1, am2), k2* = bm.
+k1* = (am1, am2), k2* = bm. bm cancels in k2* r, so the control does not depend on it (paper:
+bm = 1) and it is not a setting.
 
 Identification models (17), k = 1..5, one parameter vector theta_k = (theta_Gk, theta_Zk) each:
     xhat_k' = Am xhat_k + (A - Am) x + B [G_k u + Z_k],   e_k = xhat_k - x               (17), (18)
@@ -80,8 +81,6 @@ class TanSettings:
                          description='reference model Am = [[0, 1], [am1, am2]] (paper: -0.1)')
     am2: float = setting(-0.1, minimum=-100.0, maximum=-1e-6, units='1/s',
                          description='reference model Am = [[0, 1], [am1, am2]] (paper: -0.1)')
-    bm: float = setting(1.0, minimum=1e-6, maximum=100.0, units='-',
-                        description='reference model Bm = (0, bm) (paper: 1)')
     mass_low_ratio: float = setting(0.8, minimum=0.1, maximum=1.0, units='-',
                                     description='lightest train of the model box / nominal mass')
     mass_high_ratio: float = setting(1.2, minimum=1.0, maximum=10.0, units='-',
@@ -293,7 +292,7 @@ class _MultipleModelLaw(ControlLaw):
         k1*^T x + bm r = am1 (s - s*) + am2 (v - v*) + v*'."""
         s = self.settings
         v = x[1]
-        model_z = -theta[1] - theta[2] * v - theta[3] * v * v                   # Z = phi_Z^T theta_Z
+        model_z = -theta[1] - theta[2] * v - theta[3] * v * v        # Z = phi_Z^T theta_Z
         wanted = (s.am1 * (x[0] - reference.position) + s.am2 * (v - reference.speed)
                   + reference.acceleration)
         return (wanted - model_z) / max(theta[0], g_floor)                     # (24)
@@ -342,7 +341,8 @@ class SecondLevelFixedLaw(_MultipleModelLaw):
         rhs = [a + step * (c0 * h0 + c1 * h1) for a, (c0, c1) in zip(self.alpha.tolist(), columns)]
         e00 = sum(c0 * c0 for c0, _ in columns)
         e11 = sum(c1 * c1 for _, c1 in columns)
-        i00, i11, i01 = 1.0 + step * e00, 1.0 + step * e11, step * sum(c0 * c1 for c0, c1 in columns)
+        e01 = sum(c0 * c1 for c0, c1 in columns)
+        i00, i11, i01 = 1.0 + step * e00, 1.0 + step * e11, step * e01
         y0 = sum(c0 * r for (c0, _), r in zip(columns, rhs))
         y1 = sum(c1 * r for (_, c1), r in zip(columns, rhs))
         # det = 1 + step tr(E E^T) + step^2 det(E E^T), the last by Lagrange's identity so that
