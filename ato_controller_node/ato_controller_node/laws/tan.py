@@ -401,20 +401,23 @@ class SecondLevelAdaptiveLaw(SecondLevelFixedLaw):
         s = self.settings
         am = np.array([[0.0, 1.0], [s.am1, s.am2]])
         p = solve_continuous_lyapunov(am.T, -np.eye(2))       # Am^T P + P Am = -I
-        self._pb = p[:, 1]                                     # P B
-        self._gamma = (self.theta_max - self.theta_min) ** 2
+        self._pb = p[:, 1].tolist()                            # P B
+        self._gamma = ((self.theta_max - self.theta_min) ** 2).tolist()
 
     def _update(self, errors, x) -> None:
         # identification models: theta_k' = -Gamma omega (B^T P e_k), omega = (u, phi_Z), at the
         # new errors (forward Euler); then the combination as for fixed models
         v = x[1]
-        omega = np.array([self._last_force, -1.0, -v, -v * v])
-        drive = np.array(errors) @ self._pb                     # B^T P e_k, one per model
-        with np.errstate(all='ignore'):
-            thetas = self.bank.thetas - (self.dt * self.settings.identification_gain) * \
-                np.outer(drive, self._gamma * omega)
-        if np.isfinite(thetas).all():   # overflow on absurd input: keep the last parameters
-            self.bank.thetas = thetas
+        omega = (self._last_force, -1.0, -v, -v * v)
+        step = self.dt * self.settings.identification_gain
+        scaled = [step * g * w for g, w in zip(self._gamma, omega)]
+        pb0, pb1 = self._pb
+        rows = []
+        for (e0, e1), row in zip(errors, self.bank.parameter_rows()):
+            drive = pb0 * e0 + pb1 * e1                                  # B^T P e_k
+            rows.append(tuple(t - drive * c for t, c in zip(row, scaled)))
+        if all(math.isfinite(t) for row in rows for t in row):
+            self.bank.thetas = rows   # (overflow on absurd input: keep the last parameters)
         super()._update(errors, x)
 
 
@@ -422,17 +425,17 @@ class _IndexedLaw(_MultipleModelLaw):
     """Laws that rank the fixed models by the performance index J_k."""
 
     def _start_weights(self) -> None:
-        self.memory = np.zeros(MODELS)
+        self.memory = [0.0] * MODELS
 
-    def _indices(self, errors) -> np.ndarray:
+    def _indices(self, errors) -> list[float]:
         s = self.settings
-        with np.errstate(all='ignore'):
-            squared = np.array([p * p + v * v for p, v in errors])
-            memory = self.memory * math.exp(-s.forgetting_per_s * self.dt) + self.dt * squared
-            index = s.index_instant * squared + s.index_memory * memory
-        if not np.isfinite(index).all():   # overflow on absurd input: forget, start again
-            self.memory = np.zeros(MODELS)
-            return self.memory.copy()
+        decay = math.exp(-s.forgetting_per_s * self.dt)
+        squared = [p * p + v * v for p, v in errors]                       # |e_k|^2
+        memory = [m * decay + self.dt * q for m, q in zip(self.memory, squared)]
+        index = [s.index_instant * q + s.index_memory * m for q, m in zip(squared, memory)]
+        if not all(math.isfinite(j) for j in index):   # overflow on absurd input: start again
+            self.memory = [0.0] * MODELS
+            return [0.0] * MODELS
         self.memory = memory
         return index
 
@@ -449,12 +452,12 @@ class SwitchingMultipleModelLaw(_IndexedLaw):
 
     def _update(self, errors, x) -> None:
         index = self._indices(errors)
-        best = int(np.argmin(index))
+        best = min(range(MODELS), key=index.__getitem__)
         if index[best] < (1.0 - self.settings.hysteresis) * index[self.selected]:
             self.selected = best
 
     def _control(self, x, reference):
-        theta = self.bank.thetas[self.selected]
+        theta = self.bank.parameter_rows()[self.selected]
         force = self._controller(x, reference, theta, 1e-3 * self.g_min)
         estimates = {'selected_model': float(self.selected + 1)}
         estimates.update(self._estimates(theta))
@@ -469,24 +472,27 @@ class WeightedMultipleModelLaw(_IndexedLaw):
 
     def _start_weights(self) -> None:
         super()._start_weights()
-        self.weights = np.full(MODELS, 1.0 / MODELS)
+        self.weights = [1.0 / MODELS] * MODELS
 
     def _update(self, errors, x) -> None:
         index = self._indices(errors)
-        total = index.sum()
+        total = sum(index)
         if total <= 0.0:
             return                      # no information yet (all models agree)
-        likelihood = 1.0 - index / total
-        weights = self.weights * likelihood
-        if weights.sum() <= 0.0:
+        weights = [w * (1.0 - j / total) for w, j in zip(self.weights, index)]   # w_k l_k
+        norm = sum(weights)
+        if not norm > 0.0:
             return
-        weights = np.maximum(weights / weights.sum(), self.settings.weight_floor)
-        self.weights = weights / weights.sum()
+        weights = [max(w / norm, self.settings.weight_floor) for w in weights]
+        norm = sum(weights)
+        self.weights = [w / norm for w in weights]
 
     def _control(self, x, reference):
-        forces = [self._controller(x, reference, theta, 1e-3 * self.g_min)
-                  for theta in self.bank.thetas]
-        force = float(self.weights @ forces)
-        estimates = {f'weight_{k + 1}': float(w) for k, w in enumerate(self.weights)}
-        estimates.update(self._estimates(self.weights @ self.bank.thetas))
+        rows = self.bank.parameter_rows()
+        floor = 1e-3 * self.g_min
+        force = sum(w * self._controller(x, reference, theta, floor)
+                    for w, theta in zip(self.weights, rows))                 # sum w_k u_k
+        estimates = {f'weight_{k + 1}': w for k, w in enumerate(self.weights)}
+        estimates.update(self._estimates(
+            [sum(w * row[i] for w, row in zip(self.weights, rows)) for i in range(4)]))
         return force, estimates
