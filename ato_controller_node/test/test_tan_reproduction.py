@@ -5,7 +5,7 @@
 - 4.3: comparison with the three other multiple-model methods, same five models and initial
   parameters, with the grade raised to 30 per mille for 1000 <= t < 1100 s (the plant's
   abrupt change). The paper's plant has no actuator limits; with the CRH380A's 9.6 MW the
-  30 per mille climb at 245 km/h is beyond the traction power (about 165 kN needed, 140 kN
+  30 per mille climb at 245 km/h is beyond the traction power (about 170 kN needed, 141 kN
   available) and every law loses the same 41 km/h, so the comparison lifts the traction limits
   to the paper's unconstrained actuator.
 """
