@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from ato_common.trains import DavisResistance, TractionCharacteristic
+from ato_common.trains import DavisResistance, train_preset
 from ato_common.types import ReferencePoint
 from ato_common.units import STANDARD_GRAVITY
 from ato_controller_node.host import ControllerHost
@@ -33,14 +33,10 @@ class Mode:
     curve_accel_mps2: float
 
 
-def davis_kn_kmh(a_kn: float, b_kn_per_kmh: float, c_kn_per_kmh2: float) -> DavisResistance:
-    return DavisResistance(a_kn * 1e3, b_kn_per_kmh * 1e3 * 3.6, c_kn_per_kmh2 * 1e3 * 3.6 ** 2)
-
-
 def paper_modes() -> tuple[Mode, ...]:
     """Section 4, reading (A): whole-train kN with V in km/h."""
-    open_air = davis_kn_kmh(2.25, -1.9e-3, 3.2e-4)
-    tunnel = davis_kn_kmh(2.25, -1.9e-3, 9.2e-4)
+    open_air = DavisResistance.from_kn_kmh(2.25, -1.9e-3, 3.2e-4)
+    tunnel = DavisResistance.from_kn_kmh(2.25, -1.9e-3, 9.2e-4)
     return (Mode(MASS_KG, open_air, 0.0, 0.0),                             # (i) accelerating
             Mode(MASS_KG, tunnel, 0.0, 0.0),                               # (ii) tunnel
             Mode(MASS_KG, open_air, 0.015, CURVE_COEFFICIENT * 0.34),      # (iii) slope + curve
@@ -66,10 +62,10 @@ def failed_motor_force(time_s: float) -> float | None:
 
 
 def knowledge(modes=()) -> TrainKnowledge:
-    # Limits of the mao_2017_500t preset: 300 kN, 8.8 MW, braking 0.9 m/s^2.
-    traction = TractionCharacteristic(300e3, 8.8e6, 0.9 * MASS_KG, 1.2 * MASS_KG)
-    return TrainKnowledge(MASS_KG, paper_modes()[0].davis, traction,
-                          ('motor_1', 'motor_2', 'motor_3', 'motor_4'), modes=modes)
+    """The mao_2017_500t train (500 t, four motors, 300 kN, 8.8 MW)."""
+    train = train_preset('mao_2017_500t')
+    assert train.mass_kg == MASS_KG and train.davis == paper_modes()[0].davis
+    return TrainKnowledge.of(train, modes)
 
 
 CRUISE_MPS = 60.0
