@@ -64,7 +64,7 @@ class Mao2017Settings:
                                     'given; notes: 0.5)')
     r2: float = setting(1.0, minimum=1e-3, maximum=10.0, units='1/s',
                         description='backstepping gain of z2 (paper: not given; notes: 1)')
-    gamma_xi: float = setting(2e5, minimum=0.0, maximum=1e9, units='N s/m',
+    gamma_xi: float = setting(2e5, minimum=0.0, maximum=1e9, units='N/m',
                               description='adaptation gain of the failure magnitudes xi (28)')
     gamma_a: float = setting(1e-3, minimum=0.0, maximum=1.0, units='1/s^2',
                              description='adaptation gain of a_i (29)')
@@ -72,13 +72,13 @@ class Mao2017Settings:
                              description='adaptation gain of b_i (30)')
     gamma_c: float = setting(1e-9, minimum=0.0, maximum=1.0, units='s^2/m^4',
                              description='adaptation gain of c_i (31)')
-    gamma_vartheta: float = setting(1e-5, minimum=0.0, maximum=1.0, units='s^3/m^3',
+    gamma_vartheta: float = setting(1e-5, minimum=0.0, maximum=1.0, units='s^2/m^2',
                                     description='adaptation gain of the grade sine vartheta_i (32)')
-    gamma_d: float = setting(1e-2, minimum=0.0, maximum=100.0, units='1/s^2',
+    gamma_d: float = setting(10.0, minimum=0.0, maximum=1e4, units='1/s^2',
                              description='adaptation gain of the curve parameter D_i (33)')
     gamma_knu: float = setting(1e-6, minimum=0.0, maximum=1.0, units='1/(N m)',
                                description='adaptation gain of rho_knu = 1/k_nu (35)')
-    gamma_m: float = setting(1e5, minimum=0.0, maximum=1e9, units='kg s^3/m^3',
+    gamma_m: float = setting(1e5, minimum=0.0, maximum=1e9, units='kg s^2/m^2',
                              description='adaptation gain of rho_i = mass_i/k_nu (36)')
     failure_basis_omega_radps: float = setting(
         0.05, minimum=0.0, maximum=10.0, units='rad/s',
