@@ -73,6 +73,14 @@ TOPICS = {
                      'ato_controller_node', 'train_plant_node, run_scenario',
                      'force per actuated unit in effort (name = actuator names); '
                      'header.frame_id = registry name of the law that produced it'),
+    'actuators_commanded': Topic('train/actuators/commanded', 'sensor_msgs/msg/JointState', STREAM,
+                                 'N', 'train_plant_node', 'recorder, evaluation',
+                                 'force per actuated unit as commanded (the held ATO command), '
+                                 'effort per name = actuator names; stamped like train/state'),
+    'actuators_applied': Topic('train/actuators/applied', 'sensor_msgs/msg/JointState', STREAM,
+                               'N', 'train_plant_node', 'recorder, evaluation',
+                               'force per actuated unit as delivered (limits, lag, rate limit, '
+                               'safety brakes and failures applied), same layout'),
     'diagnostics': Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', DIAGNOSTICS, '-',
                          'all nodes', 'run_scenario, rqt_robot_monitor',
                          'active law, tracking errors, parameter estimates, rejected input'),
