@@ -71,8 +71,7 @@ def plant_model_for(law: str) -> str:
 def knowledge_of(scenario):
     """What the on-board software knows of the scenario's train (and its plant's known modes)."""
     from ato_controller_node.laws.base import TrainKnowledge
-    plant = getattr(scenario, 'plant', None)
-    return TrainKnowledge.of(scenario.train, getattr(plant, 'modes', ()))
+    return TrainKnowledge.of(scenario.train, scenario.plant.modes)
 
 
 def plan_jobs(scenarios: list[str]) -> tuple[list[Job], list[dict]]:
