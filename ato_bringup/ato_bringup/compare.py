@@ -2,9 +2,9 @@
 
     python -m ato_bringup.compare [--out runs/compare] [--jobs 2] [--scenario NAME ...]
 
-A law applies to a scenario when its ``fits`` accepts the scenario's train and the plant model
-it needs (``multi_car`` for a law that uses the measurements of several cars, else
-``point_mass``). Each run is the offline closed loop (ato_bringup.offline), one process per run
+A law applies to a scenario when its ``fits`` accepts the scenario's train and plant. The plant
+model is the scenario's, the same for every law on it: ``multi_car`` when the train has per-car
+data (what the 4-car laws need; a single-mass law then sees the lead car), else ``point_mass``. Each run is the offline closed loop (ato_bringup.offline), one process per run
 over ``--jobs`` cores. The result, ``<out>/compare.md``, has one table per scenario and the plots
 ``<out>/<scenario>_{tracking,errors,commands,estimates}.png``; ``<out>/compare.json`` holds the
 same numbers and the ranking that ``make demo`` reads.
@@ -64,8 +64,8 @@ class Job:
     model: str
 
 
-def plant_model_for(law: str) -> str:
-    return 'multi_car' if LAWS[law].cars is not None else 'point_mass'
+def plant_model_for(scenario) -> str:
+    return 'multi_car' if scenario.train.cars else 'point_mass'
 
 
 def knowledge_of(scenario):
@@ -81,9 +81,9 @@ def plan_jobs(scenarios: list[str]) -> tuple[list[Job], list[dict]]:
         scenario = load_scenario(name)
         knowledge = knowledge_of(scenario)
         dt = 1.0 / scenario.run.controller_rate_hz
+        model = plant_model_for(scenario)
+        cars = len(scenario.train.cars) if model == 'multi_car' else 1
         for law in sorted(LAWS):
-            model = plant_model_for(law)
-            cars = max(1, len(scenario.train.cars)) if model == 'multi_car' else 1
             reason = LAWS[law](knowledge, dt).fits(knowledge, cars)
             if reason:
                 skipped.append({'scenario': name, 'law': law, 'reason': reason})
