@@ -213,9 +213,11 @@ def _number(result: dict, key: str, fmt: str) -> str:
 
 def markdown(results: list[dict], skipped: list[dict], scenarios: list[str], stamp: str,
              command: str) -> str:
-    lines = [f'# Comparison of the control laws', '',
+    load = ', '.join(f'{x:.1f}' for x in os.getloadavg())
+    lines = ['# Comparison of the control laws', '',
              f'`{command}`, {stamp}, offline closed loop (ato_bringup.offline), '
-             f'{os.cpu_count()} cores.', '',
+             f'{os.cpu_count()} cores, load average {load} at the end (step times grow with '
+             'it).', '',
              'Columns: RMS/max speed error (km/h), RMS position error (m), worst stop error '
              '|x - station| (m), traction energy (kWh), max jerk max|dF|/(M dt) (m/s^3), host '
              'step time p99 (us, measured while the runs share the cores). Best: lowest RMS '
