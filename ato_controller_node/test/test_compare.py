@@ -100,3 +100,12 @@ def test_demo_falls_back_to_the_default_on_a_bad_ranking_file(tmp_path, content)
     path = tmp_path / 'compare.json'
     path.write_text(content)
     assert compare.ranked_demo_law(path)[0] == compare.DEFAULT_DEMO_LAW
+
+
+def test_demo_runs_the_ranked_law_only_where_it_can_drive_the_train(tmp_path):
+    from ato_bringup.run_scenario import default_controller
+    path = tmp_path / 'compare.json'
+    path.write_text(json.dumps({'generated': 'then', 'best': {'jinan_xuzhou': 'mao_2017'}}))
+    assert default_controller('mao_2017_modes', path)[0] == 'mao_2017'
+    law, why = default_controller('short_line', path)
+    assert law == 'pid' and 'drives 4 actuators' in why
