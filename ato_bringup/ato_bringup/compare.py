@@ -150,13 +150,16 @@ def run_job(job: Job) -> dict:
 class ProgressBar:
     """A one-line bar on the terminal (stderr): done/total, elapsed time, the last finished."""
 
-    def __init__(self, total: int, width: int = 30, stream=sys.stderr):
-        self.total, self.width, self.stream = total, width, stream
+    def __init__(self, total: int, width: int = 30, stream=None):
+        self.total, self.width = total, width
+        self.stream = stream if stream is not None else sys.stderr
         self.done, self.started = 0, time.monotonic()
-        self.interactive = stream.isatty()
-        self.show('')
+        self.interactive = self.stream.isatty()
+        self.show('', force=True)
 
-    def show(self, last: str) -> None:
+    def show(self, last: str, force: bool = False) -> None:
+        if not (self.interactive or force):
+            return  # in a log, one line per finished run
         filled = self.width * self.done // max(self.total, 1)
         elapsed = time.monotonic() - self.started
         line = (f'[{"#" * filled}{"." * (self.width - filled)}] {self.done}/{self.total} runs, '
@@ -169,7 +172,7 @@ class ProgressBar:
 
     def advance(self, last: str) -> None:
         self.done += 1
-        self.show(last)
+        self.show(last, force=True)
 
     def close(self) -> None:
         if self.interactive:
@@ -188,9 +191,17 @@ def run_all(jobs: list[Job], processes: int) -> list[dict]:
     else:
         # Spawned workers do not inherit a half-initialised parent; one run per task.
         with multiprocessing.get_context('spawn').Pool(processes) as pool:
-            for result in pool.imap_unordered(run_job, jobs):
+            pending = pool.imap_unordered(run_job, jobs)
+            last = ''
+            while len(results) < len(jobs):
+                try:
+                    result = pending.next(timeout=1.0)
+                except multiprocessing.TimeoutError:
+                    bar.show(last)  # keep the elapsed time moving during long runs
+                    continue
                 results.append(result)
-                bar.advance(f'{result["law"]} on {result["scenario"]}: {result["status"]}')
+                last = f'{result["law"]} on {result["scenario"]}: {result["status"]}'
+                bar.advance(last)
     bar.close()
     return results
 

@@ -109,3 +109,15 @@ def test_demo_runs_the_ranked_law_only_where_it_can_drive_the_train(tmp_path):
     assert default_controller('mao_2017_modes', path)[0] == 'mao_2017'
     law, why = default_controller('short_line', path)
     assert law == 'pid' and 'drives 4 actuators' in why
+
+
+def test_progress_bar_in_a_log_writes_one_line_per_finished_run():
+    import io
+    log = io.StringIO()
+    bar = compare.ProgressBar(4, width=8, stream=log)
+    bar.show('running')          # a refresh between runs: nothing in a log
+    bar.advance('pid on short_line: ok')
+    bar.close()
+    lines = log.getvalue().splitlines()
+    assert len(lines) == 2
+    assert lines[1].startswith('[##......] 1/4 runs,') and lines[1].endswith('pid on short_line: ok')
