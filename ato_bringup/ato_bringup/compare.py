@@ -4,8 +4,9 @@
 
 A law applies to a scenario when its ``fits`` accepts the scenario's train and plant. The plant
 model is the scenario's, the same for every law on it: ``multi_car`` when the train has per-car
-data (what the 4-car laws need; a single-mass law then sees the lead car), else ``point_mass``. Each run is the offline closed loop (ato_bringup.offline), one process per run
-over ``--jobs`` cores. The result, ``<out>/compare.md``, has one table per scenario and the plots
+data (what the 4-car laws need; a single-mass law then sees the lead car), else ``point_mass``.
+Each run is the offline closed loop (ato_bringup.offline), one process per run over ``--jobs``
+cores. The result, ``<out>/compare.md``, has one table per scenario and the plots
 ``<out>/<scenario>_{tracking,errors,commands,estimates}.png``; ``<out>/compare.json`` holds the
 same numbers and the ranking that ``make demo`` reads.
 

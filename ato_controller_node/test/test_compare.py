@@ -120,4 +120,5 @@ def test_progress_bar_in_a_log_writes_one_line_per_finished_run():
     bar.close()
     lines = log.getvalue().splitlines()
     assert len(lines) == 2
-    assert lines[1].startswith('[##......] 1/4 runs,') and lines[1].endswith('pid on short_line: ok')
+    assert lines[1].startswith('[##......] 1/4 runs,')
+    assert lines[1].endswith('pid on short_line: ok')

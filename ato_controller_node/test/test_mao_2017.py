@@ -229,7 +229,8 @@ def test_adaptive_laws_move_each_estimate_in_the_direction_of_the_proof():
     assert controller.theta_hat[0] == [0.95 * p for p in controller.modes[0].parameters]
     printed = law(paper_as_printed=True)
     printed.xi_hat = [1e5, 0.0]
-    out = printed.step(Measurement(100.0, 10.5, 40.0, mode=1), ReferencePoint(100.0, 10.0, 40.0, 0.0))
+    out = printed.step(Measurement(100.0, 10.5, 40.0, mode=1),
+                       ReferencePoint(100.0, 10.0, 40.0, 0.0))
     printed.after_saturation(out.force_n, out.force_n, out.forces_n)
     assert printed.rho_knu_hat < before_rho_knu                                        # as printed
 
