@@ -2,7 +2,9 @@
 
     python -m ato_bringup.compare [--out runs/compare] [--jobs 2] [--scenario NAME ...]
 
-A law applies to a scenario when its ``fits`` accepts the scenario's train and plant. The plant
+A law applies to a scenario when its ``fits`` accepts the scenario's train and plant and the
+plant's sensors do not fail a measurement the law requires (a law without speed measurement
+would only hold its last command; a law that estimates the speed does not require it). The plant
 model is the scenario's, the same for every law on it: ``multi_car`` when the train has per-car
 data (what the 4-car laws need; a single-mass law then sees the lead car), else ``point_mass``.
 Each run is the offline closed loop (ato_bringup.offline), one process per run over ``--jobs``
@@ -75,6 +77,19 @@ def knowledge_of(scenario):
     return TrainKnowledge.of(scenario.train, scenario.plant.modes)
 
 
+def failed_measurement(law: str, scenario, model: str) -> str:
+    """Why the scenario's plant fails a measurement the law requires ('' if it does not)."""
+    lead = scenario.train.cars[0].name if model == 'multi_car' else 'train'
+    for quantity in LAWS[law].requires:
+        sensor = getattr(scenario.plant.sensors, quantity.removeprefix('car_').rstrip('s'))
+        if math.isinf(sensor.failed_from_s):
+            continue
+        if quantity.startswith('car_') or not sensor.failed_cars or lead in sensor.failed_cars:
+            return (f'{law} needs the measured {quantity.replace("_", " ")}, which the plant\'s '
+                    f'sensor fails from {sensor.failed_from_s:g} s')
+    return ''
+
+
 def plan_jobs(scenarios: list[str]) -> tuple[list[Job], list[dict]]:
     """The runs to make, and the (scenario, law) pairs that do not apply, with the reason."""
     jobs, skipped = [], []
@@ -85,7 +100,8 @@ def plan_jobs(scenarios: list[str]) -> tuple[list[Job], list[dict]]:
         model = plant_model_for(scenario)
         cars = len(scenario.train.cars) if model == 'multi_car' else 1
         for law in sorted(LAWS):
-            reason = LAWS[law](knowledge, dt).fits(knowledge, cars)
+            reason = (LAWS[law](knowledge, dt).fits(knowledge, cars)
+                      or failed_measurement(law, scenario, model))
             if reason:
                 skipped.append({'scenario': name, 'law': law, 'reason': reason})
             else:

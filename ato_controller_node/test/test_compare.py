@@ -122,3 +122,15 @@ def test_progress_bar_in_a_log_writes_one_line_per_finished_run():
     assert len(lines) == 2
     assert lines[1].startswith('[##......] 1/4 runs,')
     assert lines[1].endswith('pid on short_line: ok')
+
+
+def test_a_law_that_needs_a_failed_measurement_does_not_apply():
+    from dataclasses import replace
+    from ato_common.plant_setup import QuantitySensor, SensorSetup
+    from ato_common.scenario import load_scenario
+    scenario = load_scenario('short_line')
+    assert compare.failed_measurement('pid', scenario, 'point_mass') == ''
+    failed = replace(scenario, plant=replace(scenario.plant, sensors=SensorSetup(
+        speed=QuantitySensor(failed_from_s=300.0))))
+    assert compare.failed_measurement('pid', failed, 'point_mass') == (
+        "pid needs the measured speed, which the plant's sensor fails from 300 s")
