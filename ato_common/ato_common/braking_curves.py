@@ -166,12 +166,10 @@ def deceleration_curve(line: Line, location_m: float, speed_mps: float, top_spee
         def slope(square: float) -> float:
             return 2.0 * (deceleration(math.sqrt(max(square, 0.0)))
                           + units.STANDARD_GRAVITY * sine)
-        middle = y + 0.5 * step * slope(y)
-        y_next = y + step * slope(middle)
-        if y_next <= y:
-            # The brake cannot hold the speed on this descent: the curve does not exist above.
-            break
-        x, y = x - step, y_next
+        middle = max(y + 0.5 * step * slope(y), 0.0)
+        # Where the brake cannot even hold the speed on a descent, the curve falls backwards:
+        # the train must come to it slower still (down to standstill).
+        x, y = x - step, max(y + step * slope(middle), 0.0)
         positions.append(x)
         squares.append(y)
     return DecelerationCurve(np.array(positions), np.sqrt(np.array(squares)), location_m)

@@ -61,6 +61,7 @@ class Scenario:
     run: RunSettings
     supervision: SupervisionSettings
     plant: PlantSetup = PlantSetup()  # what varies, actuators, failures, sensors
+    journey: ttobench.TTOBenchJourney | None = None  # timing points of a TTOBench journey
 
 
 def builtin_scenarios() -> list[str]:
@@ -118,7 +119,7 @@ def _parse_train(f: Fields, base: Path) -> tuple[TrainParameters, ttobench.TTOBe
     return train_preset(preset), None
 
 
-def _parse_line(f: Fields, base: Path) -> Line:
+def _parse_line(f: Fields, base: Path) -> tuple[Line, ttobench.TTOBenchJourney | None]:
     raw = f.raw('line', required=True)
     if not (isinstance(raw, dict) and 'ttobench' in raw):
         line = parse_line(raw, 'line')
@@ -127,7 +128,7 @@ def _parse_line(f: Fields, base: Path) -> Line:
             raise ConfigError('journey.ttobench: a TTOBench journey needs a TTOBench track '
                               '(line.ttobench)')
         journey.reject_unknown()
-        return line
+        return line, None
     fields = f.section('line')
     path = _file(fields, 'ttobench', base)
     track = ttobench.load_track(path, fields.number('dwell_s', 0.0, minimum=0.0))
@@ -136,10 +137,10 @@ def _parse_line(f: Fields, base: Path) -> Line:
     if journey_fields.has('ttobench'):
         journey_path = _file(journey_fields, 'ttobench', base)
         journey_fields.reject_unknown()
-        return ttobench.apply_journey(track, ttobench.load_journey(journey_path),
-                                      str(journey_path))
+        journey = ttobench.load_journey(journey_path)
+        return ttobench.apply_journey(track, journey, str(journey_path)), journey
     journey_fields.reject_unknown()
-    return track.line
+    return track.line, None
 
 
 def _capped(line: Line, speed: float) -> Line:
@@ -185,7 +186,7 @@ def parse_scenario(data, origin: str = '<memory>', base: Path | None = None) -> 
     base = base or Path.cwd()
     f = Fields(data, '')
     train, loaded_train = _parse_train(f, base)
-    line = _parse_line(f, base)
+    line, journey = _parse_line(f, base)
     if loaded_train is not None:
         line = _capped(line, loaded_train.max_speed_mps)
 
@@ -217,6 +218,6 @@ def parse_scenario(data, origin: str = '<memory>', base: Path | None = None) -> 
         name=f.text('name'), description=f.text('description', ''),
         source=f.text('source', 'suite'), origin=origin, train=train, line=line,
         planning=planning, run=run, supervision=_parse_supervision(f, train, loaded_train),
-        plant=parse_plant_setup(f.raw('plant'), train, 'plant'))
+        plant=parse_plant_setup(f.raw('plant'), train, 'plant'), journey=journey)
     f.reject_unknown()
     return scenario

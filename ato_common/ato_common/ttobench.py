@@ -34,7 +34,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import json
 import math
-import os
 from pathlib import Path
 import re
 from typing import Any
@@ -47,13 +46,6 @@ from ato_common.validation import ConfigError
 ID_PATTERN = re.compile(r'^[A-Za-z0-9_]+$')
 # Length of the speed restriction standing for a passing point's upper speed bound, m.
 PASSING_POINT_RESTRICTION_M = 1.0
-
-
-def default_ttobench_dir() -> Path:
-    """``$TTOBENCH_DIR``, else ``shared/ttobench`` beside the repository."""
-    if os.environ.get('TTOBENCH_DIR'):
-        return Path(os.environ['TTOBENCH_DIR'])
-    return Path(__file__).resolve().parents[2].parent / 'shared' / 'ttobench'
 
 
 # Unit conversions to SI, by the unit string the file declares.
@@ -460,6 +452,12 @@ class TTOBenchJourney:
             stations.append(Station(f'stop_{len(stations)}', point.position_m, dwell))
             i += 1
         return tuple(stations)
+
+    def earliest_departure_s(self, position_m: float) -> float | None:
+        """The lower time bound of the last stopping point at a position (the departure)."""
+        times = [p.earliest_s for p in self.timing_points
+                 if p.is_stopping_point and p.position_m == position_m]
+        return times[-1] if times else None
 
     def passing_speed_bounds(self) -> tuple[tuple[float, float], ...]:
         """(position, highest speed) of every passing point with an upper speed bound."""

@@ -3,21 +3,22 @@
 import copy
 import json
 import math
+from pathlib import Path
 
 import pytest
 import yaml
 
 from ato_common import units
 from ato_common.scenario import load_scenario, parse_scenario
-from ato_common.ttobench import (default_ttobench_dir, load_journey, load_track, load_train,
-                                 scenario_data)
+from ato_common.ttobench import load_journey, load_track, load_train, scenario_data
 from ato_common.validation import ConfigError
 
-SAMPLES = default_ttobench_dir()
+# The BSD-2 TTOBench samples ship with the tests (tests/data/ttobench, with their licence), so
+# these tests run wherever the repository is cloned.
+SAMPLES = Path(__file__).resolve().parents[2] / 'tests' / 'data' / 'ttobench'
 TRACKS = sorted((SAMPLES / 'tracks').glob('*.json'))
 TRAINS = sorted((SAMPLES / 'trains').glob('*.json'))
-needs_samples = pytest.mark.skipif(not TRACKS or not TRAINS,
-                                   reason=f'no TTOBench samples in {SAMPLES} (set TTOBENCH_DIR)')
+assert TRACKS and TRAINS, f'the TTOBench samples are missing from {SAMPLES}'
 
 TRACK = {
     'metadata': {'id': 'T_curvy', 'library version': 'TTOBench v1.5'},
@@ -74,7 +75,6 @@ def test_a_track_converts_to_si_with_clothoids_and_tunnel_cross_sections(tmp_pat
     assert track.etcs_kt_int == pytest.approx(1.1)
 
 
-@needs_samples
 def test_a_train_converts_to_si():
     train = load_train(SAMPLES / 'trains' / 'CH_Stadler_FLIRT_TPF.json')
     p = train.parameters
@@ -172,7 +172,6 @@ def test_a_scenario_naming_a_missing_or_broken_file_says_which(tmp_path):
         load_scenario_file(tmp_path, {'line': {'ttobench': 'track.json', 'dwell': 3}})
 
 
-@needs_samples
 def test_every_sample_track_loads_and_yields_a_curve_within_its_limits_and_stops(tmp_path):
     from profile_node.planner import plan_reference
     import numpy as np
@@ -198,7 +197,6 @@ def test_every_sample_track_loads_and_yields_a_curve_within_its_limits_and_stops
             assert p.speed <= plan.permitted_speed(p.position, t) + 1e-6
 
 
-@needs_samples
 def test_the_scenario_command_writes_a_runnable_scenario(tmp_path, capsys):
     from ato_common.ttobench import main
     assert main([str(TRACKS[0]), str(TRAINS[0]), '--dwell', '15']) == 0
@@ -209,3 +207,31 @@ def test_the_scenario_command_writes_a_runnable_scenario(tmp_path, capsys):
     assert main([str(tmp_path / 'nope.json'), str(TRAINS[0])]) == 2
     assert 'line.ttobench: no such file' in capsys.readouterr().err
     assert math.isfinite(scenario.train.mass_kg)
+
+
+def test_a_journey_timetable_holds_departures_and_reports_its_windows(tmp_path):
+    from profile_node.planner import plan_reference
+    write(tmp_path, 'track.json', TRACK)
+    journey = copy.deepcopy(JOURNEY)
+    journey['timing points']['values'] = [[0, 0, 0, 0, 0], [3500, None, None, 10, 60],
+                                          [6000, 300, 330, 0, 0], [6000, 600, None, 0, 0],
+                                          [12000, 650, 700, 0, 0]]
+    write(tmp_path, 'journey.json', journey)
+    scenario = load_scenario_file(tmp_path, {'line': {'ttobench': 'track.json'},
+                                             'journey': {'ttobench': 'journey.json'}})
+    plan = plan_reference(scenario)
+    middle = plan.stops[0]
+    # the dwell is the difference of the earliest times (300 s), and the departure waits for
+    # its earliest time
+    assert middle.arrival_s < 300.0
+    assert middle.departure_s == pytest.approx(600.0)
+    checks = plan.timing
+    assert [c.point.position_m for c in checks] == [0, 3500, 6000, 6000, 12000]
+    assert checks[2].planned_s == middle.arrival_s and checks[3].planned_s == middle.departure_s
+    # arriving before the earliest arrival time is outside the window: reported
+    assert [c.within_window for c in checks[:4]] == [True, True, False, True]
+    # 6 km from a 600 s departure cannot be done by 700 s at 140 km/h: reported as missed
+    assert checks[4].planned_s > 700.0 and not checks[4].within_window
+    passing = plan.trajectory.at(checks[1].planned_s)
+    assert passing.position == pytest.approx(3500.0, abs=1e-3)
+    assert passing.speed <= 60 / 3.6 + 1e-9

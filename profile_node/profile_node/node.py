@@ -79,6 +79,12 @@ class ProfileNode(Node):
             f'scenario {self.scenario.name}: {len(self.plan.stops)} stops, '
             f'{len(self.plan.targets)} targets, reference ends at '
             f'{self.trajectory.end_time:.1f} s, {len(self.trajectory.segments)} segments')
+        for check in self.plan.timing:
+            if not check.within_window:
+                point = check.point
+                self.get_logger().warning(
+                    f'journey timing point at {point.position_m:.0f} m: the curve is there at '
+                    f'{check.planned_s:.1f} s, outside [{point.earliest_s}, {point.latest_s}] s')
 
     def curve_msg(self) -> JointTrajectory:
         step = self.params['curve_sample_period_s']

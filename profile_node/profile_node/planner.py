@@ -26,7 +26,6 @@ supervision times), the braking into that target is planned further ahead and th
 
 from __future__ import annotations
 
-from bisect import bisect_right
 from dataclasses import dataclass
 import math
 
@@ -58,6 +57,7 @@ class Plan:
     stops: tuple[StopEvent, ...]
     supervision: RunSupervision
     targets: tuple[Target, ...]   # every target of the run, by location
+    timing: tuple = ()            # TimingCheck of each journey timing point, if any
 
     def next_stop(self, time_s: float) -> StopEvent:
         """The stop the reference is heading for or dwelling at; the last one at the end."""
@@ -118,6 +118,11 @@ def braking_deceleration(scenario: Scenario, descent_sine: float) -> float:
     deliver it on the steepest descent (gradient correction; uphill does not raise it)."""
     brake = scenario.train.traction.max_service_brake_force_n / scenario.train.mass_kg
     available = TRACTION_RESERVE_SHARE * brake + units.STANDARD_GRAVITY * min(descent_sine, 0.0)
+    if available < MIN_PLANNED_ACCELERATION_MPS2:
+        raise PlanningError(f'{scenario.origin}: a descent of '
+                            f'{-1000 * math.tan(math.asin(descent_sine)):.0f} per mille leaves the '
+                            'service brake less than '
+                            f'{MIN_PLANNED_ACCELERATION_MPS2} m/s^2 of deceleration')
     return min(scenario.planning.service_deceleration_mps2, available)
 
 
@@ -276,14 +281,67 @@ def _build(scenario: Scenario, supervision: RunSupervision, stations: list[Stati
     builder.add(stations[0].dwell_s)
     stops = []
     for leg, (origin, destination) in enumerate(zip(stations, stations[1:])):
-        sections = leg_sections(scenario, supervision.legs[leg].mrsp, origin.position_m, destination.position_m,
-                                anticipation_s, extra_m)
+        sections = leg_sections(scenario, supervision.legs[leg].mrsp, origin.position_m,
+                                destination.position_m, anticipation_s, extra_m)
         plan_leg(builder, scenario, sections, deceleration_factors[leg])
         builder.snap(destination.position_m)
         arrival = builder.t
-        builder.add(destination.dwell_s)
+        dwell = destination.dwell_s
+        if scenario.journey is not None and destination is not stations[-1]:
+            # A timetable: no departure before the journey's earliest departure time.
+            earliest = scenario.journey.earliest_departure_s(destination.position_m)
+            if earliest is not None:
+                dwell = max(dwell, earliest - arrival)
+        builder.add(dwell)
         stops.append(StopEvent(destination, arrival, builder.t))
     return builder.build(), tuple(stops)
+
+
+@dataclass(frozen=True)
+class TimingCheck:
+    """A journey timing point and when the target curve is there."""
+
+    point: object          # ato_common.ttobench.TimingPoint
+    planned_s: float       # arrival (stopping point) or passage (passing point)
+    within_window: bool
+
+
+def timing_checks(scenario: Scenario, trajectory: Trajectory,
+                  stops: tuple[StopEvent, ...]) -> tuple[TimingCheck, ...]:
+    """Each timing point of the scenario's journey against the plan: the curve is the fastest
+    one (it waits at stations for the earliest departure), so a missed upper bound is a
+    timetable the train cannot keep, reported here rather than planned around."""
+    if scenario.journey is None:
+        return ()
+    checks = []
+    points = scenario.journey.timing_points
+    origin_departure = trajectory.start_time + scenario.line.stations[0].dwell_s
+    for i, point in enumerate(points):
+        stop = next((s for s in stops if s.station.position_m == point.position_m), None)
+        is_departure = i > 0 and points[i - 1].is_stopping_point and \
+            points[i - 1].position_m == point.position_m
+        if i == 0:
+            planned = origin_departure
+        elif point.is_stopping_point and stop is not None:
+            planned = stop.departure_s if is_departure else stop.arrival_s
+        else:
+            planned = passing_time(trajectory, point.position_m)
+        within = ((point.earliest_s is None or planned >= point.earliest_s - 1e-6)
+                  and (point.latest_s is None or planned <= point.latest_s + 1e-6))
+        checks.append(TimingCheck(point, planned, within))
+    return tuple(checks)
+
+
+def passing_time(trajectory: Trajectory, position_m: float) -> float:
+    """First time the target reaches a position (bisection: the position never decreases)."""
+    low, high = trajectory.start_time, trajectory.end_time
+    for _ in range(60):
+        middle = 0.5 * (low + high)
+        if trajectory.at(middle).position < position_m:
+            low = middle
+        else:
+            high = middle
+    return high
 
 
 def first_violation(trajectory: Trajectory, plan_stops, supervision: RunSupervision):
@@ -315,7 +373,8 @@ def plan_reference(scenario: Scenario) -> Plan:
         if violation is None:
             targets = tuple(sorted({t for leg in supervision.legs for t in leg.targets},
                                    key=lambda t: (t.location_m, t.kind)))
-            return Plan(trajectory, stops, supervision, targets)
+            return Plan(trajectory, stops, supervision, targets,
+                        timing_checks(scenario, trajectory, stops))
         _, position, leg = violation
         target = supervision.legs[leg].binding_target(position)
         if target is None:

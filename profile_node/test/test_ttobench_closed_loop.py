@@ -2,19 +2,18 @@
 cores as the nodes): the plant runs the track's line and the train's physics, the PID law
 tracks the suite's target curve."""
 
+from pathlib import Path
+
 import numpy as np
-import pytest
 
 from ato_common.scenario import parse_scenario
-from ato_common.ttobench import default_ttobench_dir, scenario_data
+from ato_common.ttobench import scenario_data
 
-SAMPLES = default_ttobench_dir()
+SAMPLES = Path(__file__).resolve().parents[2] / 'tests' / 'data' / 'ttobench'
 TRACK = SAMPLES / 'tracks' / 'CH_Stadelhofen_Altstetten.json'
 TRAIN = SAMPLES / 'trains' / 'CH_Stadler_KISS_SBB.json'
 
 
-@pytest.mark.skipif(not TRACK.is_file() or not TRAIN.is_file(),
-                    reason=f'no TTOBench samples in {SAMPLES} (set TTOBENCH_DIR)')
 def test_a_ttobench_track_and_train_run_through_the_closed_loop():
     from ato_bringup.offline import run_offline
     scenario = parse_scenario(scenario_data(TRACK, TRAIN, dwell_s=20.0))

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 from ato_controller_node.laws.base import ControlLaw
 from ato_controller_node.laws.luo_xu import LuoXuLaw, LuoXuProjectionLaw
+from ato_controller_node.laws.mao_2017 import Mao2017Law
 from ato_controller_node.laws.pid import PidLaw
 from ato_controller_node.laws.tan import (SecondLevelAdaptiveLaw, SecondLevelFixedLaw,
                                           SwitchingMultipleModelLaw, WeightedMultipleModelLaw)
 
 LAWS: dict[str, type[ControlLaw]] = {law.name: law for law in (
-    PidLaw, LuoXuLaw, LuoXuProjectionLaw,
+    PidLaw, LuoXuLaw, LuoXuProjectionLaw, Mao2017Law,
     SecondLevelFixedLaw, SecondLevelAdaptiveLaw, SwitchingMultipleModelLaw, WeightedMultipleModelLaw)}
 
 
