@@ -16,6 +16,7 @@ is sampled at the middle of each integration step.
 
 from __future__ import annotations
 
+from bisect import bisect_right
 from dataclasses import dataclass, replace
 import math
 from typing import Sequence
@@ -24,7 +25,7 @@ import numpy as np
 
 from ato_common.plant_setup import ActuatorFailure, PlantSetup, QuantitySensor, SensorSetup
 from ato_common.scenario import Scenario
-from ato_common.types import TrainState, nanoseconds, seconds
+from ato_common.types import NS_PER_S, TrainState, nanoseconds
 from train_plant_node.models import PlantModel, make_model
 from train_plant_node.surroundings import Surroundings, surroundings_at
 
@@ -106,15 +107,21 @@ class TrainSimulation:
         self._events = self._schedule()
         self._env_key = None
         self._env: Surroundings | None = None
+        # Nothing switches the surroundings during the run: one for all steps.
+        self._constant_env = not self.setup.modes and not self.setup.abrupt_changes
         settings = self.setup.actuators
         self._instant_actuators = settings.time_constant_s == 0.0 and \
             settings.rate_limit_n_per_s == 0.0
+        # One integration step per period is possible (see ``advance``).
+        self._one_step_possible = self._instant_actuators and \
+            self.setup.disturbance.kind != 'random'
+        self._applied_for = None  # the state ``applied`` was last computed for
         self._update_applied()
 
     # --- time and state ----------------------------------------------------------------------
     @property
     def time_s(self) -> float:
-        return seconds(self.stamp_ns)
+        return self.stamp_ns / NS_PER_S  # ato_common.types.seconds, inlined: per step
 
     @property
     def actuator_names(self) -> tuple[str, ...]:
@@ -134,9 +141,9 @@ class TrainSimulation:
 
     def surroundings(self, time_s: float | None = None) -> Surroundings:
         """The mode, abrupt change, varying resistance and disturbance in force now."""
-        setup = self.setup
-        if self._env is not None and not setup.modes and not setup.abrupt_changes:
+        if self._env is not None and self._constant_env:
             return self._env  # nothing switches: the same all run
+        setup = self.setup
         t = self.time_s if time_s is None else time_s
         key = (setup.mode_index(t, self.lead_position()), setup.abrupt_change(t))
         if key != self._env_key:
@@ -214,10 +221,10 @@ class TrainSimulation:
         traction = self.scenario.train.traction
         n = len(self.commanded)
         share = 1.0 / n
-        watchdog = self.watchdog
-        if self.atp_intervention or watchdog == EMERGENCY_BRAKE:
+        missed, safety = self.missed_periods, self.safety  # ``watchdog``, inlined: per step
+        if self.atp_intervention or missed >= safety.emergency_periods:
             return [-traction.max_emergency_brake_force_n * share] * n
-        if watchdog == SERVICE_BRAKE:
+        if missed >= safety.watchdog_periods:
             return [-traction.max_service_brake_force_n * share] * n
         highest = traction.max_traction_at(self.lead_speed()) * share
         lowest = -traction.max_emergency_brake_force_n * share
@@ -235,6 +242,13 @@ class TrainSimulation:
         if self._instant_actuators:
             self._drive = self.targets()
         self.applied = self._failed(self._drive, self.time_s)
+        self._applied_for = self.state
+
+    def _event_within(self, start_s: float, end_s: float) -> bool:
+        """A scheduled time strictly inside (start_s, end_s), beyond the tolerance."""
+        events = self._events
+        i = bisect_right(events, start_s + EVENT_TOLERANCE_S)
+        return i < len(events) and events[i] < end_s - EVENT_TOLERANCE_S
 
     def _actuate(self, time_s: float, h: float) -> tuple:
         """The forces held during the integration step [time_s, time_s + h]."""
@@ -263,16 +277,19 @@ class TrainSimulation:
     def advance(self, duration_ns: int) -> None:
         """Integrate one period: steps of at most the model's ``max_substep_s``, split at every
         scheduled time (modes, abrupt changes, failures, disturbance jumps)."""
-        t = self.time_s
-        duration = seconds(duration_ns)
+        t = self.stamp_ns / NS_PER_S
+        duration = duration_ns / NS_PER_S
         end = t + duration
-        if self._instant_actuators and duration <= self.model.max_substep_s and \
-                self.setup.disturbance.kind != 'random' and not any(
-                t + EVENT_TOLERANCE_S < e < end - EVENT_TOLERANCE_S for e in self._events):
+        if self._one_step_possible and duration <= self.model.max_substep_s and \
+                not self._event_within(t, end):
             # One integration step and nothing switches within it: the general loop's result,
-            # without its bookkeeping.
-            self.state = self.model.step(self.state, duration, self._actuate(t, duration), t,
-                                         self.surroundings(t))
+            # without its bookkeeping. Instant actuators deliver what ``_update_applied`` last
+            # computed, if for this state (and no failure samples its force within the step).
+            forces = (self.applied if self._applied_for is self.state and not self.failures
+                      else self._actuate(t, duration))
+            env = self._env if self._constant_env and self._env is not None \
+                else self.surroundings(t)
+            self.state = self.model.step(self.state, duration, forces, t, env)
             self.stamp_ns += duration_ns
             self._supervise()
             return
@@ -298,8 +315,9 @@ class TrainSimulation:
 
     # --- outputs -------------------------------------------------------------------------------
     def truth(self) -> TrainState:
+        env = self._env if self._constant_env and self._env is not None else self.surroundings()
         positions, speeds, accelerations, forces = self.model.outputs(
-            self.state, self.applied, self.time_s, self.surroundings())
+            self.state, self.applied, self.stamp_ns / NS_PER_S, env)
         return TrainState(self.stamp_ns, self.model.car_names, positions, speeds, accelerations,
                           forces)
 

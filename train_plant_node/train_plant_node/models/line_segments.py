@@ -5,9 +5,12 @@ no integration stage straddles a jump of the force: the step keeps its full orde
 
 from __future__ import annotations
 
-from bisect import bisect_right
+import math
+
+import numpy as np
 
 from ato_common.line import Line
+from train_plant_node.jit import kernel
 
 # A car that has just been integrated onto a boundary is in the segment it is entering.
 BOUNDARY_NUDGE_M = 1e-6
@@ -31,43 +34,59 @@ class LineSegments:
             mid = 0.5 * (s + e)
             self.slope.append((line.line_force_per_kg(mid, gravity) - g - o) / (mid - s))
         self.slope = [0.0 if abs(k) < 1e-15 else k for k in self.slope]
-        self.has_slopes = any(self.slope)
         self.gravity = gravity
-
-    def index(self, position: float, moving_back: bool = False) -> int:
-        return bisect_right(self.bounds, position - BOUNDARY_NUDGE_M if moving_back
-                            else position + BOUNDARY_NUDGE_M)
-
-    def accel(self, index: int, grade_override_sine: float | None, line_factor: float) -> float:
-        """Specific line force at a segment's start, m/s^2 (positive opposes forward motion)."""
-        grade = (self.grade[index] if grade_override_sine is None
-                 else self.gravity * grade_override_sine)
-        return line_factor * (grade + self.other[index])
-
-    def accel_at(self, index: int, position: float, grade_override_sine: float | None) -> float:
-        """Specific line force at a position inside segment ``index``, m/s^2."""
-        base = self.accel(index, grade_override_sine, 1.0)
-        slope = self.slope[index]
-        return base + slope * (position - self.starts[index]) if slope else base
-
-    def boundary_between(self, index_from: int, index_to: int) -> float:
-        """The first boundary crossed going from one segment towards another."""
-        return self.bounds[index_from] if index_to > index_from else self.bounds[index_from - 1]
+        # What the kernels read: the bounds closed by +inf (so that a search needs no length
+        # check), and one row per segment quantity.
+        self.bound_array = np.array(self.bounds + [math.inf])
+        self.table = np.array([starts, self.grade, self.other, self.slope], dtype=float)
 
 
-def crossing_time(s0: float, v0: float, s1: float, v1: float, h: float, boundary: float) -> float:
+# Rows of LineSegments.table.
+START, GRADE, OTHER, SLOPE = 0, 1, 2, 3
+
+
+@kernel
+def segment_index(bounds, position, moving_back):
+    """The segment holding ``position`` (``bounds``: LineSegments.bound_array)."""
+    nudged = position - BOUNDARY_NUDGE_M if moving_back else position + BOUNDARY_NUDGE_M
+    return np.searchsorted(bounds, nudged, side='right')
+
+
+@kernel
+def segment_accel(table, index, has_override, override_accel):
+    """Specific line force at a segment's start, m/s^2 (positive opposes forward motion); an
+    abrupt change's grade (``override_accel`` = g sin) replaces the line's."""
+    grade = override_accel if has_override else table[GRADE, index]
+    return grade + table[OTHER, index]
+
+
+@kernel
+def segment_accel_at(table, index, position, has_override, override_accel):
+    """Specific line force at a position inside segment ``index``, m/s^2."""
+    base = segment_accel(table, index, has_override, override_accel)
+    slope = table[SLOPE, index]
+    return base + slope * (position - table[START, index]) if slope != 0.0 else base
+
+
+@kernel
+def boundary_between(bounds, index_from, index_to):
+    """The first boundary crossed going from one segment towards another."""
+    return bounds[index_from] if index_to > index_from else bounds[index_from - 1]
+
+
+@kernel
+def crossing_time(s0, v0, s1, v1, h, boundary):
     """When the cubic Hermite interpolant of a step (positions and speeds at both ends) reaches
     ``boundary``; the step's own error bounds its error (the position is 4th-order accurate)."""
-    def position(tau: float) -> float:
-        x = tau / h
-        h00, h10 = (1 + 2 * x) * (1 - x) ** 2, x * (1 - x) ** 2
-        h01, h11 = x * x * (3 - 2 * x), x * x * (x - 1)
-        return h00 * s0 + h10 * h * v0 + h01 * s1 + h11 * h * v1
     low, high = 0.0, h
     rising = s1 > s0
     for _ in range(60):  # bisection: robust, and crossings are rare
         mid = 0.5 * (low + high)
-        if (position(mid) < boundary) == rising:
+        x = mid / h
+        h00, h10 = (1 + 2 * x) * (1 - x) ** 2, x * (1 - x) ** 2
+        h01, h11 = x * x * (3 - 2 * x), x * x * (x - 1)
+        position = h00 * s0 + h10 * h * v0 + h01 * s1 + h11 * h * v1
+        if (position < boundary) == rising:
             low = mid
         else:
             high = mid

@@ -19,12 +19,17 @@ the disturbance) by the fourth-order exponential Runge-Kutta scheme ETDRK4 of Co
 and mode (Van Loan 1978; Higham & Al-Mohy), cached. Steps are split where a car crosses a line
 segment boundary (see line_segments.py).
 
+The step runs in compiled kernels (train_plant_node.jit) on preallocated arrays: the line
+table, each mode's per-car parameters (``_ModeMatrices.cars``) and propagators (one array per
+step length), and the parameter array of the surroundings (layout below).
+
 The constant resistance a_p is applied as a_p tanh(v_p / 0.01 m/s): a smooth sign, so that the
 coupler oscillation around standstill does not make it chatter.
 """
 
 from __future__ import annotations
 
+import cmath
 import math
 from typing import Sequence
 
@@ -35,10 +40,23 @@ from ato_common import units
 from ato_common.line import Line
 from ato_common.plant_setup import Mode
 from ato_common.trains import TrainParameters
-from train_plant_node.models.line_segments import LineSegments, crossing_time
-from train_plant_node.surroundings import Surroundings, nominal_mode
+from train_plant_node.jit import kernel
+from train_plant_node.models.line_segments import (SLOPE, START, LineSegments, boundary_between,
+                                                   crossing_time, segment_accel, segment_index)
+from train_plant_node.surroundings import (DISTURBANCE_VALUE, ENV_SIZE, HAS_OVERRIDE,
+                                           OVERRIDE_SINE, Surroundings, env_factors,
+                                           nominal_mode)
 
 STANDSTILL_SPEED_MPS = 0.01
+
+# The kernels' parameter array: the mode's extra grade and curve term (m/s^2), its total mass,
+# gravity, then the surroundings (surroundings.py). Rows of _ModeMatrices.cars: each car's a, b,
+# c per kg and 1 / mass. Propagator array (one per step length): e^(Ah/2), its phi_1 map on the
+# velocities, e^(Ah), and the three ETDRK4 maps of the non-linear terms (velocity columns).
+EXTRA_ACCEL, TOTAL_MASS, GRAVITY, ENV = range(4)
+PARAMETERS = ENV + ENV_SIZE
+CAR_A, CAR_B, CAR_C, CAR_INVERSE_MASS = range(4)
+E_HALF, PHI1_HALF, E_FULL, F1, F2, F3 = range(6)
 
 
 def phi_functions(matrix: np.ndarray, order: int = 3) -> list[np.ndarray]:
@@ -54,24 +72,74 @@ def phi_functions(matrix: np.ndarray, order: int = 3) -> list[np.ndarray]:
     return [e[:m, m * k:m * (k + 1)] for k in range(order + 1)]
 
 
-def scalar_phi(z: np.ndarray, k: int) -> np.ndarray:
-    """phi_k of complex scalars: the closed form, or its Taylor series near 0 (cancellation)."""
-    z = np.asarray(z, dtype=complex)
-    out = np.empty_like(z)
-    small = np.abs(z) < 0.5
-    zs = z[small]
-    series = np.zeros_like(zs)
-    term = np.full_like(zs, 1.0 / math.factorial(k))
-    for j in range(1, 25):
-        series += term
-        term = term * zs / (j + k)
-    out[small] = series
-    zl = z[~small]
-    value = np.exp(zl)
+@kernel
+def _phi(z, k):
+    """phi_k of a complex scalar: the closed form, or its Taylor series near 0 (cancellation)."""
+    factorial = 1.0
+    for j in range(2, k + 1):
+        factorial *= j
+    if abs(z) < 0.5:
+        total = 0j
+        term = 1.0 / factorial + 0j
+        for j in range(1, 25):
+            total += term
+            term = term * z / (j + k)
+        return total
+    value = cmath.exp(z)
+    factorial = 1.0  # j!
     for j in range(k):
-        value = (value - 1.0 / math.factorial(j)) / zl
-    out[~small] = value
+        value = (value - 1.0 / factorial) / z
+        factorial *= j + 1
+    return value
+
+
+@kernel
+def _pack(e_half, phi1_half, e_full, phi1, phi2, phi3, h):
+    """The propagator array of step h from phi_k(A h) and phi_k(A h / 2); only the velocity
+    columns of the nonlinear-term maps are kept (the non-linear term has no position rows).
+    Cox & Matthews (2002) eq (26): f1 = phi1 - 3 phi2 + 4 phi3, f2 = phi2 - 2 phi3,
+    f3 = -phi2 + 4 phi3 (their h^-2 L^-3 forms, written with phi functions)."""
+    m = e_full.shape[0]
+    n = m // 2
+    out = np.zeros((6, m, m))
+    out[E_HALF] = e_half
+    out[E_FULL] = e_full
+    for i in range(m):
+        for j in range(n):
+            c = n + j
+            out[PHI1_HALF, i, j] = h / 2 * phi1_half[i, c]
+            out[F1, i, j] = h * (phi1[i, c] - 3.0 * phi2[i, c] + 4.0 * phi3[i, c])
+            out[F2, i, j] = 2.0 * h * (phi2[i, c] - 2.0 * phi3[i, c])
+            out[F3, i, j] = h * (4.0 * phi3[i, c] - phi2[i, c])
     return out
+
+
+@kernel
+def _phi_matrix(values, left, right, z_scale, k):
+    """Re(left diag(phi_k(values z_scale)) right) = phi_k(A z_scale) for A = left diag right."""
+    m = values.shape[0]
+    weights = np.empty(m, np.complex128)
+    for i in range(m):
+        weights[i] = _phi(values[i] * z_scale, k)
+    out = np.empty((m, m))
+    for r in range(m):
+        for c in range(m):
+            total = 0j
+            for i in range(m):
+                total += left[r, i] * weights[i] * right[i, c]
+            out[r, c] = total.real
+    return out
+
+
+@kernel
+def eigen_propagators(values, left, right, h):
+    """The propagator array of step h from the eigen-decomposition of A (a few small products
+    instead of two matrix exponentials): for the odd step lengths of line-boundary crossings."""
+    return _pack(_phi_matrix(values, left, right, h / 2, 0),
+                 _phi_matrix(values, left, right, h / 2, 1),
+                 _phi_matrix(values, left, right, h, 0), _phi_matrix(values, left, right, h, 1),
+                 _phi_matrix(values, left, right, h, 2), _phi_matrix(values, left, right, h, 3),
+                 h)
 
 
 class _ModeMatrices:
@@ -115,6 +183,7 @@ class _ModeMatrices:
         self.A[n:, n:] = -inverse_mass @ damping - np.diag(self.b)
         self.inverse_mass = 1.0 / self.masses
         self.total_mass = float(np.sum(self.masses))
+        self.cars = np.array([self.a, self.b, self.c, self.inverse_mass], dtype=float)
         self._propagators: dict[float, tuple] = {}
 
     def _balancing(self):
@@ -125,52 +194,156 @@ class _ModeMatrices:
         scale = np.concatenate([np.full(n, 1.0 / omega), np.ones(n)])
         return scale, self.A * scale[None, :] / scale[:, None]
 
-    def _phis_by_eigenvectors(self, h: float):
-        """[phi_0..phi_3](A h) and [phi_0, phi_1](A h/2) from the eigen-decomposition of the
-        balanced A (a few small products instead of two matrix exponentials): for the odd step
-        lengths of line-boundary crossings. None if A is (nearly) defective."""
+    def _eigen_decomposition(self):
+        """(eigenvalues, vectors, inverse) of A, complex, or None if A is (nearly) defective;
+        from the balanced A."""
         if not hasattr(self, '_eigen'):
             scale, balanced = self._balancing()
             values, vectors = np.linalg.eig(balanced)
             self._eigen = None
             if np.linalg.cond(vectors) < 1e8:
-                self._eigen = (values, vectors * scale[:, None],
-                               np.linalg.inv(vectors) / scale[None, :])
-        if self._eigen is None:
-            return None
-        values, left, right = self._eigen
+                self._eigen = tuple(np.ascontiguousarray(a, dtype=complex) for a in (
+                    values, vectors * scale[:, None], np.linalg.inv(vectors) / scale[None, :]))
+        return self._eigen
 
-        def matrices(z, order):
-            return [np.real((left * scalar_phi(z, k)[None, :]) @ right) for k in range(order + 1)]
-        return matrices(values * h, 3), matrices(values * (h / 2), 1)
-
-    def propagators(self, h: float, cache: bool = True):
-        """ETDRK4 matrices for step h; only the velocity columns of the nonlinear-term maps are
-        kept (the non-linear term has no position rows). Cached step lengths: from the matrix
+    def propagators(self, h: float, cache: bool = True) -> np.ndarray:
+        """ETDRK4 matrices for step h (see ``_pack``). Cached step lengths: from the matrix
         exponential of the balanced augmented matrix; others: from eigenvectors."""
         found = self._propagators.get(h)
         if found is not None:
             return found
-        n = self.A.shape[0] // 2
-        by_eigenvectors = None if cache else self._phis_by_eigenvectors(h)
-        if by_eigenvectors is not None:
-            (e_full, phi1, phi2, phi3), (e_half, phi1_half) = by_eigenvectors
-        else:
-            scale, balanced = self._balancing()
+        eigen = None if cache else self._eigen_decomposition()
+        if eigen is not None:
+            return eigen_propagators(*eigen, float(h))
+        scale, balanced = self._balancing()
 
-            def unbalanced(phis):
-                return [p * scale[:, None] / scale[None, :] for p in phis]
-            e_half, phi1_half = unbalanced(phi_functions(balanced * (h / 2), 1))
-            e_full, phi1, phi2, phi3 = unbalanced(phi_functions(balanced * h, 3))
-        v = slice(n, 2 * n)
-        # Cox & Matthews (2002) eq (26): f1 = phi1 - 3 phi2 + 4 phi3, f2 = phi2 - 2 phi3,
-        # f3 = -phi2 + 4 phi3 (their h^-2 L^-3 forms, written with phi functions).
-        result = (e_half, (h / 2 * phi1_half)[:, v], e_full,
-                  (h * (phi1 - 3 * phi2 + 4 * phi3))[:, v], (2 * h * (phi2 - 2 * phi3))[:, v],
-                  (h * (4 * phi3 - phi2))[:, v])
+        def unbalanced(phis):
+            return [np.ascontiguousarray(p * scale[:, None] / scale[None, :]) for p in phis]
+        e_half, phi1_half = unbalanced(phi_functions(balanced * (h / 2), 1))
+        e_full, phi1, phi2, phi3 = unbalanced(phi_functions(balanced * h, 3))
+        result = _pack(e_half, phi1_half, e_full, phi1, phi2, phi3, float(h))
         if cache:
             self._propagators[h] = result
         return result
+
+
+@kernel
+def _matvec(matrix, x, columns):
+    """matrix[:, :columns] @ x (loops: faster than BLAS on 8 x 8)."""
+    rows = matrix.shape[0]
+    out = np.zeros(rows)
+    for i in range(rows):
+        total = 0.0
+        for j in range(columns):
+            total += matrix[i, j] * x[j]
+        out[i] = total
+    return out
+
+
+@kernel
+def segment_indices(x, offsets, bounds):
+    """Each car's line segment (positions shifted by the rest spacing ``offsets``)."""
+    n = x.shape[0] // 2
+    out = np.empty(n, np.int64)
+    for q in range(n):
+        out[q] = segment_index(bounds, x[q] - offsets[q], x[n + q] < 0.0)
+    return out
+
+
+@kernel
+def _step_line(indices, table, offsets, shift, p):
+    """Each car's line force in its segment: at the segment start, its slope per metre and
+    where the slope is anchored in the state's coordinates (positions relative to ``shift``)."""
+    n = indices.shape[0]
+    accels, slopes, anchors = np.empty(n), np.empty(n), np.empty(n)
+    has_override = p[ENV + HAS_OVERRIDE] != 0.0
+    override_accel = p[GRAVITY] * p[ENV + OVERRIDE_SINE]
+    for q in range(n):
+        i = indices[q]
+        accels[q] = segment_accel(table, i, has_override, override_accel)
+        slopes[q] = table[SLOPE, i]
+        anchors[q] = table[START, i] + offsets[q] - shift
+    return accels, slopes, anchors
+
+
+@kernel
+def _nonlinear(x, time_s, forces, powered, accels, slopes, anchors, cars, p):
+    """Specific forces outside the exact linear part (velocity rows), m/s^2; the actuator
+    forces are included here (constant over the step, so phi_1 integrates them exactly)."""
+    n = x.shape[0] // 2
+    fa, fb, fc, fl, dist = env_factors(p, ENV, time_s)
+    base = dist / p[TOTAL_MASS] - p[EXTRA_ACCEL]
+    out = np.empty(n)
+    for q in range(n):
+        v = x[n + q]
+        line = accels[q]
+        if slopes[q] != 0.0:  # a transition curve: the force follows the car's position
+            line += slopes[q] * (x[q] - anchors[q])
+        out[q] = (base - fa * cars[CAR_A, q] * math.tanh(v / STANDSTILL_SPEED_MPS)
+                  - (fb - 1.0) * cars[CAR_B, q] * v - fc * cars[CAR_C, q] * v * abs(v)
+                  - fl * line)
+    for j in range(powered.shape[0]):
+        out[powered[j]] += forces[j] * cars[CAR_INVERSE_MASS, powered[j]]
+    return out
+
+
+@kernel
+def etdrk4_kernel(x, t, h, props, forces, powered, indices, table, offsets, cars, p):
+    """Cox & Matthews (2002) ETDRK4, eqs (26). The line forces of the step are given, so
+    the non-linear term does not depend on positions; a uniform shift of the positions is
+    invariant under the linear part (unstretched couplers), so the step runs relative to
+    the lead car's position: no round-off from positions of tens of kilometres."""
+    m = x.shape[0]
+    n = m // 2
+    shift = x[0]
+    y = x.copy()
+    for q in range(n):
+        y[q] -= shift
+    accels, slopes, anchors = _step_line(indices, table, offsets, shift, p)
+    n_x = _nonlinear(y, t, forces, powered, accels, slopes, anchors, cars, p)
+    ex = _matvec(props[E_HALF], y, m)
+    a = ex + _matvec(props[PHI1_HALF], n_x, n)
+    n_a = _nonlinear(a, t + h / 2, forces, powered, accels, slopes, anchors, cars, p)
+    b = ex + _matvec(props[PHI1_HALF], n_a, n)
+    n_b = _nonlinear(b, t + h / 2, forces, powered, accels, slopes, anchors, cars, p)
+    c = _matvec(props[E_HALF], a, m) + _matvec(props[PHI1_HALF], 2.0 * n_b - n_x, n)
+    n_c = _nonlinear(c, t + h, forces, powered, accels, slopes, anchors, cars, p)
+    out = (_matvec(props[E_FULL], y, m) + _matvec(props[F1], n_x, n)
+           + _matvec(props[F2], n_a + n_b, n) + _matvec(props[F3], n_c, n))
+    for q in range(n):
+        out[q] += shift
+    return out
+
+
+@kernel
+def substep_kernel(x, t, h, props, forces, powered, table, bounds, offsets, cars, p):
+    """One ETDRK4 step in the cars' current segments: (the state after it, the segments,
+    whether a car has reached another segment by its end)."""
+    indices = segment_indices(x, offsets, bounds)
+    x1 = etdrk4_kernel(x, t, h, props, forces, powered, indices, table, offsets, cars, p)
+    after = segment_indices(x1, offsets, bounds)
+    crossed = False
+    for q in range(indices.shape[0]):
+        if after[q] != indices[q]:
+            crossed = True
+    return x1, indices, crossed
+
+
+@kernel
+def derivative_kernel(state, shift, time_s, linear, forces, powered, table, bounds, offsets,
+                      cars, p):
+    """x' at one instant, the line forces looked up at the cars' positions (``state`` holds
+    positions relative to ``shift``)."""
+    m = state.shape[0]
+    n = m // 2
+    absolute = state.copy()
+    for q in range(n):
+        absolute[q] += shift
+    indices = segment_indices(absolute, offsets, bounds)
+    accels, slopes, anchors = _step_line(indices, table, offsets, shift, p)
+    out = _matvec(linear, state, m)
+    out[n:] += _nonlinear(state, time_s, forces, powered, accels, slopes, anchors, cars, p)
+    return out
 
 
 class MultiCarModel:
@@ -191,20 +364,32 @@ class MultiCarModel:
             raise ValueError(f'actuators {train.actuator_names} are not the powered cars '
                              f'{self.actuator_names}')
         self.offsets = np.arange(n) * train.car_length_m
-        self._offsets = [float(o) for o in self.offsets]
-        self._powered = [i for i, c in enumerate(cars) if c.powered]
+        self._powered = np.array([i for i, c in enumerate(cars) if c.powered], dtype=np.int64)
         self.segments = LineSegments(line, gravity)
         self.nominal = Surroundings(nominal_mode(train), 0)
         self._modes: dict[int, _ModeMatrices] = {}
         self.A = self.mode_matrices(self.nominal).A  # the nominal linear dynamics
+        self.parameters = np.zeros(PARAMETERS)
+        self._parameters_of = None  # the surroundings ``parameters`` holds
 
     def mode_matrices(self, env: Surroundings) -> _ModeMatrices:
         found = self._modes.get(env.mode_key)
-        if found is None or found.mode != env.mode:
+        if found is None or (found.mode is not env.mode and found.mode != env.mode):
             found = _ModeMatrices(self, env.mode)
-            found.mode = env.mode
             self._modes[env.mode_key] = found
+        found.mode = env.mode  # equal: identical from now on, a cheaper comparison
         return found
+
+    def _parameters(self, env: Surroundings, mm: _ModeMatrices, time_s: float,
+                    duration_s: float) -> np.ndarray:
+        p = self.parameters
+        if env is not self._parameters_of:
+            p[:ENV] = (mm.extra, mm.total_mass, self.gravity)
+            env.write_parameters(p, ENV)
+            self._parameters_of = env
+        if env.held_disturbance:  # constant within the step (the simulation splits at jumps)
+            p[ENV + DISTURBANCE_VALUE] = env.disturbance.force(time_s + 0.5 * duration_s)
+        return p
 
     def initial_state(self, position_m: float, speed_mps: float = 0.0) -> np.ndarray:
         return np.concatenate([np.full(self.n, position_m), np.full(self.n, speed_mps)])
@@ -215,106 +400,44 @@ class MultiCarModel:
     def positions(self, state: np.ndarray) -> np.ndarray:
         return state[:self.n] - self.offsets
 
-    def _nonlinear(self, state, time_s: float, forces: Sequence[float], line,
-                   mm: _ModeMatrices, env: Surroundings) -> np.ndarray:
-        """Specific forces outside the exact linear part (velocity rows), m/s^2; the actuator
-        forces are included here (constant over the step, so phi_1 integrates them exactly)."""
-        n = self.n
-        line_accels, slopes, anchors = line
-        if slopes is not None:  # transition curves: the force follows each car's position
-            line_accels = [g + k * (z - z0) if k else g for g, k, z, z0
-                           in zip(line_accels, slopes, state[:n].tolist(), anchors)]
-        speeds = state[n:].tolist()  # Python floats: faster than numpy on four elements
-        a, b, c = mm.a, mm.b, mm.c
-        tanh = math.tanh
-        if env.time_varying:
-            fa, fb, fc, fl, dist = env.factors(time_s)
-            base = dist / mm.total_mass - mm.extra
-            out = [base - fa * a[p] * tanh(v / STANDSTILL_SPEED_MPS) - (fb - 1.0) * b[p] * v
-                   - fc * c[p] * v * abs(v) - fl * line_accels[p] for p, v in enumerate(speeds)]
-        else:
-            r = env.resistance_factor
-            extra = mm.extra
-            out = [-r * (a[p] * tanh(v / STANDSTILL_SPEED_MPS) + c[p] * v * abs(v))
-                   - (r - 1.0) * b[p] * v - line_accels[p] - extra for p, v in enumerate(speeds)]
-        inv = mm.inverse_mass
-        for force, p in zip(forces, self._powered):
-            out[p] += force * inv[p]
-        return np.array(out)
-
-    def _line(self, indices, env: Surroundings, shift: float = 0.0):
-        """Each car's line force in its segment: (at the segment start, slope per metre or
-        None if all are constant, where the slope is anchored in the state's coordinates)."""
-        segments = self.segments
-        accels = [segments.accel(i, env.grade_override_sine, 1.0) for i in indices]
-        if not segments.has_slopes or not any(segments.slope[i] for i in indices):
-            return accels, None, None
-        return (accels, [segments.slope[i] for i in indices],
-                [segments.starts[i] + o - shift for i, o in zip(indices, self._offsets)])
-
-    def _segment_indices(self, state) -> list[int]:
-        n = self.n
-        values = state.tolist()
-        index = self.segments.index
-        return [index(values[p] - self._offsets[p], values[n + p] < 0.0) for p in range(n)]
-
-    def _etdrk4(self, x, t: float, h: float, forces, indices, mm, env, cache: bool = True):
-        """Cox & Matthews (2002) ETDRK4, eqs (26). The line forces of the step are given, so
-        the non-linear term does not depend on positions; a uniform shift of the positions is
-        invariant under the linear part (unstretched couplers), so the step runs relative to
-        the lead car's position: no round-off from positions of tens of kilometres."""
-        e_half, p_half, e_full, f1, f2, f3 = mm.propagators(h, cache)
-        n = self.n
-        shift = float(x[0])
-        x = x.copy()
-        x[:n] -= shift
-        line = self._line(indices, env, shift)
-        nl = self._nonlinear
-        n_x = nl(x, t, forces, line, mm, env)
-        ex = e_half @ x
-        a = ex + p_half @ n_x
-        n_a = nl(a, t + h / 2, forces, line, mm, env)
-        b = ex + p_half @ n_a
-        n_b = nl(b, t + h / 2, forces, line, mm, env)
-        c = e_half @ a + p_half @ (2.0 * n_b - n_x)
-        n_c = nl(c, t + h, forces, line, mm, env)
-        out = e_full @ x + f1 @ n_x + f2 @ (n_a + n_b) + f3 @ n_c
-        out[:n] += shift
-        return out
-
     def step(self, state: np.ndarray, duration_s: float, forces: Sequence[float],
              time_s: float = 0.0, env: Surroundings | None = None) -> np.ndarray:
         """State after ``duration_s`` with the forces held (zero-order hold) from ``time_s``."""
         env = env or self.nominal
         mm = self.mode_matrices(env)
-        forces = [float(f) for f in forces]
+        p = self._parameters(env, mm, time_s, duration_s)
+        forces = np.array(forces, dtype=float)
         substeps = max(1, math.ceil(duration_s / self.max_substep_s - 1e-9))
         h_max = duration_s / substeps
         x = np.asarray(state, dtype=float)
-        t, end = time_s, time_s + duration_s
+        t, end = float(time_s), time_s + duration_s
         n = self.n
+        table, bounds, offsets = self.segments.table, self.segments.bound_array, self.offsets
         while end - t > 1e-12 * max(1.0, abs(end)):
             h = h_max if end - t > h_max * (1.0 - 1e-9) else end - t
-            cached = h == h_max
-            indices = self._segment_indices(x)
-            x1 = self._etdrk4(x, t, h, forces, indices, mm, env, cached)
-            after = self._segment_indices(x1)
-            if after != indices:  # a car reaches another segment: stop the step there
+            x1, indices, crossed = substep_kernel(x, t, h, mm.propagators(h, h == h_max), forces,
+                                                  self._powered, table, bounds, offsets,
+                                                  mm.cars, p)
+            if crossed:  # a car reaches another segment: stop the step there
+                after = segment_indices(x1, offsets, bounds)
                 crossings = []
-                for p, (i0, i1) in enumerate(zip(indices, after)):
+                for q, (i0, i1) in enumerate(zip(indices.tolist(), after.tolist())):
                     if i0 != i1:
-                        boundary = self.segments.boundary_between(i0, i1) + self._offsets[p]
-                        crossings.append((crossing_time(float(x[p]), float(x[n + p]),
-                                                        float(x1[p]), float(x1[n + p]), h,
-                                                        boundary), p, boundary))
-                h, p, boundary = min(crossings)
-                x1 = self._etdrk4(x, t, h, forces, indices, mm, env, cache=False)
+                        boundary = boundary_between(bounds, i0, i1) + offsets[q]
+                        crossings.append((crossing_time(x[q], x[n + q], x1[q], x1[n + q], h,
+                                                        boundary), q, boundary))
+                h, q, boundary = min(crossings)
+
+                def etdrk4(h):
+                    return etdrk4_kernel(x, t, h, mm.propagators(h, False), forces,
+                                         self._powered, indices, table, offsets, mm.cars, p)
+                x1 = etdrk4(h)
                 for _ in range(3):  # Newton on the crossing time, with the car's speed
-                    miss = float(x1[p]) - boundary
-                    if abs(miss) < 1e-8 or x1[n + p] == 0.0:
+                    miss = float(x1[q]) - boundary
+                    if abs(miss) < 1e-8 or x1[n + q] == 0.0:
                         break
-                    h = min(max(h - miss / float(x1[n + p]), 0.0), end - t)
-                    x1 = self._etdrk4(x, t, h, forces, indices, mm, env, cache=False)
+                    h = min(max(h - miss / float(x1[n + q]), 0.0), end - t)
+                    x1 = etdrk4(h)
             x, t = x1, t + h
         return x
 
@@ -325,22 +448,18 @@ class MultiCarModel:
         extensions exact when the positions are tens of kilometres."""
         env = env or self.nominal
         mm = self.mode_matrices(env)
-        n = self.n
-        absolute = np.array(state, dtype=float)
-        absolute[:n] += shift
-        indices = self._segment_indices(absolute)
-        out = mm.A @ state
-        out[n:] += self._nonlinear(state, time_s, [float(f) for f in forces],
-                                   self._line(indices, env, shift), mm, env)
-        return out
+        return derivative_kernel(np.asarray(state, dtype=float), float(shift), float(time_s),
+                                 mm.A, np.array(forces, dtype=float), self._powered,
+                                 self.segments.table, self.segments.bound_array, self.offsets,
+                                 mm.cars, self._parameters(env, mm, time_s, 0.0))
 
     def outputs(self, state: np.ndarray, forces: Sequence[float], time_s: float = 0.0,
                 env: Surroundings | None = None):
         n = self.n
+        state = np.asarray(state, dtype=float)
         accelerations = self.derivative(state, forces, time_s, env)[n:]
         applied = [0.0] * n
-        for force, i in zip(forces, self._powered):
+        for force, i in zip(forces, self._powered.tolist()):
             applied[i] = float(force)
-        return (tuple(float(z) for z in self.positions(state)),
-                tuple(float(v) for v in state[n:]),
-                tuple(float(a) for a in accelerations), tuple(applied))
+        return (tuple(self.positions(state).tolist()), tuple(state[n:].tolist()),
+                tuple(accelerations.tolist()), tuple(applied))

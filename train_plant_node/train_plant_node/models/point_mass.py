@@ -17,7 +17,8 @@ up to ``a`` and the brakes hold it, so the speed is kept at or above zero.
 Integration: classical RK4 per step (the dynamics are smooth and slow: the resistance's time
 constant is minutes), split where the train crosses a line segment boundary. The work done by
 the traction, the resistance, the line, and the disturbance are integrated alongside (``work``),
-for energy balances.
+for energy balances. The integration runs in compiled kernels (train_plant_node.jit) on the
+parameter array ``PointMassModel.parameters`` (layout below).
 """
 
 from __future__ import annotations
@@ -30,8 +31,91 @@ import numpy as np
 from ato_common.line import Line
 from ato_common.trains import TrainParameters
 from ato_common import units
-from train_plant_node.models.line_segments import LineSegments, crossing_time
-from train_plant_node.surroundings import Surroundings, nominal_mode
+from train_plant_node.jit import kernel
+from train_plant_node.models.line_segments import (LineSegments, boundary_between, crossing_time,
+                                                   segment_accel_at, segment_index)
+from train_plant_node.surroundings import (DISTURBANCE_VALUE, ENV_SIZE, HAS_OVERRIDE,
+                                           OVERRIDE_SINE, Surroundings, env_factors,
+                                           nominal_mode)
+
+# The kernels' parameter array: the mode's mass (kg), Davis a (N), b (N s/m), c (N s^2/m^2), its
+# extra grade and curve term (m/s^2), gravity, then the surroundings (surroundings.py).
+MASS, DAVIS_A, DAVIS_B, DAVIS_C, MODE_ACCEL, GRAVITY, ENV = range(7)
+PARAMETERS = ENV + ENV_SIZE
+
+
+@kernel
+def _line_accel(p, table, segment, position):
+    return segment_accel_at(table, segment, position, p[ENV + HAS_OVERRIDE] != 0.0,
+                            p[GRAVITY] * p[ENV + OVERRIDE_SINE])
+
+
+@kernel
+def _parts(p, speed, force, line_accel, time_s):
+    """(acceleration, resistance force, line force, disturbance force) at one instant."""
+    fa, fb, fc, fl, dist = env_factors(p, ENV, time_s)
+    mass, a_n = p[MASS], p[DAVIS_A]
+    line_force = mass * (line_accel * fl + p[MODE_ACCEL])
+    if speed > 0.0:
+        resistance = fa * a_n + (fb * p[DAVIS_B] + fc * p[DAVIS_C] * speed) * speed
+        return (force - resistance - line_force + dist) / mass, resistance, line_force, dist
+    # Standstill: static friction (the constant Davis term) and brakes hold the train.
+    driving = force - line_force + dist
+    if driving <= fa * a_n:
+        return 0.0, driving, line_force, dist
+    return (driving - fa * a_n) / mass, fa * a_n, line_force, dist
+
+
+@kernel
+def acceleration_kernel(p, table, bounds, position, speed, force, time_s):
+    segment = segment_index(bounds, position, False)
+    return _parts(p, speed, force, _line_accel(p, table, segment, position), time_s)[0]
+
+
+@kernel
+def _rk4(p, table, s, v, t, h, force, segment):
+    """One classical RK4 step of (s, v) and of the work integrals (powers P v)."""
+    a1, r1, l1, d1 = _parts(p, v, force, _line_accel(p, table, segment, s), t)
+    v2 = max(v + 0.5 * h * a1, 0.0)
+    a2, r2, l2, d2 = _parts(p, v2, force, _line_accel(p, table, segment, s + 0.5 * h * v),
+                            t + 0.5 * h)
+    v3 = max(v + 0.5 * h * a2, 0.0)
+    a3, r3, l3, d3 = _parts(p, v3, force, _line_accel(p, table, segment, s + 0.5 * h * v2),
+                            t + 0.5 * h)
+    v4 = max(v + h * a3, 0.0)
+    a4, r4, l4, d4 = _parts(p, v4, force, _line_accel(p, table, segment, s + h * v3), t + h)
+    w = h / 6.0
+    s_new = s + w * (v + 2.0 * v2 + 2.0 * v3 + v4)
+    v_new = max(v + w * (a1 + 2.0 * a2 + 2.0 * a3 + a4), 0.0)
+    return (s_new, v_new, force * w * (v + 2.0 * v2 + 2.0 * v3 + v4),
+            w * (r1 * v + 2.0 * r2 * v2 + 2.0 * r3 * v3 + r4 * v4),
+            w * (l1 * v + 2.0 * l2 * v2 + 2.0 * l3 * v3 + l4 * v4),
+            w * (d1 * v + 2.0 * d2 * v2 + 2.0 * d3 * v3 + d4 * v4))
+
+
+@kernel
+def step_kernel(p, table, bounds, work, s, v, time_s, duration_s, max_substep_s, force):
+    """(s, v) after ``duration_s`` with the force held from ``time_s``, in RK4 steps of at most
+    ``max_substep_s`` split at segment boundaries; adds the work integrals to ``work``."""
+    t, end = time_s, time_s + duration_s
+    substeps = max(1, math.ceil(duration_s / max_substep_s - 1e-9))
+    h_max = duration_s / substeps
+    while end - t > 1e-12 * max(1.0, abs(end)):
+        h = h_max if end - t > h_max * (1.0 - 1e-9) else end - t
+        segment = segment_index(bounds, s, False)
+        s1, v1, w0, w1, w2, w3 = _rk4(p, table, s, v, t, h, force, segment)
+        after = segment_index(bounds, s1, False)
+        if after != segment:  # the train reaches the next segment within this step
+            boundary = boundary_between(bounds, segment, after)
+            h = crossing_time(s, v, s1, v1, h, boundary)
+            s1, v1, w0, w1, w2, w3 = _rk4(p, table, s, v, t, h, force, segment)
+            s1 = boundary  # on it, within the step's error: continue in the next segment
+        s, v, t = s1, v1, t + h
+        work[0] += w0
+        work[1] += w1
+        work[2] += w2
+        work[3] += w3
+    return s, v
 
 
 class PointMassModel:
@@ -50,7 +134,9 @@ class PointMassModel:
         self.nominal = Surroundings(nominal_mode(train), 0)
         # Work done on the train since the start, J: by the actuators, against the running
         # resistance, against the line (grade, curve, tunnel, mode terms), by the disturbance.
-        self.work = [0.0, 0.0, 0.0, 0.0]
+        self.work = np.zeros(4)
+        self.parameters = np.zeros(PARAMETERS)
+        self._parameters_of = None  # the surroundings ``parameters`` holds
 
     def initial_state(self, position_m: float, speed_mps: float = 0.0) -> np.ndarray:
         return np.array([position_m, speed_mps], dtype=float)
@@ -58,85 +144,34 @@ class PointMassModel:
     def lead_speed(self, state) -> float:
         return float(state[1])
 
-    def _parts(self, speed: float, force: float, line_accel: float, time_s: float,
-               env: Surroundings) -> tuple[float, float, float, float]:
-        """(acceleration, resistance force, line force, disturbance force) at one instant."""
-        mode = env.mode
-        mass, d = mode.mass_kg, mode.davis
-        fa, fb, fc, fl, dist = env.factors(time_s) if env.time_varying else (
-            env.resistance_factor, env.resistance_factor, env.resistance_factor, 1.0, 0.0)
-        line_force = mass * (line_accel * fl + mode.grade_sine * self.gravity
-                             + mode.curve_accel_mps2)
-        if speed > 0.0:
-            resistance = fa * d.a_n + (fb * d.b_n_s_per_m + fc * d.c_n_s2_per_m2 * speed) * speed
-            return (force - resistance - line_force + dist) / mass, resistance, line_force, dist
-        # Standstill: static friction (the constant Davis term) and brakes hold the train.
-        driving = force - line_force + dist
-        if driving <= fa * d.a_n:
-            return 0.0, driving, line_force, dist
-        return (driving - fa * d.a_n) / mass, fa * d.a_n, line_force, dist
+    def _parameters(self, env: Surroundings, time_s: float, duration_s: float) -> np.ndarray:
+        p = self.parameters
+        if env is not self._parameters_of:
+            mode = env.mode
+            p[:ENV] = (mode.mass_kg, mode.davis.a_n, mode.davis.b_n_s_per_m,
+                       mode.davis.c_n_s2_per_m2,
+                       mode.grade_sine * self.gravity + mode.curve_accel_mps2, self.gravity)
+            env.write_parameters(p, ENV)
+            self._parameters_of = env
+        if env.held_disturbance:  # constant within the step (the simulation splits at jumps)
+            p[ENV + DISTURBANCE_VALUE] = env.disturbance.force(time_s + 0.5 * duration_s)
+        return p
 
     def acceleration(self, position: float, speed: float, force: float, time_s: float = 0.0,
                      env: Surroundings | None = None) -> float:
-        env = env or self.nominal
-        segment = self.segments.index(position)
-        line_accel = self.segments.accel_at(segment, position, env.grade_override_sine)
-        return self._parts(speed, force, line_accel, time_s, env)[0]
-
-    def _rk4(self, s: float, v: float, t: float, h: float, force: float, segment: int,
-             env: Surroundings):
-        """One classical RK4 step of (s, v) and of the work integrals (powers P v)."""
-        parts = self._parts
-        segments = self.segments
-        override = env.grade_override_sine
-        if segments.slope[segment]:  # a transition curve: the force follows the position
-            def line(position):
-                return segments.accel_at(segment, position, override)
-        else:
-            constant = segments.accel(segment, override, 1.0)
-
-            def line(position):
-                return constant
-        a1, r1, l1, d1 = parts(v, force, line(s), t, env)
-        v2 = max(v + 0.5 * h * a1, 0.0)
-        a2, r2, l2, d2 = parts(v2, force, line(s + 0.5 * h * v), t + 0.5 * h, env)
-        v3 = max(v + 0.5 * h * a2, 0.0)
-        a3, r3, l3, d3 = parts(v3, force, line(s + 0.5 * h * v2), t + 0.5 * h, env)
-        v4 = max(v + h * a3, 0.0)
-        a4, r4, l4, d4 = parts(v4, force, line(s + h * v3), t + h, env)
-        w = h / 6.0
-        s_new = s + w * (v + 2.0 * v2 + 2.0 * v3 + v4)
-        v_new = max(v + w * (a1 + 2.0 * a2 + 2.0 * a3 + a4), 0.0)
-        work = (force * w * (v + 2.0 * v2 + 2.0 * v3 + v4),
-                w * (r1 * v + 2.0 * r2 * v2 + 2.0 * r3 * v3 + r4 * v4),
-                w * (l1 * v + 2.0 * l2 * v2 + 2.0 * l3 * v3 + l4 * v4),
-                w * (d1 * v + 2.0 * d2 * v2 + 2.0 * d3 * v3 + d4 * v4))
-        return s_new, v_new, work
+        p = self._parameters(env or self.nominal, time_s, 0.0)
+        return acceleration_kernel(p, self.segments.table, self.segments.bound_array,
+                                   float(position), float(speed), float(force), float(time_s))
 
     def step(self, state, duration_s: float, forces: Sequence[float], time_s: float = 0.0,
              env: Surroundings | None = None) -> np.ndarray:
         """State after ``duration_s`` with the forces held (zero-order hold) from ``time_s``."""
-        env = env or self.nominal
-        force = math.fsum(forces)
-        s, v = float(state[0]), float(state[1])
+        p = self._parameters(env or self.nominal, time_s, duration_s)
         segments = self.segments
-        t, end = time_s, time_s + duration_s
-        substeps = max(1, math.ceil(duration_s / self.max_substep_s - 1e-9))
-        h_max = duration_s / substeps
-        while end - t > 1e-12 * max(1.0, abs(end)):
-            h = h_max if end - t > h_max * (1.0 - 1e-9) else end - t
-            segment = segments.index(s)
-            s1, v1, work = self._rk4(s, v, t, h, force, segment, env)
-            after = segments.index(s1)
-            if after != segment:  # the train reaches the next segment within this step
-                boundary = segments.boundary_between(segment, after)
-                h = crossing_time(s, v, s1, v1, h, boundary)
-                s1, v1, work = self._rk4(s, v, t, h, force, segment, env)
-                s1 = boundary  # on it, within the step's error: continue in the next segment
-            s, v, t = s1, v1, t + h
-            for i, w in enumerate(work):
-                self.work[i] += w
-        return np.array([s, v])
+        s, v = step_kernel(p, segments.table, segments.bound_array, self.work, float(state[0]),
+                           float(state[1]), float(time_s), float(duration_s),
+                           self.max_substep_s, math.fsum(forces))
+        return np.array((s, v))
 
     def outputs(self, state, forces: Sequence[float], time_s: float = 0.0,
                 env: Surroundings | None = None):
