@@ -51,6 +51,10 @@ if [ ! -f ros_ws/install/setup.bash ] || [ "$(cat "$stamp" 2>/dev/null)" != "$sr
     colcon --log-base log build --event-handlers console_cohesion- summary+ status- \
       --cmake-args -DBUILD_TESTING=OFF > /dev/null 2> build.err || { cat build.err >&2; exit 1; }
     rm -f build.err
+    # The plant's numba kernels: compiled once here (cached next to the installed sources)
+    # instead of in the first node start or test process.
+    . install/setup.bash
+    python -m train_plant_node.jit
   )
   echo "$src_hash" > "$stamp"
 else

@@ -371,6 +371,29 @@ class MultiCarModel:
         self.A = self.mode_matrices(self.nominal).A  # the nominal linear dynamics
         self.parameters = np.zeros(PARAMETERS)
         self._parameters_of = None  # the surroundings ``parameters`` holds
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """Call every kernel once (compiled, or loaded from numba's cache, on first use in a
+        process: that takes from a tenth of a second to seconds), so that no lockstep step pays
+        it. Changes nothing."""
+        mm = self.mode_matrices(self.nominal)
+        p = self._parameters(self.nominal, mm, 0.0, 0.0)
+        table, bounds, offsets = self.segments.table, self.segments.bound_array, self.offsets
+        x = self.initial_state(0.0, 1.0)
+        forces = np.zeros(len(self.actuator_names))
+        props = mm.propagators(self.max_substep_s)
+        if mm._eigen_decomposition() is not None:
+            eigen_propagators(*mm._eigen_decomposition(), self.max_substep_s)
+        indices = segment_indices(x, offsets, bounds)
+        substep_kernel(x, 0.0, self.max_substep_s, props, forces, self._powered, table, bounds,
+                       offsets, mm.cars, p)
+        etdrk4_kernel(x, 0.0, self.max_substep_s, props, forces, self._powered, indices, table,
+                      offsets, mm.cars, p)
+        derivative_kernel(x, 0.0, 0.0, mm.A, forces, self._powered, table, bounds, offsets,
+                          mm.cars, p)
+        boundary_between(bounds, 0, 0)
+        crossing_time(0.0, 1.0, 1.0, 1.0, 1.0, 0.5)
 
     def mode_matrices(self, env: Surroundings) -> _ModeMatrices:
         found = self._modes.get(env.mode_key)

@@ -137,6 +137,11 @@ class PointMassModel:
         self.work = np.zeros(4)
         self.parameters = np.zeros(PARAMETERS)
         self._parameters_of = None  # the surroundings ``parameters`` holds
+        # Compile the kernels, or load them from numba's cache, now rather than in a lockstep
+        # step (from a tenth of a second to seconds on first use in a process).
+        self.step(self.initial_state(0.0), self.max_substep_s, (0.0,) * len(self.actuator_names))
+        self.outputs(self.initial_state(0.0), (0.0,) * len(self.actuator_names))
+        self.work[:] = 0.0
 
     def initial_state(self, position_m: float, speed_mps: float = 0.0) -> np.ndarray:
         return np.array([position_m, speed_mps], dtype=float)
