@@ -202,3 +202,23 @@ def test_multi_car_modes_by_region_scale_every_car_and_failures_hit_a_power_car(
         assert momentum_rate == pytest.approx(expected, abs=1e-6 * mode.mass_kg), mode_index
         assert truth.forces == (0.0, applied[0], applied[1], 0.0)
     assert trace[48][2] == (12e3, 12e3) and trace[49][2] == (12e3, 0.0)  # at 4.9 s, at 5 s
+
+
+@pytest.mark.parametrize('kind', ['none', 'fast', 'slow', 'random'])
+def test_the_kernels_read_the_varying_resistance_and_disturbance_as_the_scenario_defines_them(kind):
+    # The compiled kernels evaluate Luo & Xu eq (34) and Liu & Li eq (9) from a parameter array
+    # (surroundings.env_factors): they must agree with ato_common's definitions.
+    from ato_common.plant_setup import Disturbance, ResistanceVariation, Sinusoid
+    from train_plant_node.surroundings import Surroundings, nominal_mode
+    from ato_common.trains import train_preset
+    variation = ResistanceVariation(a=Sinusoid(0.2, 0.3, 0.1), c=Sinusoid(0.1, 0.05),
+                                    line=Sinusoid(0.05, 0.7, -1.0))
+    disturbance = Disturbance(kind=kind, amplitude_n=3e4, omega_rad_per_s=0.4, phase_rad=0.5,
+                              hold_s=2.0, seed=3)
+    env = Surroundings(nominal_mode(train_preset('crh3_luo_xu')), 0, resistance_factor=1.3,
+                       variation=variation,
+                       disturbance=disturbance if kind != 'none' else None)
+    for t in (0.0, 1.7, 12.3, 101.0):
+        fa, fb, fc, fl = variation.factors(t)
+        expected = (1.3 * fa, 1.3 * fb, 1.3 * fc, fl, disturbance.force(t))
+        assert env.factors(t) == pytest.approx(expected, rel=1e-14, abs=1e-9)

@@ -317,8 +317,8 @@ def etdrk4_kernel(x, t, h, props, forces, powered, indices, table, offsets, cars
 
 @kernel
 def substep_kernel(x, t, h, props, forces, powered, table, bounds, offsets, cars, p):
-    """One ETDRK4 step in the cars' current segments: (the state after it, the segments,
-    whether a car has reached another segment by its end)."""
+    """One ETDRK4 step in the cars' current segments: (the state after it, whether a car has
+    reached another segment by its end)."""
     indices = segment_indices(x, offsets, bounds)
     x1 = etdrk4_kernel(x, t, h, props, forces, powered, indices, table, offsets, cars, p)
     after = segment_indices(x1, offsets, bounds)
@@ -326,7 +326,7 @@ def substep_kernel(x, t, h, props, forces, powered, table, bounds, offsets, cars
     for q in range(indices.shape[0]):
         if after[q] != indices[q]:
             crossed = True
-    return x1, indices, crossed
+    return x1, crossed
 
 
 @kernel
@@ -343,6 +343,20 @@ def derivative_kernel(state, shift, time_s, linear, forces, powered, table, boun
     accels, slopes, anchors = _step_line(indices, table, offsets, shift, p)
     out = _matvec(linear, state, m)
     out[n:] += _nonlinear(state, time_s, forces, powered, accels, slopes, anchors, cars, p)
+    return out
+
+
+@kernel
+def outputs_kernel(state, time_s, linear, forces, powered, table, bounds, offsets, cars, p):
+    """[positions of the cars, their speeds, their accelerations]."""
+    n = state.shape[0] // 2
+    out = np.empty(3 * n)
+    derivative = derivative_kernel(state, 0.0, time_s, linear, forces, powered, table, bounds,
+                                   offsets, cars, p)
+    for q in range(n):
+        out[q] = state[q] - offsets[q]
+        out[n + q] = state[n + q]
+        out[2 * n + q] = derivative[n + q]
     return out
 
 
@@ -365,20 +379,21 @@ class MultiCarModel:
                              f'{self.actuator_names}')
         self.offsets = np.arange(n) * train.car_length_m
         self._powered = np.array([i for i, c in enumerate(cars) if c.powered], dtype=np.int64)
+        self._powered_list = self._powered.tolist()
         self.segments = LineSegments(line, gravity)
         self.nominal = Surroundings(nominal_mode(train), 0)
         self._modes: dict[int, _ModeMatrices] = {}
         self.A = self.mode_matrices(self.nominal).A  # the nominal linear dynamics
         self.parameters = np.zeros(PARAMETERS)
-        self._parameters_of = None  # the surroundings ``parameters`` holds
+        self._parameters_of = None  # the surroundings ``parameters`` holds, and their matrices
+        self._matrices_of_parameters: _ModeMatrices | None = None
         self._warm_up()
 
     def _warm_up(self) -> None:
         """Call every kernel once (compiled, or loaded from numba's cache, on first use in a
         process: that takes from a tenth of a second to seconds), so that no lockstep step pays
         it. Changes nothing."""
-        mm = self.mode_matrices(self.nominal)
-        p = self._parameters(self.nominal, mm, 0.0, 0.0)
+        mm, p = self._prepare(self.nominal, 0.0, 0.0)
         table, bounds, offsets = self.segments.table, self.segments.bound_array, self.offsets
         x = self.initial_state(0.0, 1.0)
         forces = np.zeros(len(self.actuator_names))
@@ -392,6 +407,7 @@ class MultiCarModel:
                       offsets, mm.cars, p)
         derivative_kernel(x, 0.0, 0.0, mm.A, forces, self._powered, table, bounds, offsets,
                           mm.cars, p)
+        outputs_kernel(x, 0.0, mm.A, forces, self._powered, table, bounds, offsets, mm.cars, p)
         boundary_between(bounds, 0, 0)
         crossing_time(0.0, 1.0, 1.0, 1.0, 1.0, 0.5)
 
@@ -403,16 +419,18 @@ class MultiCarModel:
         found.mode = env.mode  # equal: identical from now on, a cheaper comparison
         return found
 
-    def _parameters(self, env: Surroundings, mm: _ModeMatrices, time_s: float,
-                    duration_s: float) -> np.ndarray:
+    def _prepare(self, env: Surroundings, time_s: float, duration_s: float
+                 ) -> tuple[_ModeMatrices, np.ndarray]:
+        """The mode's matrices and the kernels' parameter array for a step in ``env``."""
         p = self.parameters
         if env is not self._parameters_of:
+            mm = self.mode_matrices(env)
             p[:ENV] = (mm.extra, mm.total_mass, self.gravity)
             env.write_parameters(p, ENV)
-            self._parameters_of = env
+            self._parameters_of, self._matrices_of_parameters = env, mm
         if env.held_disturbance:  # constant within the step (the simulation splits at jumps)
             p[ENV + DISTURBANCE_VALUE] = env.disturbance.force(time_s + 0.5 * duration_s)
-        return p
+        return self._matrices_of_parameters, p
 
     def initial_state(self, position_m: float, speed_mps: float = 0.0) -> np.ndarray:
         return np.concatenate([np.full(self.n, position_m), np.full(self.n, speed_mps)])
@@ -426,9 +444,7 @@ class MultiCarModel:
     def step(self, state: np.ndarray, duration_s: float, forces: Sequence[float],
              time_s: float = 0.0, env: Surroundings | None = None) -> np.ndarray:
         """State after ``duration_s`` with the forces held (zero-order hold) from ``time_s``."""
-        env = env or self.nominal
-        mm = self.mode_matrices(env)
-        p = self._parameters(env, mm, time_s, duration_s)
+        mm, p = self._prepare(env or self.nominal, time_s, duration_s)
         forces = np.array(forces, dtype=float)
         substeps = max(1, math.ceil(duration_s / self.max_substep_s - 1e-9))
         h_max = duration_s / substeps
@@ -438,10 +454,10 @@ class MultiCarModel:
         table, bounds, offsets = self.segments.table, self.segments.bound_array, self.offsets
         while end - t > 1e-12 * max(1.0, abs(end)):
             h = h_max if end - t > h_max * (1.0 - 1e-9) else end - t
-            x1, indices, crossed = substep_kernel(x, t, h, mm.propagators(h, h == h_max), forces,
-                                                  self._powered, table, bounds, offsets,
-                                                  mm.cars, p)
+            x1, crossed = substep_kernel(x, t, h, mm.propagators(h, h == h_max), forces,
+                                         self._powered, table, bounds, offsets, mm.cars, p)
             if crossed:  # a car reaches another segment: stop the step there
+                indices = segment_indices(x, offsets, bounds)
                 after = segment_indices(x1, offsets, bounds)
                 crossings = []
                 for q, (i0, i1) in enumerate(zip(indices.tolist(), after.tolist())):
@@ -469,20 +485,21 @@ class MultiCarModel:
         """x' at one instant (line forces looked up at the cars' positions). ``state`` may hold
         positions relative to ``shift`` (e.g. the lead car's), which keeps the coupler
         extensions exact when the positions are tens of kilometres."""
-        env = env or self.nominal
-        mm = self.mode_matrices(env)
+        mm, p = self._prepare(env or self.nominal, time_s, 0.0)
         return derivative_kernel(np.asarray(state, dtype=float), float(shift), float(time_s),
                                  mm.A, np.array(forces, dtype=float), self._powered,
                                  self.segments.table, self.segments.bound_array, self.offsets,
-                                 mm.cars, self._parameters(env, mm, time_s, 0.0))
+                                 mm.cars, p)
 
     def outputs(self, state: np.ndarray, forces: Sequence[float], time_s: float = 0.0,
                 env: Surroundings | None = None):
         n = self.n
-        state = np.asarray(state, dtype=float)
-        accelerations = self.derivative(state, forces, time_s, env)[n:]
+        mm, p = self._prepare(env or self.nominal, time_s, 0.0)
+        values = outputs_kernel(np.asarray(state, dtype=float), float(time_s), mm.A,
+                                np.array(forces, dtype=float), self._powered, self.segments.table,
+                                self.segments.bound_array, self.offsets, mm.cars, p).tolist()
         applied = [0.0] * n
-        for force, i in zip(forces, self._powered.tolist()):
+        for force, i in zip(forces, self._powered_list):
             applied[i] = float(force)
-        return (tuple(self.positions(state).tolist()), tuple(state[n:].tolist()),
-                tuple(accelerations.tolist()), tuple(applied))
+        return (tuple(values[:n]), tuple(values[n:2 * n]), tuple(values[2 * n:]),
+                tuple(applied))
