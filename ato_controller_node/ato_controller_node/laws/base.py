@@ -33,11 +33,12 @@ class TrainKnowledge:
     actuator_names: tuple[str, ...]
     cars: tuple[CarParameters, ...] = ()    # nominal per-car data of a multi-car train
     couplers: tuple[Coupler, ...] = ()
+    car_length_m: float = 25.0  # rest spacing of consecutive cars (coupler extension = 0)
 
     @classmethod
     def of(cls, train: TrainParameters) -> 'TrainKnowledge':
         return cls(train.mass_kg, train.davis_nominal, train.traction, train.actuator_names,
-                   train.cars, train.couplers)
+                   train.cars, train.couplers, train.car_length_m)
 
     def actuator_limits_at(self, speed: float) -> tuple[float, float]:
         """(lowest, highest) force of one actuator: an equal share of the train's limits."""
