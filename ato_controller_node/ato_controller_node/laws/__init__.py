@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 from ato_controller_node.laws.base import ControlLaw
+from ato_controller_node.laws.liu_li import LiuLiLaw
 from ato_controller_node.laws.luo_xu import LuoXuLaw
 from ato_controller_node.laws.mao_multibody import MaoAdaptiveLaw, MaoNominalLaw
 from ato_controller_node.laws.pid import PidLaw
 
 LAWS: dict[str, type[ControlLaw]] = {law.name: law for law in (
-    PidLaw, LuoXuLaw, MaoNominalLaw, MaoAdaptiveLaw)}
+    PidLaw, LuoXuLaw, MaoNominalLaw, MaoAdaptiveLaw, LiuLiLaw)}
 
 
 def law_class(name: str) -> type[ControlLaw]:
