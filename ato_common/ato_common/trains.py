@@ -33,6 +33,12 @@ class DavisResistance:
         a, b, c = units.davis_per_tonne_to_per_kg(a_n_per_t, b_n_per_t_kmh, c_n_per_t_kmh2)
         return cls(a * mass_kg, b * mass_kg, c * mass_kg)
 
+    @classmethod
+    def from_kn_kmh(cls, a_kn: float, b_kn_per_kmh: float, c_kn_per_kmh2: float
+                    ) -> 'DavisResistance':
+        """Whole-train coefficients in kN with V in km/h (Mao et al. 2017, reading (A))."""
+        return cls(*units.davis_kn_kmh_to_n(a_kn, b_kn_per_kmh, c_kn_per_kmh2))
+
     def per_kg(self, mass_kg: float) -> tuple[float, float, float]:
         """(a [m/s^2], b [1/s], c [1/m]): the specific resistance of the papers' laws."""
         return (self.a_n / mass_kg, self.b_n_s_per_m / mass_kg, self.c_n_s2_per_m2 / mass_kg)
@@ -154,23 +160,27 @@ def _crh380a_tan() -> TrainParameters:
     )
 
 
-def _crh2_4car_mao() -> TrainParameters:
-    # Table II of Mao, Tao, Jiang & Yan; a, b, c are per tonne with V in km/h (the printed SI-like
-    # units are a slip: 0.88 + 0.00744 V + 0.000114 V^2 N/kN times g gives these numbers).
-    masses_t = (42.8, 48.0, 46.5, 42.0)
-    a_n_per_t = (8.63, 9.03, 9.03, 8.63)
-    b_n_per_t_kmh = (0.07295, 0.08015, 0.08015, 0.07295)
-    c_n_per_t_kmh2 = 0.00112
+def _four_car_unit(masses_t, a_n_per_t, b_n_per_t_kmh, c_n_per_t_kmh2, couplers):
+    """Cars of a Mao, Tao, Jiang & Yan 4-car unit: a, b, c per tonne with V in km/h (the
+    printed SI-like units of Tables I and II are a slip: 0.88 + 0.00744 V + 0.000114 V^2 N/kN
+    times g gives the CRH2 numbers); power on cars 2 and 3; aerodynamics on the lead car."""
     cars = []
     for i, (m, a, b) in enumerate(zip(masses_t, a_n_per_t, b_n_per_t_kmh)):
         a_si, b_si, c_si = units.davis_per_tonne_to_per_kg(a, b, c_n_per_t_kmh2)
         cars.append(CarParameters(f'car_{i + 1}', units.tonnes_to_kg(m), a_si, b_si,
                                   c_si if i == 0 else 0.0, powered=i in (1, 2)))
-    couplers = (Coupler(800e6, 8e4), Coupler(600e6, 6e4), Coupler(800e6, 8e4))
-    mass = sum(c.mass_kg for c in cars)
     davis = DavisResistance(sum(c.a_mps2 * c.mass_kg for c in cars),
                             sum(c.b_per_s * c.mass_kg for c in cars),
                             cars[0].c_per_m * cars[0].mass_kg)
+    return tuple(cars), tuple(Coupler(k, d) for k, d in couplers), davis
+
+
+def _crh2_4car_mao() -> TrainParameters:
+    cars, couplers, davis = _four_car_unit(
+        masses_t=(42.8, 48.0, 46.5, 42.0), a_n_per_t=(8.63, 9.03, 9.03, 8.63),
+        b_n_per_t_kmh=(0.07295, 0.08015, 0.08015, 0.07295), c_n_per_t_kmh2=0.00112,
+        couplers=((800e6, 8e4), (600e6, 6e4), (800e6, 8e4)))
+    mass = sum(c.mass_kg for c in cars)
     return TrainParameters(
         name='crh2_4car_mao',
         description='CRH2 4-car unit, power on cars 2 and 3, as simulated by Mao, Tao, Jiang & Yan',
@@ -178,7 +188,7 @@ def _crh2_4car_mao() -> TrainParameters:
         traction=TractionCharacteristic(
             max_traction_force_n=mass * 0.6, max_traction_power_w=units.kw_to_w(2400.0),
             max_service_brake_force_n=mass * 0.9, max_emergency_brake_force_n=mass * 1.2),
-        actuator_names=('car_2', 'car_3'), length_m=100.0, cars=tuple(cars),
+        actuator_names=('car_2', 'car_3'), length_m=100.0, cars=cars,
         couplers=couplers, car_length_m=25.0,
         sources={
             'masses, resistance, couplers': 'Mao, Tao, Jiang & Yan, Table II (units corrected '
@@ -188,10 +198,99 @@ def _crh2_4car_mao() -> TrainParameters:
         })
 
 
+def _crh5_4car_mao() -> TrainParameters:
+    cars, couplers, davis = _four_car_unit(
+        masses_t=(50.0, 48.0, 51.0, 53.0), a_n_per_t=(6.63, 5.43, 5.43, 6.63),
+        b_n_per_t_kmh=(0.06382, 0.07041, 0.07041, 0.06382), c_n_per_t_kmh2=0.00107,
+        couplers=((500e6, 2e4), (650e6, 2.2e4), (500e6, 2e4)))
+    mass = sum(c.mass_kg for c in cars)
+    return TrainParameters(
+        name='crh5_4car_mao',
+        description='CRH5 4-car unit, power on cars 2 and 3, as in the zero-dynamics study '
+                    '(Section IV-D) of Mao, Tao, Jiang & Yan',
+        mass_kg=mass, davis=davis, davis_nominal=davis,
+        traction=TractionCharacteristic(
+            max_traction_force_n=mass * 0.6, max_traction_power_w=units.kw_to_w(2750.0),
+            max_service_brake_force_n=mass * 0.9, max_emergency_brake_force_n=mass * 1.2),
+        actuator_names=('car_2', 'car_3'), length_m=100.0, cars=cars,
+        couplers=couplers, car_length_m=25.0,
+        sources={
+            'masses, resistance, couplers': 'Mao, Tao, Jiang & Yan, Table I (CRH5: 50/48/51/53 t; '
+                                            'a 6.63/5.43 N/t, b 0.06382/0.07041 N/(t km/h), '
+                                            'c 0.00107 N/(t (km/h)^2), k 500e6/650e6 N/m, '
+                                            'd 2e4/2.2e4 N s/m; units corrected as for Table II)',
+            'max_traction_power_w': 'half of the 5.5 MW of an 8-car CRH5A (manufacturer figure)',
+            'max_traction_force_n, braking': 'suite assumption: 0.6, 0.9 and 1.2 m/s^2',
+            'car_length_m': 'not in the paper; only shifts the cars\' rest positions',
+        })
+
+
+def _crh380al_liu_li() -> TrainParameters:
+    mass = units.tonnes_to_kg(890.0)
+    # Liu & Li's resistance formula (60)-(61) was lost in extraction; shared/papers/README.md
+    # recommends the CRH380A(L) unit resistance of Tan et al.: a0 = 4984 N, a1 = 115.34 N s/m,
+    # a2 = 13.957 N s^2/m^2 for 890 t.
+    davis = DavisResistance.from_per_tonne(mass, 5.6, 0.036, 0.00121)
+    return TrainParameters(
+        name='crh380al_liu_li',
+        description='CRH380AL 16-car (14M2T), 890 t, as simulated by Liu & Li',
+        mass_kg=mass, davis=davis, davis_nominal=davis,
+        traction=TractionCharacteristic(
+            max_traction_force_n=units.kn_to_n(500.0),
+            max_traction_power_w=units.kw_to_w(20440.0),
+            max_service_brake_force_n=mass * 0.9,
+            max_emergency_brake_force_n=mass * 1.2),
+        actuator_names=('traction',), length_m=399.0,
+        sources={
+            'mass': 'Liu & Li, Section 5 (M = 890 t; g = 9.8 m/s^2 in the paper, the suite uses '
+                    'standard gravity)',
+            'davis': 'Liu & Li formula lost; shared/papers/README.md recommendation: '
+                     '5.6 + 0.036 V + 0.00121 V^2 N/t (Tan et al. Table 1) scaled to 890 t',
+            'max_traction_power_w': 'CRH380AL traction power 20.44 MW (manufacturer figure)',
+            'max_traction_force_n': 'the +/-500 kN actuator limit suggested in '
+                                    'shared/papers/README.md (Liu & Li give none)',
+            'service and emergency braking': 'suite assumption: 0.9 and 1.2 m/s^2',
+            'length_m': 'CRH380AL 16-car length, about 399 m',
+        })
+
+
+def _mao_2017_500t() -> TrainParameters:
+    mass = units.tonnes_to_kg(500.0)
+    # Mode (i) (open air) of Mao, Tao, Jiang, Yan & Zhong 2017, Section 4.1, read as whole-train
+    # coefficients in kN with V in km/h (reading (A) of shared/papers/README.md):
+    # a = 2.25 kN, b = -1.9e-3 kN/(km/h), c = 3.2e-4 kN/(km/h)^2 -> 2250 N, -6.84 N s/m,
+    # 4.147 N s^2/m^2. The negative b is the paper's.
+    davis = DavisResistance.from_kn_kmh(2.25, -1.9e-3, 3.2e-4)
+    return TrainParameters(
+        name='mao_2017_500t',
+        description='500 t train with 4 motors, as simulated by Mao, Tao, Jiang, Yan & Zhong '
+                    '(IFAC 2017); modes, failures: plant section of the scenario',
+        mass_kg=mass, davis=davis, davis_nominal=davis,
+        traction=TractionCharacteristic(
+            max_traction_force_n=units.kn_to_n(300.0),
+            max_traction_power_w=units.kw_to_w(8800.0),
+            max_service_brake_force_n=mass * 0.9,
+            max_emergency_brake_force_n=mass * 1.2),
+        actuator_names=('motor_1', 'motor_2', 'motor_3', 'motor_4'), length_m=200.0,
+        sources={
+            'mass, 4 motors': 'Mao et al. 2017, Section 4 (M = 500 t, n = 4)',
+            'davis': 'Mao et al. 2017 mode (i): a = 2.25, b = -1.9e-3, c = 3.2e-4, read as kN '
+                     'with V in km/h (reading (A) of shared/papers/README.md)',
+            'max_traction_force_n, max_traction_power_w':
+                'the paper borrows "a CRH type train" (Dong et al. 2010); a 500 t CRH with four '
+                'motor cars is a CRH3C (4M4T): 300 kN starting effort, 8.8 MW, one quarter per '
+                'motor (manufacturer figures)',
+            'service and emergency braking': 'suite assumption: 0.9 and 1.2 m/s^2',
+        })
+
+
 TRAIN_PRESETS = {
     'crh3_luo_xu': _crh3_luo_xu,
     'crh380a_tan': _crh380a_tan,
     'crh2_4car_mao': _crh2_4car_mao,
+    'crh5_4car_mao': _crh5_4car_mao,
+    'crh380al_liu_li': _crh380al_liu_li,
+    'mao_2017_500t': _mao_2017_500t,
 }
 
 

@@ -59,3 +59,13 @@ def davis_per_kn_to_per_kg(a_n_per_kn: float, b_n_per_kn_kmh: float, c_n_per_kn_
     per_tonne = gravity  # 1 t weighs g kN, so N/kN * g = N/t
     return davis_per_tonne_to_per_kg(a_n_per_kn * per_tonne, b_n_per_kn_kmh * per_tonne,
                                      c_n_per_kn_kmh2 * per_tonne)
+
+
+def davis_kn_kmh_to_n(a_kn: float, b_kn_per_kmh: float,
+                      c_kn_per_kmh2: float) -> tuple[float, float, float]:
+    """Whole-train Davis coefficients in kN with V in km/h -> N with v in m/s.
+
+    Returns (a [N], b [N s/m], c [N s^2/m^2]) so that the resistance is a + b v + c v^2.
+    """
+    return (kn_to_n(a_kn), kn_to_n(b_kn_per_kmh) * KMH_PER_MPS,
+            kn_to_n(c_kn_per_kmh2) * KMH_PER_MPS ** 2)

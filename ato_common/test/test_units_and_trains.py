@@ -74,3 +74,73 @@ def test_steady_speed_balances_force_and_resistance():
 def test_resistance_opposes_motion_with_the_sign_of_speed():
     davis = DavisResistance(1000.0, 10.0, 1.0)
     assert davis.force(10.0) == davis.force(-10.0) == 1000.0 + 100.0 + 100.0
+
+
+def test_whole_train_davis_in_kn_and_kmh_converts_to_newtons():
+    # Mao et al. 2017 mode (i), reading (A): 2.25 kN, -1.9e-3 kN/(km/h), 3.2e-4 kN/(km/h)^2
+    a, b, c = units.davis_kn_kmh_to_n(2.25, -1.9e-3, 3.2e-4)
+    assert a == pytest.approx(2250.0)
+    assert b == pytest.approx(-6.84)
+    assert c == pytest.approx(4.1472)
+    # the tunnel mode's c = 9.2e-4 -> 11.92 N s^2/m^2
+    assert units.davis_kn_kmh_to_n(0.0, 0.0, 9.2e-4)[2] == pytest.approx(11.9232)
+
+
+def test_crh5_preset_carries_mao_table_1():
+    train = train_preset('crh5_4car_mao')
+    assert [c.mass_kg for c in train.cars] == [50e3, 48e3, 51e3, 53e3]
+    assert train.mass_kg == 202e3
+    assert [c.a_mps2 for c in train.cars] == pytest.approx([6.63e-3, 5.43e-3, 5.43e-3, 6.63e-3])
+    assert [c.b_per_s for c in train.cars] == pytest.approx(
+        [0.06382 * 3.6e-3, 0.07041 * 3.6e-3, 0.07041 * 3.6e-3, 0.06382 * 3.6e-3])
+    assert train.cars[0].c_per_m == pytest.approx(0.00107 * 12.96e-3)
+    assert all(c.c_per_m == 0.0 for c in train.cars[1:])
+    assert [c.powered for c in train.cars] == [False, True, True, False]
+    assert [(k.stiffness_n_per_m, k.damping_n_s_per_m) for k in train.couplers] == [
+        (500e6, 2e4), (650e6, 2.2e4), (500e6, 2e4)]
+    assert train.actuator_names == ('car_2', 'car_3')
+    # whole-train Davis is the sum of the cars' resistances
+    v = 50.0
+    per_car = sum(c.mass_kg * (c.a_mps2 + c.b_per_s * v + c.c_per_m * v * v) for c in train.cars)
+    assert train.davis.force(v) == pytest.approx(per_car)
+
+
+def test_crh2_preset_carries_mao_table_2():
+    train = train_preset('crh2_4car_mao')
+    assert [c.mass_kg for c in train.cars] == [42.8e3, 48e3, 46.5e3, 42e3]
+    assert train.cars[1].a_mps2 == pytest.approx(9.03e-3)
+    assert [k.stiffness_n_per_m for k in train.couplers] == [800e6, 600e6, 800e6]
+
+
+def test_crh380al_preset_is_liu_li_890_t_with_the_recommended_resistance():
+    train = train_preset('crh380al_liu_li')
+    assert train.mass_kg == 890e3
+    # shared/papers/README.md: a0 = 4984 N, a1 = 115.34 N s/m, a2 = 13.957 N s^2/m^2
+    assert train.davis.a_n == pytest.approx(4984.0)
+    assert train.davis.b_n_s_per_m == pytest.approx(115.34, rel=1e-4)
+    assert train.davis.c_n_s2_per_m2 == pytest.approx(13.957, rel=1e-4)
+    # about 111 kN at 300 km/h
+    assert train.davis.force(units.kmh_to_mps(300.0)) == pytest.approx(111e3, rel=0.01)
+    assert train.traction.max_traction_power_w == 20.44e6
+
+
+def test_mao_2017_preset_has_four_motors_and_mode_1_resistance():
+    train = train_preset('mao_2017_500t')
+    assert train.mass_kg == 500e3
+    assert train.actuator_names == ('motor_1', 'motor_2', 'motor_3', 'motor_4')
+    assert train.davis.a_n == pytest.approx(2250.0)
+    assert train.davis.b_n_s_per_m == pytest.approx(-6.84)
+    assert train.davis.c_n_s2_per_m2 == pytest.approx(4.147, rel=1e-3)
+    # about 30 kN at 300 km/h in open air (shared/papers/README.md)
+    assert train.davis.force(units.kmh_to_mps(300.0)) == pytest.approx(30.5e3, rel=0.02)
+
+
+def test_every_preset_documents_its_sources_and_has_consistent_limits():
+    for name in TRAIN_PRESETS:
+        train = train_preset(name)
+        assert train.sources, name
+        t = train.traction
+        assert 0 < t.max_service_brake_force_n < t.max_emergency_brake_force_n, name
+        assert t.max_traction_force_n > 0 and t.max_traction_power_w > 0, name
+        # the train can climb its own starting effort: force above resistance at low speed
+        assert t.max_traction_at(10.0) > train.davis.force(10.0), name
