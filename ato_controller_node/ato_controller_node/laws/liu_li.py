@@ -60,7 +60,7 @@ class LiuLiSettings:
                         description='observer gain on s_t in s_hat\' (Table 2 row 1, Value 10)')
     k2: float = setting(35.0, minimum=1e-4, maximum=1e5, units='1/s^2',
                         description='observer gain on s_t in v_hat\' (Table 2 row 2, Value 10)')
-    Gamma1: float = setting(175.0, minimum=0.0, maximum=1e6, units='1/(m s^2)',
+    Gamma1: float = setting(175.0, minimum=0.0, maximum=1e6, units='1/s^3',
                             description='NN1 learning rate (Table 2 row 3, Value 10)')
     lam: float = setting(28.0, minimum=1e-4, maximum=1e3, units='1/s',
                          description='filtered-error slope lambda (Table 2 row 4, Value 10)')
@@ -71,24 +71,24 @@ class LiuLiSettings:
                         description='NN1 RBF width (normalised input) [REC]')
     b2: float = setting(0.35, minimum=1e-3, maximum=10.0, units='-',
                         description='NN2 RBF width (normalised inputs) [REC]')
-    sigma1: float = setting(1e-3, minimum=0.0, maximum=10.0, units='m',
+    sigma1: float = setting(1e-3, minimum=0.0, maximum=10.0, units='s^2',
                             description='NN1 sigma-modification leakage [REC]')
-    sigma2: float = setting(1e-3, minimum=0.0, maximum=10.0, units='m/s',
+    sigma2: float = setting(1e-3, minimum=0.0, maximum=10.0, units='m/(N s)',
                             description='NN2 sigma-modification leakage [REC]')
-    gamma1: float = setting(0.0, minimum=0.0, maximum=1e3, units='1/(m s^2)',
+    gamma1: float = setting(0.0, minimum=0.0, maximum=1e3, units='1/s^3',
                             description='observer robust-bound learning rate (notes: 0 to 1e-3; '
                                         'larger values kill the Case-1 trend) [REC]')
     eps1: float = setting(1.0, minimum=1e-6, maximum=1e3, units='m',
                           description='observer tanh width [REC]')
-    kappa1: float = setting(0.1, minimum=0.0, maximum=10.0, units='m',
+    kappa1: float = setting(0.1, minimum=0.0, maximum=10.0, units='s^2',
                             description='observer robust-bound leakage [REC]')
-    Gamma2: float = setting(2e5, minimum=0.0, maximum=1e9, units='N/(m/s) per s',
+    Gamma2: float = setting(2e5, minimum=0.0, maximum=1e9, units='N/m',
                             description='NN2 learning rate (force units) [REC]')
-    gamma2: float = setting(1e4, minimum=0.0, maximum=1e9, units='N/(m/s) per s',
+    gamma2: float = setting(1e4, minimum=0.0, maximum=1e9, units='N/m',
                             description='controller robust-bound learning rate [REC]')
     eps2: float = setting(0.1, minimum=1e-6, maximum=100.0, units='m/s',
                           description='controller tanh width [REC]')
-    kappa2: float = setting(0.01, minimum=0.0, maximum=100.0, units='m/s',
+    kappa2: float = setting(0.01, minimum=0.0, maximum=100.0, units='m/(N s)',
                             description='controller robust-bound leakage [REC]')
     speed_scale_mps: float = setting(100.0, minimum=1.0, maximum=1000.0, units='m/s',
                                      description='speed that normalises the NN inputs to ~[0, 1]')
