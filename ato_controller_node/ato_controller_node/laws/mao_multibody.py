@@ -170,6 +170,13 @@ class _MaoBase(ControlLaw):
     def _state(self, m: Measurement) -> MaoState:
         return MaoState.of(m, self.train.car_length_m)
 
+    def _parameters(self, as_printed: bool):
+        """(Theta1, Theta2) of the train, or None for a train the law does not fit (the host
+        builds a law before it asks ``fits``)."""
+        if len(self.train.cars) != CARS or len(self.train.couplers) != CARS - 1:
+            return None
+        return true_parameters(self.train, as_printed)
+
 
 class MaoNominalLaw(_MaoBase):
     """(17), (18) with (51), (55): exact feedback linearisation with the known parameters."""
@@ -179,13 +186,21 @@ class MaoNominalLaw(_MaoBase):
                'train: speeds of cars 1 and 3 via forces on cars 2 and 3')
     Settings = MaoNominalSettings
 
+    def __init__(self, train, dt, settings=None):
+        super().__init__(train, dt, settings)
+        self.theta = self._parameters(self.settings.paper_as_printed)
+
+    def update_settings(self, settings):
+        super().update_settings(settings)
+        self.theta = self._parameters(settings.paper_as_printed)
+
     def reset(self, measurement, reference, last_force_n):
-        pass  # stateless
+        pass  # no state of its own
 
     def step(self, measurement, reference):
         s = self.settings
         printed = s.paper_as_printed
-        theta1, theta2 = true_parameters(self.train, printed)
+        theta1, theta2 = self.theta
         state = self._state(measurement)
         w1, w2 = phi_regressors(state, printed)
         phi1 = sum(t * w for t, w in zip(theta1[1:], w1))
@@ -247,7 +262,7 @@ class MaoAdaptiveLaw(_MaoBase):
 
     def _start_from_prior(self) -> None:
         ratio = self.settings.initial_estimate_ratio
-        self.nominal1, self.nominal2 = true_parameters(self.train, self.settings.paper_as_printed)
+        self.nominal1, self.nominal2 = self._parameters(self.settings.paper_as_printed) or ((), ())
         self.theta1_hat = [ratio * t for t in self.nominal1]
         self.theta2_hat = [ratio * t for t in self.nominal2]
         self._pending = None
