@@ -76,7 +76,7 @@ def test_refuses_a_control_period_too_long_for_the_observer_gain(train):
     assert _law(train, 0.1, k1=0.88, k2=0.22, Gamma1=1.1).fits(train) is None  # Value 5
 
 
-def test_controller_adaptation_freezes_under_saturation_but_the_observer_runs(train):
+def test_controller_adaptation_freezes_into_saturation_but_the_observer_runs(train):
     law = _law(train, 0.005)
     reference = ReferencePoint(0.0, 0.0, 10.0, 0.0)
     law.reset(Measurement(0.0, 0.0, math.nan), reference, None)
@@ -90,3 +90,10 @@ def test_controller_adaptation_freezes_under_saturation_but_the_observer_runs(tr
     out = law.step(Measurement(0.005, -0.95, math.nan), reference)
     law.after_saturation(out.force_n, out.force_n)
     assert (law.w2 != weights).any() and law.rho2 > rho2
+    # saturated, but the update would lower the command toward the limit: it adapts
+    # (directional freezing, so that the law cannot lock itself in saturation)
+    law.reset(Measurement(0.0, 0.0, math.nan), reference, None)
+    out = law.step(Measurement(0.0, 1.0, math.nan), reference)   # 1 m ahead: r = +28 m/s
+    weights = law.w2.copy()
+    law.after_saturation(out.force_n + 1e6, out.force_n)          # wanted more than allowed
+    assert (law.w2 > weights).any()                               # W2' = Gamma2 S2 r > 0

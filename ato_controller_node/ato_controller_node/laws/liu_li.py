@@ -32,9 +32,10 @@ Sampled implementation (a deviation the paper, simulated in continuous time, doe
   semi-implicit Euler (v_hat first) in fixed internal steps of at most observer_step_s. Its
   discrete error dynamics are stable only if k1 dt is well under 2, so the law refuses a control
   period longer than max_k1_period / k1 (Value 10, k1 = 140 1/s: 7 ms at the default 1.0);
-- the controller laws (32), (35) are integrated by forward Euler at the control period and
-  frozen while the command is saturated (no wind-up); the observer keeps running on the force
-  actually commanded;
+- the controller laws (32), (35) are integrated by forward Euler at the control period; while
+  the command is saturated they run only when they move the command back toward the limit
+  (directional freezing: no wind-up, and no lock-up in saturation); the observer keeps running
+  on the force actually commanded;
 - the measured speed is never used (``requires = ('position',)``): the law runs with a failed
   speed sensor and reports its observed speed as ``speed_hat_mps``.
 """
@@ -168,7 +169,11 @@ class LiuLiLaw(ControlLaw):
         s_tilde, r, s2 = self._pending
         self._pending = None
         s, dt = self.settings, self.dt
-        if abs(wanted_n - commanded_n) <= 1e-9 * max(1.0, abs(wanted_n)):
+        excess = wanted_n - commanded_n
+        # Both updates move u by about -(positive) * r: under saturation, adapt only if that
+        # brings u back toward the limit (directional freezing; a full freeze can lock the law
+        # in saturation with weights it can no longer unlearn).
+        if abs(excess) <= 1e-9 * max(1.0, abs(wanted_n)) or excess * r > 0.0:
             self.w2 = self.w2 + dt * s.Gamma2 * (s2 * r - s.sigma2 * self.w2)      # (32), W2_0 = 0
             self.rho2 += dt * s.gamma2 * (r * math.tanh(r / s.eps2) - s.kappa2 * self.rho2)  # (35)
         self._observe(commanded_n, s_tilde)
