@@ -32,10 +32,12 @@ Sampled implementation (a deviation the paper, simulated in continuous time, doe
   semi-implicit Euler (v_hat first) in fixed internal steps of at most observer_step_s. Its
   discrete error dynamics are stable only if k1 dt is well under 2, so the law refuses a control
   period longer than max_k1_period / k1 (Value 10, k1 = 140 1/s: 7 ms at the default 1.0);
-- the controller laws (32), (35) are integrated by forward Euler at the control period; while
-  the command is saturated they run only when they move the command back toward the limit
-  (directional freezing: no wind-up, and no lock-up in saturation); the observer keeps running
-  on the force actually commanded;
+- the weight and bound laws (19), (21), (32), (35) are integrated exactly over a step with
+  their drive held (exponential leakage): forward Euler goes unstable once rate x leakage x dt
+  > 2 (Gamma2 sigma2 = 200 1/s with the recommended values: at 20 Hz);
+- while the command is saturated, (32) and (35) run only when they move the command back
+  toward the limit (directional freezing: no wind-up, and no lock-up in saturation); the
+  observer keeps running on the force actually commanded;
 - the measured speed is never used (``requires = ('position',)``): the law runs with a failed
   speed sensor and reports its observed speed as ``speed_hat_mps``.
 """
@@ -49,7 +51,18 @@ import numpy as np
 
 from ato_controller_node.laws.base import ControlLaw, LawOutput, setting
 
-NN1_CENTRES = np.linspace(0.0, 1.0, 11)                                   # m = 11 nodes
+def leaky_step(x, rate: float, drive, leak: float, dt: float):
+    """x after dt of x' = rate (drive - leak x) with the drive held: the exact solution, stable
+    for any dt (forward Euler is unstable once rate leak dt > 2, e.g. Gamma2 sigma2 = 200 1/s at
+    20 Hz). Works on floats and numpy arrays."""
+    decay = rate * leak * dt
+    if decay == 0.0:
+        return x + rate * dt * drive
+    kept = math.exp(-decay)
+    return x * kept + drive * ((1.0 - kept) / leak)
+
+
+NN1_CENTRES = np.linspace(-1.0, 1.0, 11)                                  # m = 11 nodes
 _G1, _G2 = np.meshgrid(np.linspace(0.0, 1.0, 6), np.linspace(-1.0, 1.0, 5), indexing='ij')
 NN2_CENTRES = np.column_stack([_G1.ravel(), _G2.ravel()])                   # q = 30 nodes
 
@@ -174,8 +187,8 @@ class LiuLiLaw(ControlLaw):
         # brings u back toward the limit (directional freezing; a full freeze can lock the law
         # in saturation with weights it can no longer unlearn).
         if abs(excess) <= 1e-9 * max(1.0, abs(wanted_n)) or excess * r > 0.0:
-            self.w2 = self.w2 + dt * s.Gamma2 * (s2 * r - s.sigma2 * self.w2)      # (32), W2_0 = 0
-            self.rho2 += dt * s.gamma2 * (r * math.tanh(r / s.eps2) - s.kappa2 * self.rho2)  # (35)
+            self.w2 = leaky_step(self.w2, s.Gamma2, s2 * r, s.sigma2, dt)           # (32), W2_0 = 0
+            self.rho2 = leaky_step(self.rho2, s.gamma2, r * math.tanh(r / s.eps2), s.kappa2, dt)  # (35)
         self._observe(commanded_n, s_tilde)
 
     def _observe(self, force_n: float, s_tilde: float) -> None:
@@ -186,10 +199,9 @@ class LiuLiLaw(ControlLaw):
         specific_force = force_n / self.mass
         switch = math.tanh(s_tilde / s.eps1)
         d1 = self.rho1 * switch                                                    # (20)
-        rho1_rate = s.gamma1 * (s_tilde * switch - s.kappa1 * self.rho1)           # (21)
         for _ in range(steps):
             s1 = self._s1(self.v_hat)
             self.v_hat += h * (specific_force - float(self.w1 @ s1) + s.k2 * s_tilde + d1)  # (12)
             self.s_hat += h * (self.v_hat + s.k1 * s_tilde)                        # (12)
-            self.w1 = self.w1 - h * s.Gamma1 * (s1 * s_tilde + s.sigma1 * self.w1)  # (19), W1_0 = 0
-        self.rho1 += self.dt * rho1_rate
+            self.w1 = leaky_step(self.w1, s.Gamma1, -s1 * s_tilde, s.sigma1, h)     # (19), W1_0 = 0
+        self.rho1 = leaky_step(self.rho1, s.gamma1, s_tilde * switch, s.kappa1, self.dt)  # (21)
