@@ -7,7 +7,7 @@ SCENARIO ?=
 CONTROLLER ?=
 PYTEST_ARGS ?=
 
-.PHONY: help setup build demo test test-unit test-integration bench clean
+.PHONY: help setup build demo test test-unit test-integration bench curves clean
 
 help:
 	@echo "make setup   create .venv with pinned packages and build ros_ws (idempotent)"
@@ -15,6 +15,8 @@ help:
 	@echo "             (SCENARIO=name-or-file CONTROLLER=law to override)"
 	@echo "make test    run every test (unit tests of the cores and integration tests over rclpy)"
 	@echo "make bench   lockstep real-time factor through the ROS graph and controller step times"
+	@echo "make curves  plot every built-in scenario's target curve and braking curves to runs/curves/"
+	@echo "             (SCENARIO=name-or-file for one)"
 
 setup:
 	@bash scripts/setup.sh
@@ -36,6 +38,9 @@ test-integration: setup
 
 bench: setup
 	@$(ENV) python bench/bench.py $(if $(SCENARIO),--scenario $(SCENARIO))
+
+curves: setup
+	@$(ENV) python -m profile_node.curves $(SCENARIO) -o runs/curves
 
 clean:
 	rm -rf ros_ws/build ros_ws/install ros_ws/log .pytest_cache

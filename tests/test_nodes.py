@@ -108,3 +108,69 @@ def test_real_time_mode_runs_on_wall_clock_timers(tmp_path, domain_id):
         assert abs(latest_state.positions[0] - latest_ref.ref_position) < 10.0
         codes = stack.stop()
     assert codes == {'controller': 0, 'profile': 0, 'plant': 0}
+
+
+MULTI_CAR_SCENARIO = """
+name: multi_car_failures
+train: {preset: crh2_4car_mao}
+line: {name: l, length_m: 50000, stations: [{name: A, position_m: 0}, {name: B, position_m: 40000}],
+       speed_limits: [{start_m: 0, speed_kmh: 300}]}
+planning: {max_acceleration_mps2: 0.5, service_deceleration_mps2: 0.5, max_jerk_mps3: 0.5}
+plant:
+  failures:
+    - {actuator: car_3, kind: stuck, start_s: 0.2, force_n: 1.0e+4}
+  sensors:
+    speed: {failed_from_s: 0.3, failed_cars: [car_2]}
+"""
+
+
+def test_multi_car_plant_publishes_cars_actuators_failures_and_takes_injections(tmp_path,
+                                                                              domain_id):
+    from sensor_msgs.msg import JointState
+    from trajectory_msgs.msg import JointTrajectory
+
+    from ato_common.ros import from_time, qos_profile, topic
+    scenario = tmp_path / 'multi.yaml'
+    scenario.write_text(MULTI_CAR_SCENARIO)
+    config = StackConfig(scenario=str(scenario), domain_id=domain_id, log_dir=tmp_path)
+    with Stack(config) as stack:
+        received = {'actuators_commanded': {}, 'actuators_applied': {}, 'state_measured': {}}
+        for key in received:
+            kind = JointTrajectory if key == 'state_measured' else JointState
+            stack.node.create_subscription(
+                kind, topic(key).name,
+                lambda msg, key=key: received[key].__setitem__(from_time(msg.header.stamp), msg),
+                qos_profile(topic(key).qos))
+        controller = ControllerStandIn(stack)
+        stack.start_process('plant', {'scenario': str(scenario), 'model': 'multi_car',
+                                      'wait_for_subscribers': 1})
+        names = ('car_2', 'car_3')
+        controller.answer(0, [20e3, 20e3], names)
+        controller.answer(100_000_000, [math.nan, 1.0], names)       # rejected, held
+        controller.answer(200_000_000, [20e3], names[:1])            # wrong length
+        controller.answer(300_000_000, [25e3, 25e3], names)
+        results = stack.set_parameters('train_plant_node', {
+            'inject_failure': '{actuator: car_2, kind: partial, effectiveness: 0.5}'})
+        assert results[0].successful, results[0].reason
+        bad = stack.set_parameters('train_plant_node', {
+            'inject_failure': '{actuator: car_9, kind: loss}'})[0]
+        assert not bad.successful and "unknown actuator 'car_9'" in bad.reason
+        controller.answer(400_000_000, [25e3, 25e3], names)
+        stack.spin_until(lambda: 500_000_000 in received['actuators_applied'], 10.0)
+        applied = {k: tuple(m.effort) for k, m in received['actuators_applied'].items()}
+        commanded = {k: tuple(m.effort) for k, m in received['actuators_commanded'].items()}
+        assert applied[100_000_000] == (20e3, 20e3)
+        assert commanded[300_000_000] == (20e3, 20e3)          # the rejected ones were not held
+        assert applied[300_000_000] == (20e3, 1e4)              # car_3 stuck from 0.2 s
+        assert commanded[400_000_000] == (25e3, 25e3)
+        assert applied[500_000_000] == (12.5e3, 1e4)           # car_2 at half effectiveness
+        states = stack.monitor.complete_samples()
+        assert len(states[-1][1].positions) == 4 and states[-1][1].forces[1:3] == (12.5e3, 1e4)
+        measured = received['state_measured']
+        assert not math.isnan(measured[200_000_000].points[0].velocities[1])
+        assert math.isnan(measured[300_000_000].points[0].velocities[1])   # failed sensor: NaN
+        assert not math.isnan(measured[300_000_000].points[0].velocities[0])
+        assert all(math.isfinite(v) for _, s in states for v in s.speeds)  # truth separate
+        assert any('not finite' in m for _, m, _ in plant_status(stack.monitor))
+        assert not stack.exited('plant')
+        assert stack.stop()['plant'] == 0

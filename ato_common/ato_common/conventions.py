@@ -57,22 +57,33 @@ TOPICS = {
                             'm, m/s, m/s^2, N', 'train_plant_node', 'ato_controller_node',
                             'what the on-board sensors report, same layout as train/state'),
     'reference': Topic('ato/reference', 'trajectory_msgs/msg/JointTrajectory', STREAM,
-                       'm, m/s, m/s^2', 'profile_node', 'ato_controller_node, run_scenario',
+                       'm, m/s, m/s^2, m/s^3', 'profile_node',
+                       'ato_controller_node, run_scenario',
                        'target position/speed/acceleration now (points[0]) and a preview '
-                       '(time_from_start); joint_names = ["train"]'),
+                       '(time_from_start); jerk in effort; joint_names = ["train"]'),
     'curve': Topic('ato/reference/curve', 'trajectory_msgs/msg/JointTrajectory', LATCHED,
                    'm, m/s, m/s^2', 'profile_node', 'visualisers, late joiners',
                    'the whole time-parameterised target curve, sampled'),
     'distance_to_go': Topic('ato/distance_to_go', 'std_msgs/msg/Float64', STREAM, 'm',
                             'profile_node', 'visualisers',
-                            'distance from the reference position to the next stop'),
+                            'distance from the reference position to the next target (a lower '
+                            'speed limit or the next stop)'),
     'permitted_speed': Topic('ato/permitted_speed', 'std_msgs/msg/Float64', STREAM, 'm/s',
                              'profile_node', 'visualisers',
-                             'static speed limit at the reference position'),
+                             'permitted speed at the reference position (static limits and '
+                             'braking curves)'),
     'command': Topic('ato/command', 'sensor_msgs/msg/JointState', STREAM, 'N',
                      'ato_controller_node', 'train_plant_node, run_scenario',
                      'force per actuated unit in effort (name = actuator names); '
                      'header.frame_id = registry name of the law that produced it'),
+    'actuators_commanded': Topic('train/actuators/commanded', 'sensor_msgs/msg/JointState', STREAM,
+                                 'N', 'train_plant_node', 'recorder, evaluation',
+                                 'force per actuated unit as commanded (the held ATO command), '
+                                 'effort per name = actuator names; stamped like train/state'),
+    'actuators_applied': Topic('train/actuators/applied', 'sensor_msgs/msg/JointState', STREAM,
+                               'N', 'train_plant_node', 'recorder, evaluation',
+                               'force per actuated unit as delivered (limits, lag, rate limit, '
+                               'safety brakes and failures applied), same layout'),
     'diagnostics': Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', DIAGNOSTICS, '-',
                          'all nodes', 'run_scenario, rqt_robot_monitor',
                          'active law, tracking errors, parameter estimates, rejected input'),

@@ -26,15 +26,28 @@ class Station:
 
 @dataclass(frozen=True)
 class Curve:
+    """A curve of constant radius, or, with ``end_radius_m``, a transition (clothoid) whose
+    curvature 1/R varies linearly from 1/radius_m to 1/end_radius_m (inf: straight)."""
+
     start_m: float
     length_m: float
     radius_m: float
+    end_radius_m: float | None = None
+
+    def curvature_at(self, position: float) -> float:
+        """1/R at a position inside the curve, 1/m."""
+        start = 1.0 / self.radius_m
+        if self.end_radius_m is None:
+            return start
+        share = (position - self.start_m) / self.length_m
+        return start + share * (1.0 / self.end_radius_m - start)
 
 
 @dataclass(frozen=True)
 class Tunnel:
     start_m: float
     length_m: float
+    cross_section_m2: float | None = None  # TTOBench tunnels give it (train-specific drag)
 
 
 class PiecewiseConstant:
@@ -69,11 +82,12 @@ class Line:
 
         Grade: g sin(theta). Curve: 600/R N/kN, tunnel without limiting gradient: 0.00013 L_t
         N/kN (the Chinese traction-calculation rules, as reconstructed for Liu & Li eqs 3-4).
+        A transition curve uses its local curvature in 600/R.
         """
         per_kn = 0.0
         for curve in self.curves:
             if curve.start_m <= position < curve.start_m + curve.length_m:
-                per_kn += CURVE_RESISTANCE_N_PER_KN_M / curve.radius_m
+                per_kn += CURVE_RESISTANCE_N_PER_KN_M * curve.curvature_at(position)
         for tunnel in self.tunnels:
             if tunnel.start_m <= position < tunnel.start_m + tunnel.length_m:
                 per_kn += TUNNEL_RESISTANCE_N_PER_KN_PER_M * tunnel.length_m
@@ -127,14 +141,20 @@ def parse_line(data, where: str = 'line') -> Line:
 
     curves = []
     for item in f.items('curves'):
-        curves.append(Curve(item.number('start_m', minimum=0.0, maximum=length),
-                            item.number('length_m', minimum=0.0, exclusive_minimum=True),
-                            item.number('radius_m', minimum=0.0, exclusive_minimum=True)))
+        start = item.number('start_m', minimum=0.0, maximum=length)
+        curve_length = item.number('length_m', minimum=0.0, exclusive_minimum=True)
+        radius = item.number('radius_m', minimum=0.0, exclusive_minimum=True)
+        end_radius = (item.number('end_radius_m', minimum=0.0, exclusive_minimum=True)
+                      if item.has('end_radius_m') else None)
+        curves.append(Curve(start, curve_length, radius, end_radius))
         item.reject_unknown()
     tunnels = []
     for item in f.items('tunnels'):
-        tunnels.append(Tunnel(item.number('start_m', minimum=0.0, maximum=length),
-                              item.number('length_m', minimum=0.0, exclusive_minimum=True)))
+        start = item.number('start_m', minimum=0.0, maximum=length)
+        tunnel_length = item.number('length_m', minimum=0.0, exclusive_minimum=True)
+        section = (item.number('cross_section_m2', minimum=0.0, exclusive_minimum=True)
+                   if item.has('cross_section_m2') else None)
+        tunnels.append(Tunnel(start, tunnel_length, section))
         item.reject_unknown()
     f.reject_unknown()
     return Line(name, length, tuple(stations), PiecewiseConstant(limit_starts, limits),

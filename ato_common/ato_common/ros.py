@@ -131,6 +131,16 @@ def command_to_msg(command: Command) -> JointState:
     return msg
 
 
+def actuator_forces_to_msg(stamp_ns: int, names: Sequence[str],
+                           forces: Sequence[float]) -> JointState:
+    """Force per actuated unit (commanded or applied) in effort, N."""
+    msg = JointState()
+    msg.header.stamp = to_time(stamp_ns)
+    msg.name = list(names)
+    msg.effort = [float(f) for f in forces]
+    return msg
+
+
 def command_from_msg(msg: JointState, expected_actuators: Sequence[str]) -> Command:
     """Validate a command against the plant's actuators; raise MessageError with the reason."""
     names = tuple(msg.name)

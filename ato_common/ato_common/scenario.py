@@ -2,6 +2,13 @@
 
 ``load_scenario(name_or_path)`` accepts the name of a built-in scenario (a YAML file shipped in
 ``ato_common/scenarios``) or a path to a user's file. Every error names the file and the field.
+
+The train is a preset (``train: {preset: name}``) or a TTOBench train file
+(``train: {ttobench: path}``); the line is inline (the schema of :mod:`ato_common.line`) or a
+TTOBench track (``line: {ttobench: path, dwell_s: 30}``), optionally with a TTOBench journey
+(``journey: {ttobench: path}``) whose stopping points become the run's stations. Relative paths
+are taken from the scenario file's folder. The optional ``supervision`` section sets the times
+and distances of the braking-curve supervision (:mod:`ato_common.braking_curves`).
 """
 
 from __future__ import annotations
@@ -13,8 +20,12 @@ from pathlib import Path
 import yaml
 
 from ato_common import units
-from ato_common.line import Line, parse_line
+from ato_common.braking_curves import (SupervisionSettings, constant_deceleration,
+                                       tabulated_deceleration)
+from ato_common.line import Line, PiecewiseConstant, parse_line
+from ato_common.plant_setup import PlantSetup, parse_plant_setup
 from ato_common.trains import TRAIN_PRESETS, TrainParameters, train_preset
+from ato_common import ttobench
 from ato_common.validation import ConfigError, Fields
 
 DEFAULT_SCENARIO = 'short_line'
@@ -48,6 +59,9 @@ class Scenario:
     line: Line
     planning: PlanningLimits
     run: RunSettings
+    supervision: SupervisionSettings
+    plant: PlantSetup = PlantSetup()  # what varies, actuators, failures, sensors
+    journey: ttobench.TTOBenchJourney | None = None  # timing points of a TTOBench journey
 
 
 def builtin_scenarios() -> list[str]:
@@ -59,13 +73,16 @@ def load_scenario(name_or_path: str) -> Scenario:
     """Load a built-in scenario by name or a scenario file by path; raise ConfigError if invalid."""
     if name_or_path in builtin_scenarios():
         origin = f'built-in scenario {name_or_path}'
-        text = (resources.files('ato_common') / 'scenarios' / f'{name_or_path}.yaml').read_text()
+        folder = resources.files('ato_common') / 'scenarios'
+        text = (folder / f'{name_or_path}.yaml').read_text()
+        base = Path(str(folder))
     else:
         path = Path(name_or_path)
         if not path.is_file():
             raise ConfigError(f"scenario '{name_or_path}' is neither a built-in scenario "
                               f"({', '.join(builtin_scenarios())}) nor a readable file")
         origin = str(path)
+        base = path.parent
         try:
             text = path.read_text()
         except (OSError, UnicodeDecodeError) as error:
@@ -75,22 +92,103 @@ def load_scenario(name_or_path: str) -> Scenario:
     except yaml.YAMLError as error:
         raise ConfigError(f'{origin}: not valid YAML: {error}') from None
     try:
-        return parse_scenario(data, origin)
+        return parse_scenario(data, origin, base)
     except ConfigError as error:
         raise ConfigError(f'{origin}: {error}') from None
 
 
-def parse_scenario(data, origin: str = '<memory>') -> Scenario:
-    f = Fields(data, '')
-    train_fields = f.section('train', required=True)
-    preset = train_fields.text('preset')
-    if preset not in TRAIN_PRESETS:
-        raise ConfigError(f"{train_fields.where}.preset: unknown train '{preset}'; valid: "
-                          f"{', '.join(sorted(TRAIN_PRESETS))}")
-    train = train_preset(preset)
-    train_fields.reject_unknown()
+def _file(fields: Fields, key: str, base: Path) -> Path:
+    path = Path(fields.text(key)).expanduser()
+    path = path if path.is_absolute() else base / path
+    if not path.is_file():
+        raise ConfigError(f'{fields.where}.{key}: no such file {path}')
+    return path
 
-    line = parse_line(f.raw('line', required=True), 'line')
+
+def _parse_train(f: Fields, base: Path) -> tuple[TrainParameters, ttobench.TTOBenchTrain | None]:
+    fields = f.section('train', required=True)
+    if fields.has('ttobench'):
+        loaded = ttobench.load_train(_file(fields, 'ttobench', base))
+        fields.reject_unknown()
+        return loaded.parameters, loaded
+    preset = fields.text('preset')
+    if preset not in TRAIN_PRESETS:
+        raise ConfigError(f"{fields.where}.preset: unknown train '{preset}'; valid: "
+                          f"{', '.join(sorted(TRAIN_PRESETS))}")
+    fields.reject_unknown()
+    return train_preset(preset), None
+
+
+def _parse_line(f: Fields, base: Path) -> tuple[Line, ttobench.TTOBenchJourney | None]:
+    raw = f.raw('line', required=True)
+    if not (isinstance(raw, dict) and 'ttobench' in raw):
+        line = parse_line(raw, 'line')
+        journey = f.section('journey')
+        if journey.has('ttobench'):
+            raise ConfigError('journey.ttobench: a TTOBench journey needs a TTOBench track '
+                              '(line.ttobench)')
+        journey.reject_unknown()
+        return line, None
+    fields = f.section('line')
+    path = _file(fields, 'ttobench', base)
+    track = ttobench.load_track(path, fields.number('dwell_s', 0.0, minimum=0.0))
+    fields.reject_unknown()
+    journey_fields = f.section('journey')
+    if journey_fields.has('ttobench'):
+        journey_path = _file(journey_fields, 'ttobench', base)
+        journey_fields.reject_unknown()
+        journey = ttobench.load_journey(journey_path)
+        return ttobench.apply_journey(track, journey, str(journey_path)), journey
+    journey_fields.reject_unknown()
+    return track.line, None
+
+
+def _capped(line: Line, speed: float) -> Line:
+    """The line's static limits capped at the train's maximum speed (part of the MRSP)."""
+    limits = line.speed_limit_mps
+    capped = PiecewiseConstant(limits.starts, [min(v, speed) for v in limits.values])
+    return Line(line.name, line.length_m, line.stations, capped, line.grade_sine, line.curves,
+                line.tunnels)
+
+
+def _parse_supervision(f: Fields, train: TrainParameters,
+                       loaded: ttobench.TTOBenchTrain | None) -> SupervisionSettings:
+    """Decelerations from the train (its ETCS tables if TTOBench gives them, else its braking
+    forces over its mass), times from the train's ETCS data, then the scenario's overrides."""
+    defaults = SupervisionSettings(
+        emergency_deceleration=constant_deceleration(
+            train.traction.max_emergency_brake_force_n / train.mass_kg),
+        service_deceleration=constant_deceleration(
+            train.traction.max_service_brake_force_n / train.mass_kg))
+    times = {}
+    if loaded is not None and loaded.braking is not None:
+        data = loaded.braking
+        defaults = SupervisionSettings(
+            emergency_deceleration=tabulated_deceleration(*zip(*data.emergency)),
+            service_deceleration=tabulated_deceleration(*zip(*data.service)))
+        times = {'traction_cut_off_s': data.traction_cut_off_s,
+                 'emergency_brake_build_up_s': data.emergency_brake_build_up_s,
+                 'service_brake_build_up_s': data.service_brake_build_up_s}
+    s = f.section('supervision')
+    values = {}
+    for key in ('traction_cut_off_s', 'emergency_brake_build_up_s', 'service_brake_build_up_s',
+                'warning_s', 'driver_reaction_s', 'indication_s', 'eoa_beyond_stop_m',
+                'overlap_m'):
+        default = times.get(key, getattr(defaults, key))
+        values[key] = s.number(key, default, minimum=0.0, maximum=1000.0)
+    s.reject_unknown()
+    return SupervisionSettings(defaults.emergency_deceleration, defaults.service_deceleration,
+                               **values)
+
+
+def parse_scenario(data, origin: str = '<memory>', base: Path | None = None) -> Scenario:
+    """``base``: the folder relative TTOBench paths are taken from (the scenario file's)."""
+    base = base or Path.cwd()
+    f = Fields(data, '')
+    train, loaded_train = _parse_train(f, base)
+    line, journey = _parse_line(f, base)
+    if loaded_train is not None:
+        line = _capped(line, loaded_train.max_speed_mps)
 
     p = f.section('planning', required=True)
     planning = PlanningLimits(
@@ -119,6 +217,7 @@ def parse_scenario(data, origin: str = '<memory>') -> Scenario:
     scenario = Scenario(
         name=f.text('name'), description=f.text('description', ''),
         source=f.text('source', 'suite'), origin=origin, train=train, line=line,
-        planning=planning, run=run)
+        planning=planning, run=run, supervision=_parse_supervision(f, train, loaded_train),
+        plant=parse_plant_setup(f.raw('plant'), train, 'plant'), journey=journey)
     f.reject_unknown()
     return scenario

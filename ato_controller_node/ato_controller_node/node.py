@@ -233,7 +233,10 @@ class AtoControllerNode(Node):
     # --- the step -----------------------------------------------------------------------------
     def step(self, stamp_ns: int, state, reference, time_s: float) -> None:
         started = time.perf_counter()
-        measurement = Measurement.from_state(time_s, state)
+        # The operating mode is known on board (line data), as the indicators chi_i of
+        # Mao et al. 2017 assume; taken at the lead car's measured position.
+        mode = self.scenario.plant.mode_index(time_s, state.positions[0])
+        measurement = Measurement.from_state(time_s, state, mode)
         result = self.host.step(measurement, reference.now)
         if result.fault and result.fault != self.last_fault_logged:
             self.get_logger().error(result.fault)

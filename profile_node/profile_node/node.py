@@ -1,5 +1,11 @@
 """profile_node: streams the target curve planned by :mod:`profile_node.planner`.
 
+Per control instant: the reference x*, v*, a* (and the jerk, in the effort field) with a
+preview; the distance from the reference position to the next target of the curve (a lower
+speed limit's start, or the stop approached or dwelt at); the supervision's permitted speed at
+the reference position (the lowest of the static limits and the braking curves,
+:mod:`ato_common.braking_curves`).
+
 Lockstep: the reference (with a preview), the distance to go and the permitted speed are
 published for each control instant, stamped with it. The reference is a function of time only,
 so once the clock period is known (two ticks) the profile publishes the next instant's reference
@@ -70,8 +76,15 @@ class ProfileNode(Node):
                                      qos_profile(topic('state').qos))
             self.create_timer(1.0 / self.params['rate_hz'], self.on_timer)
         self.get_logger().info(
-            f'scenario {self.scenario.name}: {len(self.plan.stops)} stops, reference ends at '
+            f'scenario {self.scenario.name}: {len(self.plan.stops)} stops, '
+            f'{len(self.plan.targets)} targets, reference ends at '
             f'{self.trajectory.end_time:.1f} s, {len(self.trajectory.segments)} segments')
+        for check in self.plan.timing:
+            if not check.within_window:
+                point = check.point
+                self.get_logger().warning(
+                    f'journey timing point at {point.position_m:.0f} m: the curve is there at '
+                    f'{check.planned_s:.1f} s, outside [{point.earliest_s}, {point.latest_s}] s')
 
     def curve_msg(self) -> JointTrajectory:
         step = self.params['curve_sample_period_s']
@@ -97,9 +110,10 @@ class ProfileNode(Node):
     def publish_supervision(self, stamp_ns: int) -> None:
         """Distance to go and permitted speed now (unstamped: only ever for the current tick)."""
         now = self.trajectory.at(seconds(stamp_ns - self.time_origin_ns))
-        stop = self.plan.next_stop(now.time_s)
-        self.dtg_pub.publish(Float64(data=stop.station.position_m - now.position))
-        self.permitted_pub.publish(Float64(data=self.scenario.line.speed_limit_mps(now.position)))
+        target = self.plan.next_target(now.position, now.time_s)
+        self.dtg_pub.publish(Float64(data=target.location_m - now.position))
+        self.permitted_pub.publish(Float64(data=self.plan.permitted_speed(now.position,
+                                                                          now.time_s)))
 
     def on_clock(self, msg: Clock) -> None:
         if self.reference_pub.get_subscription_count() < self.params['wait_for_subscribers']:

@@ -1,24 +1,47 @@
-"""Station-to-station reference planning.
+"""The ATO target curve: a distance-to-go reference under the supervision's permitted speed.
 
-Each leg between consecutive stations is a rest-to-rest profile: a jerk-limited traction phase
-that follows what the train can deliver (the planning acceleration, capped by a share of the
-traction force left after the nominal resistance and the steepest climb of the leg), cruise,
-jerk-limited service braking that ends exactly at the station, then the dwell. The cruise speed
-is the lowest static speed limit on the leg minus the planning margin, lowered further when the
-leg is too short to reach it.
+For each leg between consecutive stations, the line is cut into sections of constant *level*,
+the highest speed the target may hold there:
 
-Braking curves to intermediate targets within a leg (lower speed limits, end of authority) and
-their ETCS-style supervision are not planned here yet: a limit change inside a leg is respected
-by cruising at the lowest limit of the whole leg.
+* the static limit minus the planning margin, a lower limit applying from the point where the
+  supervision's permitted speed has come down to it (its start less the distance run at that
+  speed during the service-brake build-up and driver reaction times), a higher one only once the
+  whole train has left the lower limit (train length);
+* no more than the train can sustain on the section's steepest climb: the speed at which the
+  traction reserve (a share of the traction force left after the nominal resistance and the
+  grade) still gives ``MIN_PLANNED_ACCELERATION_MPS2``.
+
+A backward pass gives the highest speed allowed at the end of each section (its level, the next
+level, and what the next section leaves room to brake from); a forward pass then builds, in each
+section, a jerk-limited traction phase that follows the train's capability, a cruise, and a
+jerk-limited service braking that ends exactly at the section's end, each phase starting and
+ending with zero acceleration. The braking deceleration is the planning deceleration, lowered
+on a descent if the service brake (less the same reserve share) cannot deliver it there. The
+leg ends exactly at the station (0.01 m), then the dwell.
+
+The plan is checked against the supervision (:mod:`ato_common.braking_curves`): the target must
+never exceed the permitted speed. Where it would (high planning deceleration against long
+supervision times), the braking into that target is planned further ahead and the check repeated.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 
-from ato_common.line import Line, Station
-from ato_common.scenario import PlanningLimits, Scenario
+import numpy as np
+
+from ato_common import units
+from ato_common.braking_curves import RunSupervision, Target
+from ato_common.line import Station
+from ato_common.scenario import Scenario
+from ato_common.validation import ConfigError
 from profile_node.trajectory import Trajectory, TrajectoryBuilder, speed_change_distance
+
+
+class PlanningError(ConfigError):
+    """The scenario admits no target curve (the train cannot start, or cannot stay under the
+    permitted speed with its planning limits); the message says where and why."""
 
 
 @dataclass(frozen=True)
@@ -32,6 +55,9 @@ class StopEvent:
 class Plan:
     trajectory: Trajectory
     stops: tuple[StopEvent, ...]
+    supervision: RunSupervision
+    targets: tuple[Target, ...]   # every target of the run, by location
+    timing: tuple = ()            # TimingCheck of each journey timing point, if any
 
     def next_stop(self, time_s: float) -> StopEvent:
         """The stop the reference is heading for or dwelling at; the last one at the end."""
@@ -40,41 +66,81 @@ class Plan:
                 return stop
         return self.stops[-1]
 
+    def next_target(self, position_m: float, time_s: float) -> Target:
+        """The nearest target ahead of a reference at (time, position): a speed decrease
+        strictly ahead, or the stop being approached or dwelt at."""
+        stop = self.next_stop(time_s)
+        for target in self.targets:
+            if target.kind == 'speed_decrease' and position_m < target.location_m \
+                    < stop.station.position_m:
+                return target
+        return next(t for t in self.targets if t.kind != 'speed_decrease'
+                    and t.location_m == stop.station.position_m)
+
+    def permitted_speed(self, position_m: float, time_s: float) -> float:
+        """The supervision's permitted speed for a reference at (time, position): the authority
+        is the leg of the stop being approached."""
+        return self.supervision.permitted_speed(position_m, self.leg(time_s))
+
+    def leg(self, time_s: float) -> int:
+        index = self.stops.index(self.next_stop(time_s))
+        # Before the first departure the train stands at the origin under the first leg.
+        return min(index, len(self.supervision.legs) - 1)
+
 
 # Share of the traction reserve (force left after resistance and grade) that the plan may use;
-# the rest is the controller's margin to correct errors.
+# the rest is the controller's margin to correct errors. The same share of the service brake.
 TRACTION_RESERVE_SHARE = 0.8
-# Below this planned acceleration the approach to a speed takes too long to be useful: the cruise
-# speed of a leg is kept where the train can still accelerate at least this much.
+# Below this planned acceleration the approach to a speed takes too long to be useful: a
+# section's level is kept where the train can still accelerate at least this much.
 MIN_PLANNED_ACCELERATION_MPS2 = 0.02
+# Tolerance of the check against the permitted speed, m/s.
+PERMITTED_SPEED_TOLERANCE_MPS = 1e-6
+# Sampling of that check, s.
+CHECK_STEP_S = 0.5
 
 
 def traction_capability(scenario: Scenario, climb_sine: float):
     """capability(v): planning acceleration capped by the train's traction reserve [m/s^2]."""
     train, planning = scenario.train, scenario.planning
-    mass, gravity = train.mass_kg, 9.80665
+    mass = train.mass_kg
 
     def capability(v: float) -> float:
         reserve = (train.traction.max_traction_at(v) - train.davis_nominal.force(v)) / mass
         return min(planning.max_acceleration_mps2,
-                   TRACTION_RESERVE_SHARE * (reserve - gravity * max(climb_sine, 0.0)))
+                   TRACTION_RESERVE_SHARE * (reserve - units.STANDARD_GRAVITY
+                                             * max(climb_sine, 0.0)))
     return capability
 
 
-def traction_phase_distance(target: float, capability, jerk: float) -> float:
+def braking_deceleration(scenario: Scenario, descent_sine: float) -> float:
+    """The planning deceleration, lowered where the service brake, less its reserve, cannot
+    deliver it on the steepest descent (gradient correction; uphill does not raise it)."""
+    brake = scenario.train.traction.max_service_brake_force_n / scenario.train.mass_kg
+    available = TRACTION_RESERVE_SHARE * brake + units.STANDARD_GRAVITY * min(descent_sine, 0.0)
+    if available < MIN_PLANNED_ACCELERATION_MPS2:
+        raise PlanningError(f'{scenario.origin}: a descent of '
+                            f'{-1000 * math.tan(math.asin(descent_sine)):.0f} per mille leaves the '
+                            'service brake less than '
+                            f'{MIN_PLANNED_ACCELERATION_MPS2} m/s^2 of deceleration')
+    return min(scenario.planning.service_deceleration_mps2, available)
+
+
+def traction_phase_distance(v_from: float, v_to: float, capability, jerk: float) -> float:
     builder = TrajectoryBuilder()
-    builder.accelerate_to(target, capability, jerk, MIN_PLANNED_ACCELERATION_MPS2)
+    builder.v = v_from
+    builder.accelerate_to(v_to, capability, jerk, MIN_PLANNED_ACCELERATION_MPS2)
     return builder.x
 
 
-def highest_reachable_speed(capability, limit: float) -> float:
+def highest_reachable_speed(capability, limit: float, where: str) -> float:
     """Highest speed <= limit at which capability(v) >= MIN_PLANNED_ACCELERATION_MPS2."""
     if capability(limit) >= MIN_PLANNED_ACCELERATION_MPS2:
         return limit
     low, high = 0.0, limit
     if capability(low) < MIN_PLANNED_ACCELERATION_MPS2:
-        raise ValueError('the train cannot start on this leg: its traction reserve gives less '
-                         f'than {MIN_PLANNED_ACCELERATION_MPS2} m/s^2 at standstill')
+        raise PlanningError(f'{where}: the train cannot start: its traction reserve gives less '
+                            f'than {MIN_PLANNED_ACCELERATION_MPS2} m/s^2 at standstill')
     for _ in range(60):
         middle = 0.5 * (low + high)
         if capability(middle) >= MIN_PLANNED_ACCELERATION_MPS2:
@@ -84,51 +150,240 @@ def highest_reachable_speed(capability, limit: float) -> float:
     return low
 
 
-def leg_cruise_speed(distance: float, limit: float, planning: PlanningLimits,
-                     capability) -> float:
-    """Highest cruise speed <= limit whose acceleration and braking fit into ``distance``."""
-    def needed(v: float) -> float:
-        return (traction_phase_distance(v, capability, planning.max_jerk_mps3)
-                + speed_change_distance(v, 0.0, planning.service_deceleration_mps2,
-                                        planning.max_jerk_mps3))
-    if needed(limit) <= distance:
-        return limit
-    low, high = 0.0, limit
-    for _ in range(40):
+@dataclass
+class Section:
+    start_m: float
+    end_m: float
+    level_mps: float
+    climb_sine: float     # steepest climb (for the traction capability)
+    descent_sine: float   # steepest descent (for the braking deceleration)
+
+    @property
+    def length_m(self) -> float:
+        return self.end_m - self.start_m
+
+
+def _breakpoints(function, start: float, end: float) -> list[float]:
+    return [s for s in function.starts if start < s < end]
+
+
+def leg_sections(scenario: Scenario, mrsp, start: float, end: float,
+                 anticipation_s: float, extra_m: dict[float, float]) -> list[Section]:
+    """The leg [start, end] cut where the level or the grade changes, equal levels merged.
+
+    ``anticipation_s``: a lower limit applies from its start less the distance run at it in
+    that time; ``extra_m`` moves a given limit's application further ahead (by its start)."""
+    line, margin = scenario.line, scenario.planning.speed_margin_mps
+    # Where each MRSP value applies for the target: decreases brought forward.
+    pieces = []
+    for s, e, v in mrsp.segments(line.length_m):
+        ahead = v * anticipation_s + extra_m.get(s, 0.0)
+        pieces.append((s - ahead if s > 0.0 else s, e, v))
+
+    def ceiling(a: float, b: float) -> float:
+        return min(v for s, e, v in pieces if s < b and e > a) - margin
+
+    cuts = {start, end}
+    cuts.update(x for s, e, _ in pieces for x in (s, e) if start < x < end)
+    cuts.update(_breakpoints(line.grade_sine, start, end))
+    cuts = sorted(cuts)
+    sections: list[Section] = []
+    for a, b in zip(cuts, cuts[1:]):
+        if b - a < 1e-6:
+            continue
+        sine = line.grade_sine(0.5 * (a + b))
+        where = f'{scenario.origin}: line at {a:.0f}-{b:.0f} m'
+        limit = ceiling(a, b)
+        if limit <= 0.0:
+            raise PlanningError(f'{where}: the speed limit is not above the planning margin '
+                                f'({units.mps_to_kmh(margin):g} km/h)')
+        level = highest_reachable_speed(traction_capability(scenario, sine), limit, where)
+        if sections and sections[-1].level_mps == level:
+            last = sections[-1]
+            last.end_m = b
+            last.climb_sine = max(last.climb_sine, sine)
+            last.descent_sine = min(last.descent_sine, sine)
+        else:
+            sections.append(Section(a, b, level, sine, sine))
+    return sections
+
+
+def highest_speed_braking_within(distance: float, v_to: float, deceleration: float,
+                                 jerk: float, top: float) -> float:
+    """Highest speed <= top from which the S-curve braking to v_to fits into ``distance``."""
+    if top <= v_to or speed_change_distance(top, v_to, deceleration, jerk) <= distance:
+        return top
+    low, high = v_to, top
+    for _ in range(50):
         middle = 0.5 * (low + high)
-        if needed(middle) <= distance:
+        if speed_change_distance(middle, v_to, deceleration, jerk) <= distance:
             low = middle
         else:
             high = middle
     return low
 
 
-def lowest_limit(line: Line, start: float, end: float) -> float:
-    return min(v for s, e, v in line.speed_limit_mps.segments(line.length_m) if e > start and s < end)
+def plan_leg(builder: TrajectoryBuilder, scenario: Scenario, sections: list[Section],
+             leg_deceleration_factor: float) -> None:
+    """Append one leg, from standstill at its first section's start to standstill at its last
+    section's end."""
+    planning = scenario.planning
+    jerk = planning.max_jerk_mps3
+    decelerations = [leg_deceleration_factor * braking_deceleration(scenario, s.descent_sine)
+                     for s in sections]
+    # Backward pass: the highest speed allowed at each section's end.
+    exit_speeds = [0.0] * len(sections)
+    for i in range(len(sections) - 2, -1, -1):
+        following = sections[i + 1]
+        exit_speeds[i] = highest_speed_braking_within(
+            following.length_m, exit_speeds[i + 1], decelerations[i + 1], jerk,
+            min(sections[i].level_mps, following.level_mps))
+    # Forward pass.
+    for section, exit_speed, deceleration in zip(sections, exit_speeds, decelerations):
+        entry = builder.v
+        capability = traction_capability(scenario, section.climb_sine)
+
+        def needed(peak: float) -> float:
+            return (traction_phase_distance(entry, peak, capability, jerk)
+                    + speed_change_distance(peak, exit_speed, deceleration, jerk))
+        if entry < exit_speed and needed(exit_speed) > section.length_m:
+            # Too short to reach the highest exit speed: accelerate throughout.
+            low, high = entry, exit_speed
+            for _ in range(40):
+                middle = 0.5 * (low + high)
+                if traction_phase_distance(entry, middle, capability, jerk) <= section.length_m:
+                    low = middle
+                else:
+                    high = middle
+            exit_speed = low
+        lowest = max(entry, exit_speed)
+        peak = section.level_mps
+        if needed(peak) > section.length_m:
+            low, high = lowest, peak
+            for _ in range(40):
+                middle = 0.5 * (low + high)
+                if needed(middle) <= section.length_m:
+                    low = middle
+                else:
+                    high = middle
+            peak = low
+        builder.accelerate_to(peak, capability, jerk, MIN_PLANNED_ACCELERATION_MPS2)
+        braking = speed_change_distance(peak, exit_speed, deceleration, jerk)
+        cruise = section.end_m - braking - builder.x
+        if peak > 0.0 and cruise > 0.0:
+            builder.add(cruise / peak)
+        builder.speed_change(exit_speed, deceleration, jerk)
 
 
-def plan_reference(scenario: Scenario) -> Plan:
-    line, planning = scenario.line, scenario.planning
-    stations = [s for s in line.stations if s.position_m >= scenario.run.initial_position_m - 1e-9]
+def _build(scenario: Scenario, supervision: RunSupervision, stations: list[Station],
+           anticipation_s: float, extra_m: dict[float, float], deceleration_factors: list[float]):
     builder = TrajectoryBuilder(x0=stations[0].position_m)
     builder.add(stations[0].dwell_s)
     stops = []
-    for origin, destination in zip(stations, stations[1:]):
-        distance = destination.position_m - origin.position_m
-        limit = lowest_limit(line, origin.position_m, destination.position_m)
-        climb = max(v for s, e, v in line.grade_sine.segments(line.length_m)
-                    if e > origin.position_m and s < destination.position_m)
-        capability = traction_capability(scenario, climb)
-        top = highest_reachable_speed(capability, max(limit - planning.speed_margin_mps, 0.1))
-        cruise = leg_cruise_speed(distance, top, planning, capability)
-        builder.accelerate_to(cruise, capability, planning.max_jerk_mps3,
-                              MIN_PLANNED_ACCELERATION_MPS2)
-        braking = speed_change_distance(cruise, 0.0, planning.service_deceleration_mps2,
-                                        planning.max_jerk_mps3)
-        builder.add((destination.position_m - braking - builder.x) / cruise)
-        builder.speed_change(0.0, planning.service_deceleration_mps2, planning.max_jerk_mps3)
+    for leg, (origin, destination) in enumerate(zip(stations, stations[1:])):
+        sections = leg_sections(scenario, supervision.legs[leg].mrsp, origin.position_m,
+                                destination.position_m, anticipation_s, extra_m)
+        plan_leg(builder, scenario, sections, deceleration_factors[leg])
         builder.snap(destination.position_m)
         arrival = builder.t
-        builder.add(destination.dwell_s)
+        dwell = destination.dwell_s
+        if scenario.journey is not None and destination is not stations[-1]:
+            # A timetable: no departure before the journey's earliest departure time.
+            earliest = scenario.journey.earliest_departure_s(destination.position_m)
+            if earliest is not None:
+                dwell = max(dwell, earliest - arrival)
+        builder.add(dwell)
         stops.append(StopEvent(destination, arrival, builder.t))
-    return Plan(builder.build(), tuple(stops))
+    return builder.build(), tuple(stops)
+
+
+@dataclass(frozen=True)
+class TimingCheck:
+    """A journey timing point and when the target curve is there."""
+
+    point: object          # ato_common.ttobench.TimingPoint
+    planned_s: float       # arrival (stopping point) or passage (passing point)
+    within_window: bool
+
+
+def timing_checks(scenario: Scenario, trajectory: Trajectory,
+                  stops: tuple[StopEvent, ...]) -> tuple[TimingCheck, ...]:
+    """Each timing point of the scenario's journey against the plan: the curve is the fastest
+    one (it waits at stations for the earliest departure), so a missed upper bound is a
+    timetable the train cannot keep, reported here rather than planned around."""
+    if scenario.journey is None:
+        return ()
+    checks = []
+    points = scenario.journey.timing_points
+    origin_departure = trajectory.start_time + scenario.line.stations[0].dwell_s
+    for i, point in enumerate(points):
+        stop = next((s for s in stops if s.station.position_m == point.position_m), None)
+        is_departure = i > 0 and points[i - 1].is_stopping_point and \
+            points[i - 1].position_m == point.position_m
+        if i == 0:
+            planned = origin_departure
+        elif point.is_stopping_point and stop is not None:
+            planned = stop.departure_s if is_departure else stop.arrival_s
+        else:
+            planned = passing_time(trajectory, point.position_m)
+        within = ((point.earliest_s is None or planned >= point.earliest_s - 1e-6)
+                  and (point.latest_s is None or planned <= point.latest_s + 1e-6))
+        checks.append(TimingCheck(point, planned, within))
+    return tuple(checks)
+
+
+def passing_time(trajectory: Trajectory, position_m: float) -> float:
+    """First time the target reaches a position (bisection: the position never decreases)."""
+    low, high = trajectory.start_time, trajectory.end_time
+    for _ in range(60):
+        middle = 0.5 * (low + high)
+        if trajectory.at(middle).position < position_m:
+            low = middle
+        else:
+            high = middle
+    return high
+
+
+def first_violation(trajectory: Trajectory, plan_stops, supervision: RunSupervision):
+    """(time, position) of the first sample where the target exceeds the permitted speed."""
+    times = np.arange(trajectory.start_time, trajectory.end_time, CHECK_STEP_S)
+    stop_index = 0
+    for t in times:
+        while stop_index < len(plan_stops) - 1 and t >= plan_stops[stop_index].departure_s:
+            stop_index += 1
+        point = trajectory.at(t)
+        leg = min(stop_index, len(supervision.legs) - 1)
+        if point.speed > supervision.permitted_speed(point.position, leg) \
+                + PERMITTED_SPEED_TOLERANCE_MPS:
+            return t, point.position, leg
+    return None
+
+
+def plan_reference(scenario: Scenario) -> Plan:
+    stations = [s for s in scenario.line.stations
+                if s.position_m >= scenario.run.initial_position_m - 1e-9]
+    supervision = RunSupervision.for_scenario(scenario)
+    settings = scenario.supervision
+    anticipation = settings.service_brake_build_up_s + settings.driver_reaction_s
+    extra_m: dict[float, float] = {}
+    factors = [1.0] * (len(stations) - 1)
+    for _ in range(30):
+        trajectory, stops = _build(scenario, supervision, stations, anticipation, extra_m, factors)
+        violation = first_violation(trajectory, stops, supervision)
+        if violation is None:
+            targets = tuple(sorted({t for leg in supervision.legs for t in leg.targets},
+                                   key=lambda t: (t.location_m, t.kind)))
+            return Plan(trajectory, stops, supervision, targets,
+                        timing_checks(scenario, trajectory, stops))
+        _, position, leg = violation
+        target = supervision.legs[leg].binding_target(position)
+        if target is None:
+            raise PlanningError(f'{scenario.origin}: the target exceeds the static limit near '
+                                f'{position:.0f} m (leg {leg})')
+        if target.kind == 'speed_decrease':
+            extra_m[target.location_m] = max(100.0, 2.0 * extra_m.get(target.location_m, 0.0))
+        else:
+            factors[leg] *= 0.8
+    raise PlanningError(f'{scenario.origin}: no target curve stays under the permitted speed '
+                        f'near {position:.0f} m (leg {leg}): lower planning.'
+                        'service_deceleration_mps2 or the supervision times')

@@ -127,8 +127,9 @@ class Trajectory:
         self.end_time, self.end_position, self.end_speed, self.end_acceleration = end_state
 
     def at(self, t: float) -> ReferencePoint:
-        """The reference at time t; before the start and after the end the train stands still
-        at the first/last position."""
+        """The reference at time t, with the segment's jerk (the derivative of a*; at a segment
+        boundary the jerk of the segment starting there); before the start and after the end
+        the train stands still at the first/last position."""
         if t >= self.end_time:
             return ReferencePoint(t, self.end_position, self.end_speed, self.end_acceleration)
         if t <= self.start_time:
@@ -136,4 +137,4 @@ class Trajectory:
             return ReferencePoint(t, first.x0, first.v0, first.a0)
         segment = self.segments[bisect_right(self._starts, t) - 1]
         x, v, a = segment.at(t)
-        return ReferencePoint(t, x, v, a)
+        return ReferencePoint(t, x, v, a, segment.jerk)

@@ -19,8 +19,10 @@ from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_common.params import Param, ParameterTable
-from ato_common.ros import (MessageError, command_from_msg, diagnostic_status, from_time,
-                            qos_profile, run_node, state_to_msg, to_duration, to_time, topic)
+from ato_common.plant_setup import parse_failure_injection
+from ato_common.ros import (MessageError, actuator_forces_to_msg, command_from_msg,
+                            diagnostic_status, from_time, qos_profile, run_node, state_to_msg,
+                            to_duration, to_time, topic)
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import TrainState, nanoseconds, seconds
 from train_plant_node.models import MODELS
@@ -51,11 +53,17 @@ PARAMS = (
           'time without its command', minimum=0.01, maximum=10.0),
     Param('max_substep_s', 0.1, 'longest internal integration step, s', minimum=1e-4,
           maximum=1.0),
-    Param('sensor_position_noise_m', 0.0, 'standard deviation of position measurement noise, m',
+    Param('sensor_position_noise_m', 0.0, 'standard deviation of position measurement noise, m '
+          "(> 0: replaces the scenario's plant.sensors.position.noise_std)",
           minimum=0.0, maximum=100.0),
-    Param('sensor_speed_noise_mps', 0.0, 'standard deviation of speed measurement noise, m/s',
+    Param('sensor_speed_noise_mps', 0.0, 'standard deviation of speed measurement noise, m/s '
+          "(> 0: replaces the scenario's plant.sensors.speed.noise_std)",
           minimum=0.0, maximum=10.0),
-    Param('seed', 0, 'seed of the sensor noise', minimum=0, maximum=2**31 - 1),
+    Param('seed', 0, "seed of the sensor noise (used when the scenario's plant.sensors.seed "
+          'is 0)', minimum=0, maximum=2**31 - 1),
+    Param('inject_failure', '', 'run time: actuator failure(s) as YAML, the schema of the '
+          "scenario's plant.failures, e.g. \"{actuator: motor_2, kind: stuck, force_n: 2.0e+5}\"; "
+          'start_s defaults to now; kind healthy repairs', read_only=False),
     Param('watchdog_periods', 3, 'control periods without a valid command before service '
           'braking', minimum=1, maximum=1000),
     Param('emergency_periods', 10, 'control periods without a valid command before emergency '
@@ -109,6 +117,17 @@ class TrainPlantNode(Node):
         self.clock_pub = (self.create_publisher(Clock, topic('clock').name,
                                                 qos_profile(topic('clock').qos))
                           if self.lockstep else None)
+        self.commanded_pub = self.create_publisher(
+            JointState, topic('actuators_commanded').name,
+            qos_profile(topic('actuators_commanded').qos))
+        self.applied_pub = self.create_publisher(
+            JointState, topic('actuators_applied').name,
+            qos_profile(topic('actuators_applied').qos))
+        self.params.extra_checks.append(self.on_inject_failure)
+        if p['inject_failure']:  # given at start-up: like scenario failures
+            reason = self.on_inject_failure({'inject_failure': p['inject_failure']})
+            if reason:
+                raise ConfigError(reason)
         self.create_subscription(JointState, topic('command').name, self.on_command,
                                  qos_profile(topic('command').qos))
         # Wall-clock timer: start-up, re-sends in lockstep, integration in real time.
@@ -133,13 +152,18 @@ class TrainPlantNode(Node):
             # Once per step: a re-sent step must repeat the same measurement (sensor noise is
             # drawn here), or lockstep runs would depend on how often a step was re-sent.
             truth = self.sim.truth()
+            names = self.sim.actuator_names
             self.step_messages = (stamp, Clock(clock=to_time(stamp)), self._msg(truth, stamp),
-                                  self._msg(self.sim.measured(truth), stamp))
-        _, clock, truth_msg, measured_msg = self.step_messages
+                                  self._msg(self.sim.measured(truth), stamp),
+                                  actuator_forces_to_msg(stamp, names, self.sim.commanded),
+                                  actuator_forces_to_msg(stamp, names, self.sim.applied))
+        _, clock, truth_msg, measured_msg, commanded_msg, applied_msg = self.step_messages
         if self.clock_pub is not None:
             self.clock_pub.publish(clock)
         self.truth_pub.publish(truth_msg)
         self.measured_pub.publish(measured_msg)
+        self.commanded_pub.publish(commanded_msg)
+        self.applied_pub.publish(applied_msg)
         self.steps_published += 1
         self.last_publish_wall = time.monotonic()
         safety_state = (self.sim.watchdog, self.sim.atp_intervention)
@@ -161,7 +185,7 @@ class TrainPlantNode(Node):
     def safety_message(self) -> str:
         sim = self.sim
         if sim.atp_intervention:
-            return (f'ATP emergency brake intervention: {units.mps_to_kmh(sim._speed()):.1f} km/h '
+            return (f'ATP emergency brake intervention: {units.mps_to_kmh(sim.lead_speed()):.1f} km/h '
                     f'over the permitted {units.mps_to_kmh(sim.permitted_speed()):.0f} km/h')
         if sim.watchdog != NORMAL:
             return (f'command watchdog: {sim.watchdog} after {sim.missed_periods} control '
@@ -189,13 +213,35 @@ class TrainPlantNode(Node):
              'watchdog': self.sim.watchdog, 'missed_periods': self.sim.missed_periods,
              'atp_intervention': self.sim.atp_intervention,
              'atp_interventions': self.sim.atp_interventions,
-             'permitted_speed_mps': self.sim.permitted_speed()})
+             'permitted_speed_mps': self.sim.permitted_speed(),
+             'mode_index': self.sim.mode_index(),
+             'active_failures': '; '.join(f.describe() for f in
+                                          self.sim.active_failures().values()) or 'none',
+             'scheduled_failures': len(self.sim.failures)})
         self.diag_pub.publish(DiagnosticArray(header=self._header(), status=[status]))
 
     def _header(self) -> Header:
         return Header(stamp=to_time(self.stamp_ns()))
 
     # --- events -------------------------------------------------------------------------------
+    def on_inject_failure(self, changes) -> str | None:
+        """``ros2 param set /train_plant_node inject_failure '...'``: validated, then applied at
+        once (a rejected text returns the reason and changes nothing)."""
+        if 'inject_failure' not in changes:
+            return None
+        try:
+            failures, repaired = parse_failure_injection(
+                changes['inject_failure'], self.sim.actuator_names, self.sim.time_s)
+        except ConfigError as error:
+            return str(error)
+        self.sim.inject_failures(failures, repaired)
+        for failure in failures:
+            self.get_logger().warning(f'failure injected: {failure.describe()}')
+        for name in repaired:
+            self.get_logger().info(f'actuator {name} repaired')
+        self.next_diagnostic_ns = 0
+        return None
+
     def on_timer(self) -> None:
         if self.finished:
             return

@@ -1,21 +1,32 @@
-"""Lockstep plant simulation: model + actuator limits + sensors + exact integer time.
+"""Lockstep plant simulation: model + actuators + failures + sensors + exact integer time.
 
-``TrainSimulation`` is what the node drives: ``apply_command`` (validated, then saturated by the
-traction characteristic), ``advance`` by one control period with the applied force held, and
-``truth``/``measured`` snapshots. It has no rclpy dependency and is deterministic for a seed.
+``TrainSimulation`` is what the node drives: ``apply_command`` (validated), ``advance`` by one
+control period with the command held, and ``truth``/``measured`` snapshots. It has no rclpy
+dependency and is deterministic for a seed. The scenario's ``plant:`` section
+(:mod:`ato_common.plant_setup`) supplies what varies, the actuators, the failures and the sensors.
+
+Actuators (one per actuated unit: per motor, or per power car): the command is limited to the
+unit's equal share of the train's traction characteristic (force and power) and of its
+emergency brake, then passes a first-order lag and a rate limit. These run at the integration
+step (at most ``max_substep_s``): the drive holds its force within a step, as a traction
+controller sampling at that rate does, so every model step is a zero-order hold. A failure
+(Mao et al. 2017 eqs 13-20) replaces what the unit delivers from its start time; a stuck signal
+is sampled at the middle of each integration step.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 from typing import Sequence
 
 import numpy as np
 
+from ato_common.plant_setup import ActuatorFailure, PlantSetup, QuantitySensor, SensorSetup
 from ato_common.scenario import Scenario
 from ato_common.types import TrainState, nanoseconds, seconds
 from train_plant_node.models import PlantModel, make_model
+from train_plant_node.surroundings import Surroundings, surroundings_at
 
 
 class CommandRejected(ValueError):
@@ -36,9 +47,27 @@ NORMAL, SERVICE_BRAKE, EMERGENCY_BRAKE = 'normal', 'service brake', 'emergency b
 
 @dataclass(frozen=True)
 class SensorSettings:
-    position_noise_m: float = 0.0   # standard deviation of white noise on each measurement
+    """Node-parameter overrides of the scenario's sensors: white noise on position and speed
+    (used when > 0) and the seed (used when the scenario's is 0)."""
+
+    position_noise_m: float = 0.0
     speed_noise_mps: float = 0.0
     seed: int = 0
+
+
+def merged_sensors(setup: SensorSetup, overrides: SensorSettings | None) -> SensorSetup:
+    if overrides is None:
+        return setup
+    position, speed = setup.position, setup.speed
+    if overrides.position_noise_m > 0.0:
+        position = replace(position, noise_std=overrides.position_noise_m)
+    if overrides.speed_noise_mps > 0.0:
+        speed = replace(speed, noise_std=overrides.speed_noise_mps)
+    return replace(setup, position=position, speed=speed, seed=setup.seed or overrides.seed)
+
+
+# A scheduled time this close to a step boundary is on it (time is float seconds here).
+EVENT_TOLERANCE_S = 1e-9
 
 
 class TrainSimulation:
@@ -50,27 +79,39 @@ class TrainSimulation:
     - ATP supervision: above the permitted speed (the line's static limit) plus the margin, an
       emergency brake intervention that the ATO cannot override until the train is back at or
       under the permitted speed.
+    A failed actuator keeps delivering its failure force whatever the safety functions ask.
     """
 
     def __init__(self, scenario: Scenario, model_name: str = 'point_mass',
-                 sensors: SensorSettings = SensorSettings(),
+                 sensors: SensorSettings | None = None,
                  safety: SafetySettings = SafetySettings(), **model_options):
         self.scenario = scenario
+        self.setup: PlantSetup = scenario.plant
         self.model: PlantModel = make_model(model_name, scenario.train, scenario.line,
                                             **model_options)
-        self.sensors = sensors
-        self._rng = np.random.default_rng(sensors.seed)
+        self.sensors = merged_sensors(self.setup.sensors, sensors)
+        self._rng = np.random.default_rng(self.sensors.seed)
         self.stamp_ns = 0
         self.state = self.model.initial_state(scenario.run.initial_position_m)
         n = len(self.model.actuator_names)
         self.commanded = (0.0,) * n
-        self.applied = (0.0,) * n
+        self._drive = [0.0] * n          # what each healthy drive delivers (after lag, limits)
+        self.applied = (0.0,) * n        # what acts on the train (failures included)
+        self.failures: list[ActuatorFailure] = list(self.setup.failures)
         self.rejected_commands = 0
         self.safety = safety
         self.missed_periods = 0
         self.atp_intervention = False
         self.atp_interventions = 0
+        self._events = self._schedule()
+        self._env_key = None
+        self._env: Surroundings | None = None
+        settings = self.setup.actuators
+        self._instant_actuators = settings.time_constant_s == 0.0 and \
+            settings.rate_limit_n_per_s == 0.0
+        self._update_applied()
 
+    # --- time and state ----------------------------------------------------------------------
     @property
     def time_s(self) -> float:
         return seconds(self.stamp_ns)
@@ -79,15 +120,37 @@ class TrainSimulation:
     def actuator_names(self) -> tuple[str, ...]:
         return self.model.actuator_names
 
-    def _speed(self) -> float:
-        """The lead car's speed (the state's second half holds the speeds)."""
-        return float(self.state[len(self.state) // 2])
+    def lead_speed(self) -> float:
+        return self.model.lead_speed(self.state)
 
+    def lead_position(self) -> float:
+        return float(self.state[0])
+
+    def _schedule(self) -> list[float]:
+        times = set(self.setup.scheduled_times())
+        for f in self.failures:
+            times |= {f.start_s, f.end_s}
+        return sorted(t for t in times if math.isfinite(t) and t > 0.0)
+
+    def surroundings(self, time_s: float | None = None) -> Surroundings:
+        """The mode, abrupt change, varying resistance and disturbance in force now."""
+        t = self.time_s if time_s is None else time_s
+        setup = self.setup
+        key = (setup.mode_index(t, self.lead_position()), setup.abrupt_change(t))
+        if key != self._env_key:
+            self._env_key = key
+            self._env = surroundings_at(setup, self.scenario.train, t, self.lead_position())
+        return self._env
+
+    def mode_index(self) -> int:
+        return self.setup.mode_index(self.time_s, self.lead_position())
+
+    # --- commands ------------------------------------------------------------------------------
     def apply_command(self, forces: Sequence[float]) -> tuple[float, ...]:
-        """Validate and saturate a command; it is then held until the next one (zero-order hold).
+        """Validate a command; it is then held until the next one (zero-order hold).
 
         A command of the wrong length or with a non-finite value raises CommandRejected and the
-        previous command stays in force."""
+        previous command stays in force. Returns the forces applied now."""
         names = self.model.actuator_names
         if len(forces) != len(names):
             self.rejected_commands += 1
@@ -107,6 +170,30 @@ class TrainSimulation:
         self.missed_periods = self.missed_periods + 1 if periods is None else periods
         self._update_applied()
 
+    def inject_failures(self, failures: Sequence[ActuatorFailure],
+                        repaired: Sequence[str] = ()) -> None:
+        """Run-time failures: each replaces any failure of its actuator from its start time on;
+        the actuators in ``repaired`` become healthy now."""
+        now = self.time_s
+        for failure in failures:
+            self.failures = [f if f.actuator != failure.actuator or f.end_s <= failure.start_s
+                             else replace(f, end_s=failure.start_s)
+                             for f in self.failures if not (f.actuator == failure.actuator
+                                                            and f.start_s >= failure.start_s)]
+            self.failures.append(failure)
+        for name in repaired:
+            self.failures = [f if f.actuator != name or f.end_s <= now
+                             else replace(f, end_s=now)
+                             for f in self.failures if not (f.actuator == name
+                                                            and f.start_s > now)]
+        self.failures = [f for f in self.failures if f.end_s > f.start_s]
+        self._events = self._schedule()
+        self._update_applied()
+
+    def active_failures(self, time_s: float | None = None) -> dict[str, ActuatorFailure]:
+        t = self.time_s if time_s is None else time_s
+        return {f.actuator: f for f in self.failures if f.active(t)}
+
     @property
     def watchdog(self) -> str:
         if self.missed_periods >= self.safety.emergency_periods:
@@ -116,26 +203,53 @@ class TrainSimulation:
         return NORMAL
 
     def permitted_speed(self) -> float:
-        return self.scenario.line.speed_limit_mps(float(self.state[0]))  # at the lead car
+        return self.scenario.line.speed_limit_mps(self.lead_position())  # at the lead car
 
-    def _update_applied(self) -> None:
-        """The force the actuators apply: the command within the physical limits (traction
-        characteristic, emergency brake), unless a safety function overrides it."""
+    def targets(self) -> list[float]:
+        """What each healthy drive is asked for: the command within the unit's share of the
+        physical limits (traction characteristic, emergency brake), unless a safety function
+        overrides it."""
         traction = self.scenario.train.traction
         n = len(self.model.actuator_names)
         share = 1.0 / n
         if self.atp_intervention or self.watchdog == EMERGENCY_BRAKE:
-            self.applied = (-traction.max_emergency_brake_force_n * share,) * n
-        elif self.watchdog == SERVICE_BRAKE:
-            self.applied = (-traction.max_service_brake_force_n * share,) * n
+            return [-traction.max_emergency_brake_force_n * share] * n
+        if self.watchdog == SERVICE_BRAKE:
+            return [-traction.max_service_brake_force_n * share] * n
+        highest = traction.max_traction_at(self.lead_speed()) * share
+        lowest = -traction.max_emergency_brake_force_n * share
+        return [min(max(f, lowest), highest) for f in self.commanded]
+
+    def _failed(self, drive: Sequence[float], time_s: float, h: float = 0.0) -> tuple:
+        failures = self.active_failures(time_s) if self.failures else {}
+        if not failures:
+            return tuple(drive)
+        names = self.model.actuator_names
+        return tuple(failures[name].force(time_s + 0.5 * h, f) if name in failures else f
+                     for name, f in zip(names, drive))
+
+    def _update_applied(self) -> None:
+        if self._instant_actuators:
+            self._drive = self.targets()
+        self.applied = self._failed(self._drive, self.time_s)
+
+    def _actuate(self, time_s: float, h: float) -> tuple:
+        """The forces held during the integration step [time_s, time_s + h]."""
+        settings = self.setup.actuators
+        targets = self.targets()
+        if self._instant_actuators:
+            self._drive = targets
         else:
-            highest = traction.max_traction_at(self._speed())
-            lowest = -traction.max_emergency_brake_force_n
-            self.applied = tuple(min(max(f, lowest * share), highest * share)
-                                 for f in self.commanded)
+            gain = 1.0 - math.exp(-h / settings.time_constant_s) if settings.time_constant_s \
+                else 1.0
+            max_change = settings.rate_limit_n_per_s * h if settings.rate_limit_n_per_s \
+                else math.inf
+            self._drive = [f + min(max(gain * (target - f), -max_change), max_change)
+                           for f, target in zip(self._drive, targets)]
+        return self._failed(self._drive, time_s, h)
 
     def _supervise(self) -> None:
-        speed, permitted = self._speed(), self.permitted_speed()
+        speed, permitted = self.lead_speed(), self.permitted_speed()
         if not self.atp_intervention and speed > permitted + self.safety.overspeed_margin_mps:
             self.atp_intervention = True
             self.atp_interventions += 1
@@ -144,27 +258,69 @@ class TrainSimulation:
         self._update_applied()
 
     def advance(self, duration_ns: int) -> None:
-        self.state = self.model.step(self.state, seconds(duration_ns), self.applied)
+        """Integrate one period: steps of at most the model's ``max_substep_s``, split at every
+        scheduled time (modes, abrupt changes, failures, disturbance jumps)."""
+        t = self.time_s
+        duration = seconds(duration_ns)
+        end = t + duration
+        substeps = max(1, math.ceil(duration / self.model.max_substep_s - 1e-9))
+        h_nominal = duration / substeps
+        events = [e for e in self._events if t + EVENT_TOLERANCE_S < e < end - EVENT_TOLERANCE_S]
+        if self.setup.disturbance.kind == 'random':
+            events = sorted(set(events) | set(self.setup.disturbance.switch_times(t, end)))
+        boundaries = sorted(set([t + k * h_nominal for k in range(1, substeps)] + events))
+        boundaries = [b for b in boundaries if b < end - EVENT_TOLERANCE_S] + [end]
+        for stop in boundaries:
+            h = stop - t
+            if h <= EVENT_TOLERANCE_S:
+                continue
+            if abs(h - h_nominal) < EVENT_TOLERANCE_S:
+                h = h_nominal  # one step length: the multi-car propagators stay cached
+            env = self.surroundings(t)
+            forces = self._actuate(t, h)
+            self.state = self.model.step(self.state, h, forces, t, env)
+            t = stop
         self.stamp_ns += duration_ns
         self._supervise()
 
+    # --- outputs -------------------------------------------------------------------------------
     def truth(self) -> TrainState:
-        positions, speeds, accelerations, forces = self.model.outputs(self.state, self.applied)
+        positions, speeds, accelerations, forces = self.model.outputs(
+            self.state, self.applied, self.time_s, self.surroundings())
         return TrainState(self.stamp_ns, self.model.car_names, positions, speeds, accelerations,
                           forces)
 
+    def _measure(self, values: Sequence[float], sensor: QuantitySensor,
+                 cars: Sequence[str]) -> tuple[float, ...]:
+        """Truth + bias + white noise, quantised; NaN when dropped out or failed."""
+        if sensor.ideal:
+            return tuple(values)
+        n = len(values)
+        noise = (self._rng.normal(0.0, sensor.noise_std, n) if sensor.noise_std
+                 else np.zeros(n))
+        dropped = (self._rng.random(n) < sensor.dropout_probability
+                   if sensor.dropout_probability else np.zeros(n, dtype=bool))
+        out = []
+        for value, e, drop, car in zip(values, noise, dropped, cars):
+            if drop or sensor.failed(self.time_s, car):
+                out.append(math.nan)
+                continue
+            value = value + sensor.bias + float(e)
+            if sensor.quantum:
+                value = round(value / sensor.quantum) * sensor.quantum
+            out.append(value)
+        return tuple(out)
+
     def measured(self, truth: TrainState | None = None) -> TrainState:
+        """What the on-board sensors report; a missing measurement is NaN."""
         truth = truth or self.truth()
         s = self.sensors
-        if s.position_noise_m == 0.0 and s.speed_noise_mps == 0.0:
+        if s.ideal:
             return truth
-        n = len(truth.positions)
-        noise_s = self._rng.normal(0.0, s.position_noise_m, n) if s.position_noise_m else np.zeros(n)
-        noise_v = self._rng.normal(0.0, s.speed_noise_mps, n) if s.speed_noise_mps else np.zeros(n)
-        return TrainState(truth.stamp_ns, truth.car_names,
-                          tuple(p + e for p, e in zip(truth.positions, noise_s)),
-                          tuple(v + e for v, e in zip(truth.speeds, noise_v)),
-                          truth.accelerations, truth.forces)
+        cars = truth.car_names
+        return TrainState(truth.stamp_ns, cars, self._measure(truth.positions, s.position, cars),
+                          self._measure(truth.speeds, s.speed, cars),
+                          self._measure(truth.accelerations, s.acceleration, cars), truth.forces)
 
 
 def control_period_ns(rate_hz: float) -> int:

@@ -1,0 +1,281 @@
+"""Speed supervision of a movement authority: the most restrictive speed profile and the braking
+curves to its targets, organised as ETCS names them (SUBSET-026 section 3.13), simplified.
+
+What is modelled (all in SI, positions along the line, the front of the train):
+
+* MRSP, the most restrictive speed profile: the static speed limits, where a higher limit takes
+  effect only once the whole train (its length) has left the lower one (SUBSET-026 3.13.7).
+* Targets: the start of every lower MRSP section (a speed target), and the end of the movement
+  authority (EOA, a zero-speed target) with its supervised location SvL = EOA + overlap.
+* EBD, the emergency brake deceleration curve: from the SvL (speed 0) or from a speed target at
+  V_target + dV_ebi(V_target) (3.13.8.3), integrated backwards with the train's emergency
+  deceleration plus the gradient (g sin(theta), uphill helps, downhill hinders; 3.13.4).
+* SBD, the service brake deceleration curve: from the EOA or the speed target, with the service
+  deceleration plus the gradient (3.13.8.4).
+* Curves derived from them by shifting each point earlier by the distance run at that speed
+  during a time (3.13.9.3): EBI = EBD shifted by the traction cut-off and emergency brake
+  build-up times; SBI = SBD shifted by the service brake build-up time (and never above EBI);
+  warning = SBI shifted by T_warning; permitted = SBI shifted by T_driver; indication =
+  permitted shifted by T_indication.
+* Ceiling supervision (3.13.9.2): warning, SBI and EBI sit dV_warning, dV_sbi and dV_ebi above
+  the MRSP, each dV interpolated linearly in the MRSP speed between its two ETCS default values.
+
+Simplified against SUBSET-026: the gradient is the one at the front of the train (not the
+lowest under the whole train); no speed-dependent brake build-up, no correction factors Kdry/Kwet
+or Kv/Kr/Kt (the deceleration tables are taken as already corrected), no speed measurement
+accuracy, no release speed, no guidance curve. ``permitted_speed(position)`` is the minimum of
+the MRSP and the permitted curves of every target: the speed an ATO target must stay below.
+"""
+
+from __future__ import annotations
+
+from bisect import bisect_right
+from dataclasses import dataclass
+import math
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ato_common import units
+from ato_common.line import Line, PiecewiseConstant
+
+# ETCS default ceiling-supervision margins (SUBSET-026 A.3.1): dV at and below V_min, at and
+# above V_max, linear in between.
+DV_EBI_KMH = (7.5, 15.0)
+DV_SBI_KMH = (5.5, 10.0)
+DV_WARNING_KMH = (4.0, 5.0)
+DV_SPEEDS_KMH = (110.0, 210.0)
+
+# Integration step of the deceleration curves (m) and the speed up to which they are drawn.
+CURVE_STEP_M = 2.0
+CURVE_HEADROOM_MPS = 10.0
+
+CURVE_NAMES = ('ebd', 'ebi', 'sbd', 'sbi', 'warning', 'permitted', 'indication')
+
+
+@dataclass(frozen=True)
+class SupervisionSettings:
+    """The train's braking capability and the supervision's times and distances."""
+
+    emergency_deceleration: Callable[[float], float]  # A_brake_emergency(v) on level track
+    service_deceleration: Callable[[float], float]    # A_brake_service(v) on level track
+    traction_cut_off_s: float = 1.0       # T_traction
+    emergency_brake_build_up_s: float = 2.0  # T_be
+    service_brake_build_up_s: float = 2.0    # T_bs
+    warning_s: float = 2.0                # T_warning
+    driver_reaction_s: float = 4.0        # T_driver
+    indication_s: float = 4.0             # T_indication
+    eoa_beyond_stop_m: float = 50.0       # stopping point -> end of authority
+    overlap_m: float = 50.0               # EOA -> supervised location
+
+
+def constant_deceleration(value: float) -> Callable[[float], float]:
+    return lambda speed: value
+
+
+def tabulated_deceleration(speeds: Sequence[float], decelerations: Sequence[float]
+                           ) -> Callable[[float], float]:
+    """A deceleration table by speed (TTOBench A_brake_*): stepwise, each value holding from its
+    speed up to the next one, as ETCS brake tables are."""
+    speeds, values = list(speeds), list(decelerations)
+    return lambda speed: values[max(bisect_right(speeds, speed) - 1, 0)]
+
+
+def ceiling_margin(limit_mps: float, margins_kmh: tuple[float, float]) -> float:
+    """dV(V_MRSP) of SUBSET-026 3.13.9.2.3: margins_kmh at V_min and V_max, linear between."""
+    v_kmh = units.mps_to_kmh(limit_mps)
+    (low, high), (v_low, v_high) = margins_kmh, DV_SPEEDS_KMH
+    share = min(max((v_kmh - v_low) / (v_high - v_low), 0.0), 1.0)
+    return units.kmh_to_mps(low + share * (high - low))
+
+
+def most_restrictive_speed_profile(limits: PiecewiseConstant, end_m: float,
+                                   train_length_m: float) -> PiecewiseConstant:
+    """MRSP(x) = the lowest static limit over [x - train length, x]: a decrease applies at its
+    start, an increase once the train's tail has passed it."""
+    sections = limits.segments(end_m)
+    candidates = sorted({s for s, _, _ in sections} | {min(e + train_length_m, end_m)
+                                                        for _, e, _ in sections} - {end_m})
+    starts, values = [], []
+    for x in candidates:
+        value = min(v for s, e, v in sections if s <= x and e > x - train_length_m)
+        if not values or value != values[-1]:
+            starts.append(x)
+            values.append(value)
+    return PiecewiseConstant(starts, values)
+
+
+@dataclass(frozen=True)
+class Target:
+    """A place where the train must be at or below a speed. ``kind`` is 'speed_decrease',
+    'stop' (an intermediate station stop, ending the leg's authority) or 'end_of_authority'."""
+
+    kind: str
+    location_m: float      # where the speed must be reached (the stopping point for a stop)
+    speed_mps: float
+    name: str = ''
+
+
+class DecelerationCurve:
+    """Speed against position, sampled, increasing speed towards smaller positions. Between its
+    last sample and the target location it holds its final speed (a shifted curve reaches the
+    target speed before the target); a zero-speed curve holds zero beyond."""
+
+    def __init__(self, positions: np.ndarray, speeds: np.ndarray, target_m: float):
+        order = np.argsort(positions)
+        self.positions = positions[order]
+        self.speeds = speeds[order]
+        self.start_m = float(self.positions[0])
+        self.end_m = float(self.positions[-1])
+        self.end_speed = float(self.speeds[-1])
+        self.target_m = target_m
+
+    def __call__(self, position: float) -> float:
+        """The curve's speed; infinite where it does not restrict (before its start, after
+        a speed target)."""
+        if position < self.start_m:
+            return math.inf
+        if position > self.end_m:
+            if position <= self.target_m or self.end_speed == 0.0:
+                return self.end_speed
+            return math.inf
+        return float(np.interp(position, self.positions, self.speeds))
+
+    def shifted(self, time_s: float) -> 'DecelerationCurve':
+        """The curve a train must be on ``time_s`` earlier (SUBSET-026 3.13.9.3: each point moves
+        back by the distance run at its speed in that time)."""
+        return DecelerationCurve(self.positions - self.speeds * time_s, self.speeds.copy(),
+                                 self.target_m)
+
+
+def deceleration_curve(line: Line, location_m: float, speed_mps: float, top_speed_mps: float,
+                       deceleration: Callable[[float], float]) -> DecelerationCurve:
+    """Backwards from (location, speed): d(v^2)/dx = -2 (A(v) + g sin(theta(x))), up to
+    ``top_speed_mps`` or the start of the line. The gradient term is the line's grade only."""
+    positions, squares = [location_m], [speed_mps * speed_mps]
+    x, y = location_m, speed_mps * speed_mps
+    top = top_speed_mps * top_speed_mps
+    while x > 0.0 and y < top:
+        step = min(CURVE_STEP_M, x)
+        # Stop the step at a gradient change so each step sees one gradient.
+        grade_index = bisect_right(line.grade_sine.starts, x - 1e-9) - 1
+        if grade_index >= 0 and x - line.grade_sine.starts[grade_index] > 1e-9:
+            step = min(step, x - line.grade_sine.starts[grade_index])
+        sine = line.grade_sine(x - 0.5 * step)
+
+        def slope(square: float) -> float:
+            return 2.0 * (deceleration(math.sqrt(max(square, 0.0)))
+                          + units.STANDARD_GRAVITY * sine)
+        middle = max(y + 0.5 * step * slope(y), 0.0)
+        # Where the brake cannot even hold the speed on a descent, the curve falls backwards:
+        # the train must come to it slower still (down to standstill).
+        x, y = x - step, max(y + step * slope(middle), 0.0)
+        positions.append(x)
+        squares.append(y)
+    return DecelerationCurve(np.array(positions), np.sqrt(np.array(squares)), location_m)
+
+
+class SpeedSupervision:
+    """The supervision of one movement authority: MRSP, targets, the braking curves of each."""
+
+    def __init__(self, line: Line, settings: SupervisionSettings, train_length_m: float,
+                 start_m: float, stopping_point_m: float, final: bool = True,
+                 stop_name: str = ''):
+        self.settings = settings
+        self.start_m = start_m
+        self.mrsp = most_restrictive_speed_profile(line.speed_limit_mps, line.length_m,
+                                                   train_length_m)
+        # The authority ends beyond the stopping point (platform end, overrun), also at the
+        # last station of a line: the track does not end where the line description does.
+        eoa = stopping_point_m + settings.eoa_beyond_stop_m
+        self.end_of_authority_m = eoa
+        self.supervised_location_m = eoa + settings.overlap_m
+        kind = 'end_of_authority' if final else 'stop'
+        self.targets: list[Target] = []
+        previous = None
+        for s, e, v in self.mrsp.segments(line.length_m):
+            if previous is not None and v < previous and start_m < s < stopping_point_m:
+                self.targets.append(Target('speed_decrease', s, v))
+            previous = v
+        self.targets.append(Target(kind, stopping_point_m, 0.0, stop_name))
+        top = max(self.mrsp.values) + units.kmh_to_mps(DV_EBI_KMH[1]) + CURVE_HEADROOM_MPS
+        self.curves: dict[str, list[DecelerationCurve]] = {name: [] for name in CURVE_NAMES}
+        for target in self.targets:
+            if target.kind == 'speed_decrease':
+                ebd_from = (target.location_m,
+                            target.speed_mps + ceiling_margin(target.speed_mps, DV_EBI_KMH))
+                sbd_from = (target.location_m, target.speed_mps)
+            else:
+                ebd_from = (self.supervised_location_m, 0.0)
+                sbd_from = (eoa, 0.0)
+            ebd = deceleration_curve(line, *ebd_from, top, settings.emergency_deceleration)
+            sbd = deceleration_curve(line, *sbd_from, top, settings.service_deceleration)
+            ebi = ebd.shifted(settings.traction_cut_off_s + settings.emergency_brake_build_up_s)
+            sbi = sbd.shifted(settings.service_brake_build_up_s)
+            permitted = sbi.shifted(settings.driver_reaction_s)
+            for name, curve in (('ebd', ebd), ('ebi', ebi), ('sbd', sbd), ('sbi', sbi),
+                                ('warning', sbi.shifted(settings.warning_s)),
+                                ('permitted', permitted),
+                                ('indication', permitted.shifted(settings.indication_s))):
+                self.curves[name].append(curve)
+
+    def curve(self, name: str, position_m: float) -> float:
+        """The named supervision limit at a position: the lowest of its curves and of the
+        ceiling (the MRSP plus the name's dV; the EBD and SBD have no ceiling)."""
+        lowest = min((c(position_m) for c in self.curves[name]), default=math.inf)
+        if name == 'sbi':
+            lowest = min(lowest, self.curve('ebi', position_m))
+        mrsp = self.mrsp(position_m)
+        ceiling = {'ebi': mrsp + ceiling_margin(mrsp, DV_EBI_KMH),
+                   'sbi': mrsp + ceiling_margin(mrsp, DV_SBI_KMH),
+                   'warning': mrsp + ceiling_margin(mrsp, DV_WARNING_KMH),
+                   'permitted': mrsp, 'indication': mrsp}.get(name, math.inf)
+        if position_m > self.supervised_location_m:
+            return 0.0
+        return max(min(lowest, ceiling), 0.0)
+
+    def binding_target(self, position_m: float) -> Target | None:
+        """The target whose permitted curve is the permitted speed at a position (None where
+        the MRSP is)."""
+        speeds = [c(position_m) for c in self.curves['permitted']]
+        lowest = min(range(len(speeds)), key=speeds.__getitem__)
+        return self.targets[lowest] if speeds[lowest] < self.mrsp(position_m) else None
+
+    def permitted_speed(self, position_m: float) -> float:
+        """min(MRSP, the permitted curves of every target), m/s; 0 beyond the SvL."""
+        return self.curve('permitted', position_m)
+
+
+class RunSupervision:
+    """One movement authority per leg of a run (station to station): a train standing at, or
+    past, a station within ``STOP_WINDOW_M`` is under the next leg's authority."""
+
+    STOP_WINDOW_M = 0.5
+
+    def __init__(self, line: Line, settings: SupervisionSettings, train_length_m: float,
+                 stations_m: Sequence[float], names: Sequence[str] = ()):
+        self.stations_m = list(stations_m)
+        names = list(names) or [''] * len(stations_m)
+        self.legs = [SpeedSupervision(line, settings, train_length_m, origin, destination,
+                                      final=i == len(stations_m) - 2, stop_name=names[i + 1])
+                     for i, (origin, destination) in enumerate(zip(stations_m, stations_m[1:]))]
+
+    @classmethod
+    def for_scenario(cls, scenario) -> 'RunSupervision':
+        """The run of a scenario (:class:`ato_common.scenario.Scenario`): from its initial
+        station through every later one."""
+        stations = [s for s in scenario.line.stations
+                    if s.position_m >= scenario.run.initial_position_m - 1e-9]
+        return cls(scenario.line, scenario.supervision, scenario.train.length_m,
+                   [s.position_m for s in stations], [s.name for s in stations])
+
+    def leg_at(self, position_m: float) -> int:
+        passed = bisect_right(self.stations_m, position_m + self.STOP_WINDOW_M) - 1
+        return min(max(passed, 0), len(self.legs) - 1)
+
+    def permitted_speed(self, position_m: float, leg: int | None = None) -> float:
+        return self.legs[self.leg_at(position_m) if leg is None else leg].permitted_speed(
+            position_m)
+
+    def curve(self, name: str, position_m: float, leg: int | None = None) -> float:
+        return self.legs[self.leg_at(position_m) if leg is None else leg].curve(name, position_m)

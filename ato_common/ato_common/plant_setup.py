@@ -1,0 +1,494 @@
+"""The ``plant:`` section of a scenario: what of the train and its surroundings changes during a
+run, how the actuators respond and fail, and what the sensors report.
+
+Everything is optional; the default :class:`PlantSetup` is "nothing varies": nominal train, no
+disturbance, ideal actuators (within the traction characteristic), perfect sensors. Paper units
+are converted here, through :mod:`ato_common.units`. Schema (all keys optional)::
+
+    plant:
+      resistance_variation:        # Luo & Xu eq (34): coefficient(t) = nominal (1 + A sin(w t + phi))
+        a: {amplitude: 0.3, omega_rad_per_s: 0.1, phase_rad: 0.0}
+        b: {amplitude: 0.2, omega_rad_per_s: 0.1}
+        c: {amplitude: 0.1, omega_rad_per_s: 0.1}
+        line: {amplitude: 0.05, omega_rad_per_s: 0.02}   # Liu & Li l(t) = M g (1 + ...)
+      modes:                       # Mao et al. 2017 Section 4.1; from_s (by time) or from_m (region)
+        - {name: open air, from_s: 0, davis_kn_kmh: {a: 2.25, b: -1.9e-3, c: 3.2e-4}}
+        - {name: tunnel, from_s: 400, davis_kn_kmh: {a: 2.25, b: -1.9e-3, c: 9.2e-4}}
+        - {name: slope and curve, from_s: 800, grade_sine: 0.015, curvature: 0.34, ...}
+      abrupt_changes:              # Tan et al. 4.3: the grade is 30 per mille for 1000 <= t < 1100
+        - {start_s: 1000, end_s: 1100, grade_per_mille: 30}
+      disturbance: {kind: fast, amplitude_n: 8900, omega_rad_per_s: 1.0}   # Liu & Li Case 3
+      actuators: {time_constant_s: 0.5, rate_limit_n_per_s: 1.0e+5}
+      failures:                    # Mao et al. 2017 eqs (13)-(20)
+        - {actuator: motor_2, kind: stuck, start_s: 600, end_s: 1000, force_n: 2.0e+5}
+      sensors:
+        seed: 1
+        speed: {noise_std: 0.01, bias: 0.0, quantum: 0.0, dropout_probability: 0.0,
+                failed_from_s: 300, failed_cars: [train]}
+"""
+
+from __future__ import annotations
+
+from bisect import bisect_right
+from dataclasses import dataclass, field
+import math
+from typing import Sequence
+
+import numpy as np
+
+from ato_common import units
+from ato_common.trains import DavisResistance, TrainParameters
+from ato_common.validation import ConfigError, Fields
+
+# Mao et al. 2017 eq (12) / Tan et al. eq (1): the curve term is 0.004 D in m/s^2.
+CURVATURE_ACCEL_PER_D = 0.004
+
+
+@dataclass(frozen=True)
+class Sinusoid:
+    """A factor 1 + amplitude sin(omega t + phase) around a nominal value."""
+
+    amplitude: float
+    omega_rad_per_s: float
+    phase_rad: float = 0.0
+
+    def factor(self, time_s: float) -> float:
+        return 1.0 + self.amplitude * math.sin(self.omega_rad_per_s * time_s + self.phase_rad)
+
+
+@dataclass(frozen=True)
+class ResistanceVariation:
+    """Luo & Xu eq (34): c0(t), cv(t), ca(t) vary around their nominal values; ``line`` is Liu &
+    Li's l(t) = M g (1 + ...) applied to the line's grade, curve and tunnel forces (eq 6)."""
+
+    a: Sinusoid | None = None
+    b: Sinusoid | None = None
+    c: Sinusoid | None = None
+    line: Sinusoid | None = None
+
+    def factors(self, time_s: float) -> tuple[float, float, float, float]:
+        return tuple(1.0 if s is None else s.factor(time_s)
+                     for s in (self.a, self.b, self.c, self.line))
+
+
+@dataclass(frozen=True)
+class Mode:
+    """One piecewise-constant mode of Mao et al. 2017 (eqs 10-12): mass, whole-train Davis
+    resistance (N), extra grade (sine of the angle, added to the line's) and curve term
+    0.004 D (m/s^2), active from ``start`` (s or m, see :attr:`PlantSetup.mode_switch`)."""
+
+    name: str
+    start: float
+    mass_kg: float
+    davis: DavisResistance
+    grade_sine: float = 0.0
+    curve_accel_mps2: float = 0.0
+
+
+@dataclass(frozen=True)
+class AbruptChange:
+    """For start_s <= t < end_s the line's grade is replaced by ``grade_sine`` (if given) and the
+    running resistance is multiplied by ``resistance_factor`` (Tan et al. Section 4.3)."""
+
+    start_s: float
+    end_s: float
+    grade_sine: float | None = None
+    resistance_factor: float = 1.0
+
+    def active(self, time_s: float) -> bool:
+        return self.start_s <= time_s < self.end_s
+
+
+DISTURBANCE_KINDS = ('none', 'fast', 'slow', 'random')
+RANDOM_BLOCK = 1024
+
+
+@dataclass(frozen=True)
+class Disturbance:
+    """External force d(t) in M v' = u - f_w + d (Liu & Li eq 9, +d as in shared/papers).
+
+    none: 0; fast: A sin(w t + phi); slow: -A (1 + sin(w t + phi)) / 2 (mostly resisting; the
+    forms recommended for Liu & Li Case 3); random: uniform in [-A, A], a new value every
+    ``hold_s``, reproducible from ``seed``.
+    """
+
+    kind: str = 'none'
+    amplitude_n: float = 0.0
+    omega_rad_per_s: float = 1.0
+    phase_rad: float = 0.0
+    hold_s: float = 1.0
+    seed: int = 0
+    _values: list = field(default_factory=list, compare=False, repr=False)
+
+    def force(self, time_s: float) -> float:
+        if self.kind == 'none':
+            return 0.0
+        if self.kind == 'fast':
+            return self.amplitude_n * math.sin(self.omega_rad_per_s * time_s + self.phase_rad)
+        if self.kind == 'slow':
+            return -0.5 * self.amplitude_n * (
+                1.0 + math.sin(self.omega_rad_per_s * time_s + self.phase_rad))
+        k = max(int(time_s // self.hold_s), 0)
+        while k >= len(self._values):  # fixed blocks, each seeded by its index: order-independent
+            block = len(self._values) // RANDOM_BLOCK
+            rng = np.random.default_rng([self.seed, block])
+            self._values.extend(rng.uniform(-1.0, 1.0, RANDOM_BLOCK).tolist())
+        return self.amplitude_n * float(self._values[k])
+
+    def switch_times(self, start_s: float, end_s: float) -> list[float]:
+        """Times in (start_s, end_s) where d(t) jumps (integration steps are split there)."""
+        if self.kind != 'random':
+            return []
+        first = math.floor(start_s / self.hold_s) + 1
+        return [k * self.hold_s for k in range(first, math.ceil(end_s / self.hold_s))
+                if start_s < k * self.hold_s < end_s]
+
+
+@dataclass(frozen=True)
+class ActuatorSettings:
+    """Each actuated unit: first-order lag (0: none), rate limit of the applied force (0: none).
+    Force, power and braking limits are the unit's equal share of the train's
+    :class:`~ato_common.trains.TractionCharacteristic`."""
+
+    time_constant_s: float = 0.0
+    rate_limit_n_per_s: float = 0.0
+
+
+FAILURE_KINDS = ('stuck', 'stuck_signal', 'loss', 'partial')
+
+
+@dataclass(frozen=True)
+class ActuatorFailure:
+    """Mao et al. 2017 eqs (13)-(20): from start_s to end_s the actuator delivers
+
+    stuck:        force_n (F_j = Fbar_j0)
+    stuck_signal: force_n + amplitude_n sin(omega t + phase) (F_j = Fbar_j0 + Fbar_j1 f_j1(t))
+    loss:         0 (total loss of effectiveness)
+    partial:      effectiveness * the healthy force, 0 < effectiveness < 1
+    whatever it is commanded; a stuck force is not limited by the traction characteristic.
+    """
+
+    actuator: str
+    kind: str
+    start_s: float
+    end_s: float = math.inf
+    force_n: float = 0.0
+    amplitude_n: float = 0.0
+    omega_rad_per_s: float = 0.0
+    phase_rad: float = 0.0
+    effectiveness: float = 1.0
+
+    def active(self, time_s: float) -> bool:
+        return self.start_s <= time_s < self.end_s
+
+    def force(self, time_s: float, healthy_force_n: float) -> float:
+        if self.kind == 'stuck':
+            return self.force_n
+        if self.kind == 'stuck_signal':
+            return self.force_n + self.amplitude_n * math.sin(
+                self.omega_rad_per_s * time_s + self.phase_rad)
+        if self.kind == 'loss':
+            return 0.0
+        return self.effectiveness * healthy_force_n
+
+    def describe(self) -> str:
+        details = {'stuck': f'{self.force_n:g} N',
+                   'stuck_signal': f'{self.force_n:g} + {self.amplitude_n:g} sin('
+                                   f'{self.omega_rad_per_s:g} t + {self.phase_rad:g}) N',
+                   'loss': '0 N', 'partial': f'{self.effectiveness:g} of the healthy force'}
+        end = '' if math.isinf(self.end_s) else f' until {self.end_s:g} s'
+        return f'{self.actuator} {self.kind} ({details[self.kind]}) from {self.start_s:g} s{end}'
+
+
+@dataclass(frozen=True)
+class QuantitySensor:
+    """One measured quantity of every car: truth + bias + white noise, then quantised; NaN when
+    dropped out (probability per sample) or failed (from failed_from_s to failed_until_s on
+    ``failed_cars``, all cars if empty). Units: m, m/s or m/s^2 as the quantity."""
+
+    noise_std: float = 0.0
+    bias: float = 0.0
+    quantum: float = 0.0
+    dropout_probability: float = 0.0
+    failed_from_s: float = math.inf
+    failed_until_s: float = math.inf
+    failed_cars: tuple[str, ...] = ()
+
+    @property
+    def ideal(self) -> bool:
+        return (self.noise_std == 0.0 and self.bias == 0.0 and self.quantum == 0.0
+                and self.dropout_probability == 0.0 and math.isinf(self.failed_from_s))
+
+    def failed(self, time_s: float, car: str) -> bool:
+        return (self.failed_from_s <= time_s < self.failed_until_s
+                and (not self.failed_cars or car in self.failed_cars))
+
+
+@dataclass(frozen=True)
+class SensorSetup:
+    position: QuantitySensor = QuantitySensor()
+    speed: QuantitySensor = QuantitySensor()
+    acceleration: QuantitySensor = QuantitySensor()
+    seed: int = 0
+
+    @property
+    def ideal(self) -> bool:
+        return self.position.ideal and self.speed.ideal and self.acceleration.ideal
+
+
+MODE_SWITCHES = ('time', 'position')
+
+
+@dataclass(frozen=True)
+class PlantSetup:
+    resistance_variation: ResistanceVariation | None = None
+    modes: tuple[Mode, ...] = ()
+    mode_switch: str = 'time'          # modes start at a time (from_s) or a position (from_m)
+    abrupt_changes: tuple[AbruptChange, ...] = ()
+    disturbance: Disturbance = Disturbance()
+    actuators: ActuatorSettings = ActuatorSettings()
+    failures: tuple[ActuatorFailure, ...] = ()
+    sensors: SensorSetup = SensorSetup()
+
+    def mode_index(self, time_s: float, position_m: float) -> int:
+        """Index of the active mode (Mao et al. 2017's known indicators chi_i); 0 without modes."""
+        if len(self.modes) < 2:
+            return 0
+        key = time_s if self.mode_switch == 'time' else position_m
+        return max(bisect_right([m.start for m in self.modes], key) - 1, 0)
+
+    def abrupt_change(self, time_s: float) -> AbruptChange | None:
+        for change in self.abrupt_changes:
+            if change.active(time_s):
+                return change
+        return None
+
+    def scheduled_times(self) -> list[float]:
+        """Every time at which something switches (integration steps are split there)."""
+        times = {c.start_s for c in self.abrupt_changes} | {c.end_s for c in self.abrupt_changes}
+        times |= {f.start_s for f in self.failures} | {f.end_s for f in self.failures}
+        if self.mode_switch == 'time':
+            times |= {m.start for m in self.modes}
+        for s in (self.sensors.position, self.sensors.speed, self.sensors.acceleration):
+            times |= {s.failed_from_s, s.failed_until_s}
+        return sorted(t for t in times if math.isfinite(t) and t > 0.0)
+
+
+# --- parsing ------------------------------------------------------------------------------------
+
+def _sinusoid(f: Fields) -> Sinusoid:
+    s = Sinusoid(f.number('amplitude', minimum=-1.0, maximum=1.0),
+                 f.number('omega_rad_per_s', minimum=0.0), f.number('phase_rad', 0.0))
+    f.reject_unknown()
+    return s
+
+
+def _optional_sinusoid(parent: Fields, key: str) -> Sinusoid | None:
+    return _sinusoid(parent.section(key)) if parent.has(key) else None
+
+
+def _davis(f: Fields, default: DavisResistance) -> DavisResistance:
+    """``davis_n: {a, b, c}`` in N, N s/m, N s^2/m^2, or ``davis_kn_kmh: {a, b, c}`` in kN with V
+    in km/h (Mao et al. 2017 reading (A)); the default when neither is given."""
+    if f.has('davis_n') and f.has('davis_kn_kmh'):
+        raise ConfigError(f'{f.where}: give davis_n or davis_kn_kmh, not both')
+    for key in ('davis_n', 'davis_kn_kmh'):
+        if f.has(key):
+            d = f.section(key)
+            a, b, c = d.number('a'), d.number('b'), d.number('c')
+            d.reject_unknown()
+            davis = (DavisResistance(a, b, c) if key == 'davis_n'
+                     else DavisResistance.from_kn_kmh(a, b, c))
+            if davis.a_n < 0.0 or davis.c_n_s2_per_m2 < 0.0:
+                raise ConfigError(f'{d.where}: a and c must be >= 0')
+            return davis
+    return default
+
+
+def _grade_sine(f: Fields, default: float | None) -> float | None:
+    if f.has('grade_sine') and f.has('grade_per_mille'):
+        raise ConfigError(f'{f.where}: give grade_sine or grade_per_mille, not both')
+    if f.has('grade_sine'):
+        return f.number('grade_sine', minimum=-0.1, maximum=0.1)
+    if f.has('grade_per_mille'):
+        return units.per_mille_to_sine(f.number('grade_per_mille', minimum=-100.0, maximum=100.0))
+    return default
+
+
+def _modes(f: Fields, train: TrainParameters) -> tuple[tuple[Mode, ...], str]:
+    items = f.items('modes')
+    if not items:
+        return (), 'time'
+    switch = 'time' if items[0].has('from_s') else 'position'
+    key = 'from_s' if switch == 'time' else 'from_m'
+    modes = []
+    for i, item in enumerate(items):
+        if not item.has(key):
+            raise ConfigError(f"{item.where}: every mode needs {key} (the first mode's switch "
+                              'decides: by time or by position)')
+        start = item.number(key, minimum=0.0)
+        if i == 0 and start != 0.0:
+            raise ConfigError(f'{item.where}.{key}: the first mode must start at 0')
+        if modes and start <= modes[-1].start:
+            raise ConfigError(f'{item.where}.{key}: must increase, got {modes[-1].start:g} '
+                              f'then {start:g}')
+        mass = item.number('mass_kg', train.mass_kg, minimum=0.0, exclusive_minimum=True)
+        modes.append(Mode(
+            name=item.text('name', f'mode {i + 1}'), start=start, mass_kg=mass,
+            davis=_davis(item, train.davis), grade_sine=_grade_sine(item, 0.0),
+            curve_accel_mps2=CURVATURE_ACCEL_PER_D * item.number('curvature', 0.0, minimum=0.0)))
+        item.reject_unknown()
+    return tuple(modes), switch
+
+
+def _abrupt_changes(f: Fields) -> tuple[AbruptChange, ...]:
+    changes = []
+    for item in f.items('abrupt_changes'):
+        start = item.number('start_s', minimum=0.0)
+        end = item.number('end_s', minimum=start, exclusive_minimum=True)
+        change = AbruptChange(start, end, _grade_sine(item, None),
+                              item.number('resistance_factor', 1.0, minimum=0.0, maximum=10.0))
+        item.reject_unknown()
+        if any(c.start_s < end and start < c.end_s for c in changes):
+            raise ConfigError(f'{item.where}: overlaps another abrupt change')
+        changes.append(change)
+    return tuple(changes)
+
+
+def _disturbance(f: Fields) -> Disturbance:
+    kind = f.text('kind', 'none')
+    if kind not in DISTURBANCE_KINDS:
+        raise ConfigError(f"{f.where}.kind: '{kind}' is not valid; valid: "
+                          f"{', '.join(DISTURBANCE_KINDS)}")
+    d = Disturbance(kind, f.number('amplitude_n', 0.0, minimum=0.0),
+                    f.number('omega_rad_per_s', 1.0, minimum=0.0),
+                    f.number('phase_rad', 0.0),
+                    f.number('hold_s', 1.0, minimum=0.0, exclusive_minimum=True),
+                    int(f.number('seed', 0.0, minimum=0.0, maximum=2**31 - 1)))
+    f.reject_unknown()
+    return d
+
+
+def parse_failures(items: Sequence[Fields], actuator_names: Sequence[str],
+                   default_start_s: float | None = None) -> tuple[ActuatorFailure, ...]:
+    """Failure records (also what the node accepts at run time, where start_s defaults to now)."""
+    failures = []
+    for item in items:
+        actuator = item.text('actuator')
+        if actuator not in actuator_names:
+            raise ConfigError(f"{item.where}.actuator: unknown actuator '{actuator}'; valid: "
+                              f"{', '.join(actuator_names)}")
+        kind = item.text('kind')
+        if kind not in FAILURE_KINDS:
+            raise ConfigError(f"{item.where}.kind: '{kind}' is not valid; valid: "
+                              f"{', '.join(FAILURE_KINDS)}")
+        start = item.number('start_s', default_start_s, minimum=0.0)
+        end = item.number('end_s', math.inf, minimum=start, exclusive_minimum=True)
+        failure = ActuatorFailure(actuator, kind, start, end)
+        if kind in ('stuck', 'stuck_signal'):
+            failure = ActuatorFailure(actuator, kind, start, end, item.number('force_n'))
+        if kind == 'stuck_signal':
+            failure = ActuatorFailure(actuator, kind, start, end, failure.force_n,
+                                      item.number('amplitude_n'),
+                                      item.number('omega_rad_per_s', minimum=0.0),
+                                      item.number('phase_rad', 0.0))
+        if kind == 'partial':
+            failure = ActuatorFailure(actuator, kind, start, end, effectiveness=item.number(
+                'effectiveness', minimum=0.0, maximum=1.0, exclusive_minimum=True))
+        item.reject_unknown()
+        for other in failures:
+            if other.actuator == actuator and other.start_s < end and start < other.end_s:
+                raise ConfigError(f'{item.where}: overlaps another failure of {actuator}')
+        failures.append(failure)
+    return tuple(failures)
+
+
+def _quantity_sensor(f: Fields, car_names: Sequence[str]) -> QuantitySensor:
+    cars = []
+    for i, name in enumerate(f.raw('failed_cars') or []):
+        if name not in car_names:
+            raise ConfigError(f"{f.where}.failed_cars[{i}]: unknown car {name!r}; valid: "
+                              f"{', '.join(car_names)}")
+        cars.append(name)
+    failed_from = f.number('failed_from_s', math.inf, minimum=0.0) if f.has('failed_from_s') \
+        else math.inf
+    sensor = QuantitySensor(
+        noise_std=f.number('noise_std', 0.0, minimum=0.0),
+        bias=f.number('bias', 0.0),
+        quantum=f.number('quantum', 0.0, minimum=0.0),
+        dropout_probability=f.number('dropout_probability', 0.0, minimum=0.0, maximum=1.0),
+        failed_from_s=failed_from,
+        failed_until_s=(f.number('failed_until_s', minimum=failed_from, exclusive_minimum=True)
+                        if f.has('failed_until_s') else math.inf),
+        failed_cars=tuple(cars))
+    f.reject_unknown()
+    return sensor
+
+
+def _sensors(f: Fields, car_names: Sequence[str]) -> SensorSetup:
+    setup = SensorSetup(*(_quantity_sensor(f.section(q), car_names)
+                          for q in ('position', 'speed', 'acceleration')),
+                        seed=int(f.number('seed', 0.0, minimum=0.0, maximum=2**31 - 1)))
+    f.reject_unknown()
+    return setup
+
+
+def car_names_of(train: TrainParameters) -> tuple[str, ...]:
+    """Names of the cars a plant model publishes: the multi-car description, or one 'train'."""
+    return tuple(c.name for c in train.cars) + ('train',)
+
+
+def parse_plant_setup(data, train: TrainParameters, where: str = 'plant') -> PlantSetup:
+    """Parse the ``plant:`` section (None or absent: nothing varies)."""
+    if data is None:
+        return PlantSetup()
+    f = Fields(data, where)
+    v = f.section('resistance_variation')
+    variation = None
+    if f.has('resistance_variation'):
+        variation = ResistanceVariation(*(_optional_sinusoid(v, k) for k in ('a', 'b', 'c', 'line')))
+        v.reject_unknown()
+    modes, switch = _modes(f, train)
+    a = f.section('actuators')
+    actuators = ActuatorSettings(a.number('time_constant_s', 0.0, minimum=0.0, maximum=60.0),
+                                 a.number('rate_limit_n_per_s', 0.0, minimum=0.0))
+    a.reject_unknown()
+    setup = PlantSetup(
+        resistance_variation=variation, modes=modes, mode_switch=switch,
+        abrupt_changes=_abrupt_changes(f), disturbance=_disturbance(f.section('disturbance')),
+        actuators=actuators, failures=parse_failures(f.items('failures'), train.actuator_names),
+        sensors=_sensors(f.section('sensors'), car_names_of(train)))
+    f.reject_unknown()
+    return setup
+
+
+def parse_failure_injection(text: str, actuator_names: Sequence[str], now_s: float,
+                            where: str = 'inject_failure'
+                            ) -> tuple[tuple[ActuatorFailure, ...], tuple[str, ...]]:
+    """A run-time failure injection: YAML (or JSON) text of one failure mapping or a list of
+    them, as in ``plant.failures``; ``start_s`` defaults to now and must not be in the past;
+    ``kind: healthy`` repairs the actuator now. Returns (failures, repaired actuators)."""
+    import yaml
+    try:
+        data = yaml.safe_load(text) if text.strip() else []
+    except yaml.YAMLError as error:
+        raise ConfigError(f'{where}: not valid YAML: {error}') from None
+    items = Fields({'failures': data if isinstance(data, list) else [data]}, '').items('failures')
+    repaired, rest = [], []
+    for i, item in enumerate(items):
+        item.where = f'{where}[{i}]'
+        if item.has('kind') and item.text('kind') == 'healthy':
+            name = item.text('actuator')
+            if name not in actuator_names:
+                raise ConfigError(f"{item.where}.actuator: unknown actuator '{name}'; valid: "
+                                  f"{', '.join(actuator_names)}")
+            item.reject_unknown()
+            repaired.append(name)
+        else:
+            rest.append(item)
+    failures = parse_failures(rest, actuator_names, default_start_s=now_s)
+    late = [f for f in failures if f.start_s < now_s]
+    if late:
+        raise ConfigError(f'{where}: start_s {late[0].start_s:g} is in the past (now '
+                          f'{now_s:g} s)')
+    return failures, tuple(repaired)

@@ -1,0 +1,132 @@
+"""Braking-curve supervision: MRSP with the train length, deceleration curves against closed
+forms, gradient correction, the order of the ETCS curves, authority ends."""
+
+import math
+
+import numpy as np
+import pytest
+
+from ato_common import units
+from ato_common.braking_curves import (CURVE_NAMES, DV_EBI_KMH, RunSupervision, SpeedSupervision,
+                                       SupervisionSettings, ceiling_margin, constant_deceleration,
+                                       deceleration_curve, most_restrictive_speed_profile,
+                                       tabulated_deceleration)
+from ato_common.line import Line, PiecewiseConstant, Station
+
+
+def line(limits=((0.0, 300.0),), grades=((0.0, 0.0),), length=40000.0):
+    return Line('t', length, (Station('A', 0.0, 0.0), Station('B', length, 0.0)),
+                PiecewiseConstant([s for s, _ in limits], [units.kmh_to_mps(v) for _, v in limits]),
+                PiecewiseConstant([s for s, _ in grades],
+                                  [units.per_mille_to_sine(g) for _, g in grades]))
+
+
+SETTINGS = SupervisionSettings(constant_deceleration(1.2), constant_deceleration(0.9))
+
+
+def test_mrsp_applies_a_decrease_at_its_start_and_an_increase_after_the_train():
+    limits = PiecewiseConstant([0.0, 1000.0, 1100.0, 3000.0], [80.0, 40.0, 60.0, 70.0])
+    mrsp = most_restrictive_speed_profile(limits, 5000.0, 200.0)
+    assert mrsp(999.0) == 80.0 and mrsp(1000.0) == 40.0
+    # the 60 section is shorter than the train behind the 40 one: 40 holds until 1300 m
+    assert mrsp(1299.0) == 40.0 and mrsp(1300.0) == 60.0
+    assert mrsp(3199.0) == 60.0 and mrsp(3200.0) == 70.0
+
+
+def test_level_deceleration_curve_is_the_closed_form():
+    curve = deceleration_curve(line(), 30000.0, 10.0, 90.0, constant_deceleration(0.8))
+    for d in (0.0, 100.0, 2000.0, 4000.0):
+        assert curve(30000.0 - d) == pytest.approx(math.sqrt(100.0 + 2 * 0.8 * d), rel=1e-9)
+    assert curve(30000.0 - 6000.0) == math.inf  # beyond 90 m/s the curve does not restrict
+
+
+def test_gradient_corrects_the_deceleration():
+    level = deceleration_curve(line(), 30000.0, 0.0, 90.0, constant_deceleration(0.8))
+    down = deceleration_curve(line(grades=((0.0, -10.0),)), 30000.0, 0.0, 90.0,
+                              constant_deceleration(0.8))
+    up = deceleration_curve(line(grades=((0.0, 10.0),)), 30000.0, 0.0, 90.0,
+                            constant_deceleration(0.8))
+    d = 1500.0
+    g_sine = units.STANDARD_GRAVITY * units.per_mille_to_sine(10.0)
+    assert down(30000.0 - d) == pytest.approx(math.sqrt(2 * (0.8 - g_sine) * d), rel=1e-9)
+    assert up(30000.0 - d) == pytest.approx(math.sqrt(2 * (0.8 + g_sine) * d), rel=1e-9)
+    assert down(30000.0 - d) < level(30000.0 - d) < up(30000.0 - d)
+    # a grade change inside the curve: exact piecewise v^2
+    mixed = deceleration_curve(line(grades=((0.0, 0.0), (29000.0, -10.0))), 30000.0, 0.0,
+                               90.0, constant_deceleration(0.8))
+    expected = 2 * (0.8 - g_sine) * 1000.0 + 2 * 0.8 * 500.0
+    assert mixed(28500.0) == pytest.approx(math.sqrt(expected), rel=1e-9)
+
+
+def test_tabulated_deceleration_holds_each_value_up_to_the_next_speed():
+    table = tabulated_deceleration([0.0, 20.0, 40.0], [0.9, 0.8, 0.7])
+    assert table(0.0) == 0.9 and table(19.9) == 0.9 and table(20.0) == 0.8
+    assert table(100.0) == 0.7
+
+
+def test_ceiling_margins_follow_the_etcs_defaults():
+    assert units.mps_to_kmh(ceiling_margin(units.kmh_to_mps(80.0), DV_EBI_KMH)) == \
+        pytest.approx(7.5)
+    assert units.mps_to_kmh(ceiling_margin(units.kmh_to_mps(160.0), DV_EBI_KMH)) == \
+        pytest.approx(11.25)
+    assert units.mps_to_kmh(ceiling_margin(units.kmh_to_mps(300.0), DV_EBI_KMH)) == \
+        pytest.approx(15.0)
+
+
+@pytest.fixture(scope='module')
+def supervision():
+    return SpeedSupervision(line(((0.0, 300.0), (20000.0, 160.0), (25000.0, 300.0))), SETTINGS,
+                            200.0, 0.0, 38000.0)
+
+
+def test_targets_are_the_lower_limit_and_the_end_of_authority(supervision):
+    kinds = [(t.kind, t.location_m, round(units.mps_to_kmh(t.speed_mps), 6))
+             for t in supervision.targets]
+    assert kinds == [('speed_decrease', 20000.0, 160.0), ('end_of_authority', 38000.0, 0.0)]
+    assert supervision.end_of_authority_m == 38000.0 + SETTINGS.eoa_beyond_stop_m
+    assert supervision.supervised_location_m == supervision.end_of_authority_m + \
+        SETTINGS.overlap_m
+
+
+def test_the_curves_are_ordered_as_etcs_orders_them(supervision):
+    order = ('ebi', 'sbi', 'warning', 'permitted', 'indication')
+    for x in np.arange(0.0, 38200.0, 37.0):
+        values = [supervision.curve(name, x) for name in order]
+        assert all(a >= b - 1e-9 for a, b in zip(values, values[1:])), (x, values)
+        assert supervision.curve('ebd', x) >= supervision.curve('ebi', x) - 1e-9
+        assert supervision.curve('sbd', x) >= supervision.curve('sbi', x) - 1e-9
+        assert supervision.permitted_speed(x) <= supervision.mrsp(x)
+
+
+def test_the_permitted_curve_is_the_service_curve_shifted_by_the_reaction_times(supervision):
+    # at speed v the permitted curve is where the SBD is, v (T_bs + T_driver) further on
+    eoa = supervision.end_of_authority_m
+    shift = SETTINGS.service_brake_build_up_s + SETTINGS.driver_reaction_s
+    for v in (5.0, 20.0, 40.0):
+        d_sbd = v * v / (2 * 0.9)
+        x = eoa - d_sbd - v * shift
+        assert supervision.permitted_speed(x) == pytest.approx(v, rel=1e-3)
+    # the EBD ends at the SvL; the speed target's EBD at V_target + dV_ebi
+    assert supervision.curve('ebd', supervision.supervised_location_m - 1e-6) < 0.1
+    v_ebd = units.kmh_to_mps(160.0) + ceiling_margin(units.kmh_to_mps(160.0), DV_EBI_KMH)
+    assert supervision.curves['ebd'][0](20000.0) == pytest.approx(v_ebd, rel=1e-9)
+
+
+def test_far_from_targets_the_permitted_speed_is_the_mrsp_and_zero_beyond_the_svl(supervision):
+    assert supervision.permitted_speed(5000.0) == pytest.approx(units.kmh_to_mps(300.0))
+    assert supervision.permitted_speed(22000.0) == pytest.approx(units.kmh_to_mps(160.0))
+    assert supervision.permitted_speed(38000.0) > 0.0  # the stopping point is inside the MA
+    assert supervision.permitted_speed(supervision.supervised_location_m + 1.0) == 0.0
+    for name in CURVE_NAMES:
+        assert supervision.curve(name, supervision.supervised_location_m + 1.0) == 0.0
+
+
+def test_a_run_has_one_authority_per_leg():
+    run = RunSupervision(line(length=40000.0), SETTINGS, 200.0, [0.0, 15000.0, 40000.0],
+                         ['A', 'M', 'B'])
+    assert [t.kind for t in run.legs[0].targets] == ['stop']
+    assert [t.kind for t in run.legs[1].targets] == ['end_of_authority']
+    assert run.leg_at(14000.0) == 0 and run.leg_at(15000.0) == 1
+    # approaching the intermediate stop the first leg's curve restricts; past it, it does not
+    assert run.permitted_speed(14990.0) < 10.0
+    assert run.permitted_speed(15010.0) == pytest.approx(units.kmh_to_mps(300.0))

@@ -1,0 +1,125 @@
+"""Plot the target curve of scenarios: ``python -m profile_node.curves [SCENARIO ...] [-o DIR]``
+(``make curves``). One PNG per scenario: speed against distance with the static limits, the
+MRSP, the supervision's EBD, EBI, SBD, permitted and indication curves and the ATO target; and
+speed against time with the permitted speed at the target's position. Without names: every
+built-in scenario."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+import sys
+
+import numpy as np
+
+from ato_common import units
+from ato_common.scenario import builtin_scenarios, load_scenario
+from ato_common.validation import ConfigError
+from profile_node.planner import Plan, plan_reference
+
+SUPERVISION_STYLES = (('ebd', 'EBD', 'tab:red', ':'), ('ebi', 'EBI', 'tab:red', '-'),
+                      ('sbd', 'SBD', 'tab:orange', ':'), ('permitted', 'permitted', 'tab:orange',
+                                                          '-'),
+                      ('indication', 'indication', 'tab:olive', '--'))
+POINTS_PER_LEG = 3000
+
+
+def curve_data(scenario, plan: Plan, step_s: float = 1.0) -> dict[str, np.ndarray]:
+    """The arrays plotted, in SI: the target against time, and each supervision curve against
+    position over its leg (NaN separates legs)."""
+    times = np.arange(0.0, plan.trajectory.end_time + step_s, step_s)
+    points = [plan.trajectory.at(t) for t in times]
+    data = {'time_s': times, 'position_m': np.array([p.position for p in points]),
+            'speed_mps': np.array([p.speed for p in points]),
+            'permitted_at_target_mps': np.array([plan.permitted_speed(p.position, t)
+                                                 for t, p in zip(times, points)])}
+    positions, columns = [], {name: [] for name, *_ in SUPERVISION_STYLES}
+    columns['mrsp'], columns['static'] = [], []
+    for leg, (origin, stop) in enumerate(zip(plan.supervision.stations_m,
+                                             plan.supervision.stations_m[1:])):
+        supervision = plan.supervision.legs[leg]
+        xs = np.linspace(origin, stop, POINTS_PER_LEG)
+        positions.extend(xs)
+        for name in columns:
+            if name == 'mrsp':
+                columns[name].extend(supervision.mrsp(x) for x in xs)
+            elif name == 'static':
+                columns[name].extend(scenario.line.speed_limit_mps(x) for x in xs)
+            else:
+                columns[name].extend(supervision.curve(name, x) for x in xs)
+        positions.append(np.nan)
+        for values in columns.values():
+            values.append(np.nan)
+    data['curve_position_m'] = np.array(positions)
+    for name, values in columns.items():
+        array = np.array(values, dtype=float)
+        array[np.isinf(array)] = np.nan
+        data[f'{name}_mps'] = array
+    return data
+
+
+def plot(scenario, plan: Plan, path: Path) -> None:
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    data = curve_data(scenario, plan)
+    kmh = units.KMH_PER_MPS
+    km = data['curve_position_m'] / 1000.0
+    figure, (by_distance, by_time) = plt.subplots(2, 1, figsize=(12, 8.5))
+    by_distance.plot(km, data['static_mps'] * kmh, color='0.6', lw=1.0, label='static limit')
+    by_distance.plot(km, data['mrsp_mps'] * kmh, color='k', lw=1.0, label='MRSP (train length)')
+    for name, label, color, style in SUPERVISION_STYLES:
+        by_distance.plot(km, data[f'{name}_mps'] * kmh, color=color, ls=style, lw=1.0,
+                         label=label)
+    by_distance.plot(data['position_m'] / 1000.0, data['speed_mps'] * kmh, color='tab:blue',
+                     lw=1.6, label='ATO target')
+    for stop in plan.stops:
+        by_distance.axvline(stop.station.position_m / 1000.0, color='0.8', lw=0.8)
+    top = np.nanmax(data['mrsp_mps']) * kmh
+    by_distance.set_ylim(0.0, top * 1.15)
+    by_distance.set_xlabel('position [km]')
+    by_distance.set_ylabel('speed [km/h]')
+    by_distance.legend(loc='lower center', ncol=4, fontsize=8)
+    by_distance.grid(alpha=0.3)
+    by_time.plot(data['time_s'], data['permitted_at_target_mps'] * kmh, color='tab:orange',
+                 lw=1.0, label='permitted speed at the target position')
+    by_time.plot(data['time_s'], data['speed_mps'] * kmh, color='tab:blue', lw=1.6,
+                 label='ATO target v*(t)')
+    by_time.set_ylim(0.0, top * 1.15)
+    by_time.set_xlabel('time [s]')
+    by_time.set_ylabel('speed [km/h]')
+    by_time.legend(loc='lower center', fontsize=8)
+    by_time.grid(alpha=0.3)
+    distance_km = (plan.trajectory.end_position - plan.trajectory.at(0.0).position) / 1000.0
+    figure.suptitle(f'{scenario.name}: {scenario.train.name}, {distance_km:.1f} km in '
+                    f'{plan.trajectory.end_time:.0f} s, top '
+                    f'{np.max(data["speed_mps"]) * kmh:.0f} km/h\n{scenario.source}', fontsize=10)
+    figure.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('scenarios', nargs='*', help='built-in names or scenario files '
+                        '(default: every built-in scenario)')
+    parser.add_argument('-o', '--output', default='runs/curves', help='folder of the PNGs')
+    args = parser.parse_args(argv)
+    for name in args.scenarios or builtin_scenarios():
+        try:
+            scenario = load_scenario(name)
+            plan = plan_reference(scenario)
+        except ConfigError as error:
+            print(f'error: {error}', file=sys.stderr)
+            return 2
+        path = Path(args.output) / f'{scenario.name}.png'
+        plot(scenario, plan, path)
+        print(path)
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

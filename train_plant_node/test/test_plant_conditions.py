@@ -1,0 +1,175 @@
+"""Scheduled changes, actuators, failures, sensors and energy balance of the simulated plant."""
+
+import math
+
+import numpy as np
+import pytest
+
+from ato_common import units
+from ato_common.scenario import parse_scenario
+from train_plant_node.simulation import TrainSimulation
+
+PERIOD_NS = 100_000_000
+G = units.STANDARD_GRAVITY
+
+
+def scenario(preset='mao_2017_500t', plant=None, gradients=None, curves=None, tunnels=None):
+    line = {'name': 'l', 'length_m': 2e6,
+            'stations': [{'name': 'A', 'position_m': 0}, {'name': 'B', 'position_m': 1.9e6}],
+            'speed_limits': [{'start_m': 0, 'speed_kmh': 500}]}
+    for key, value in (('gradients', gradients), ('curves', curves), ('tunnels', tunnels)):
+        if value:
+            line[key] = value
+    return parse_scenario({
+        'name': 's', 'train': {'preset': preset}, 'line': line,
+        'planning': {'max_acceleration_mps2': 0.5, 'service_deceleration_mps2': 0.5,
+                     'max_jerk_mps3': 0.5}, 'plant': plant})
+
+
+def run(sim, seconds, command=None, every=None):
+    """Advance; ``every(sim)`` after each period collects what a test looks at."""
+    out = []
+    for _ in range(int(round(seconds * 10))):
+        if command is not None:
+            sim.apply_command(command(sim) if callable(command) else command)
+        sim.advance(PERIOD_NS)
+        if every is not None:
+            out.append(every(sim))
+    return out
+
+
+MAO_FAILURES = [
+    {'actuator': 'motor_2', 'kind': 'stuck', 'start_s': 60, 'end_s': 100, 'force_n': 2e5},
+    {'actuator': 'motor_2', 'kind': 'stuck_signal', 'start_s': 100, 'end_s': 120,
+     'force_n': 2e5, 'amplitude_n': 2e5, 'omega_rad_per_s': 0.05, 'phase_rad': -30},
+    {'actuator': 'motor_2', 'kind': 'loss', 'start_s': 120, 'end_s': 130},
+    {'actuator': 'motor_3', 'kind': 'partial', 'start_s': 125, 'effectiveness': 0.25}]
+
+
+def test_failures_act_at_their_scheduled_times_and_show_in_the_published_force():
+    # Mao et al. 2017's failure sequence, time-compressed by 10: stuck at 2e5 N, stuck on
+    # 2e5 (1 + sin(0.05 t - 30)) N, total loss; plus a partial loss on another motor.
+    sim = TrainSimulation(scenario(plant={'failures': MAO_FAILURES}))
+    trace = run(sim, 140, (30e3,) * 4, lambda s: (s.time_s, s.applied, s.truth().forces[0]))
+    by_time = {round(t, 1): (applied, total) for t, applied, total in trace}
+    assert by_time[59.9][0] == (30e3,) * 4
+    assert by_time[60.0][0] == (30e3, 2e5, 30e3, 30e3)       # from its start time on
+    assert by_time[99.9][0][1] == 2e5
+    assert by_time[110.0][0][1] == pytest.approx(2e5 * (1 + math.sin(0.05 * 110.0 - 30)))
+    assert by_time[120.0][0] == (30e3, 0.0, 30e3, 30e3)
+    assert by_time[125.0][0] == (30e3, 0.0, 7.5e3, 30e3)
+    assert by_time[130.0][0] == (30e3, 30e3, 7.5e3, 30e3)    # motor_2 healthy again
+    assert by_time[60.0][1] == pytest.approx(3 * 30e3 + 2e5)  # the train feels the sum
+    # the stuck motor accelerates the train beyond what the healthy ones would
+    healthy = TrainSimulation(scenario())
+    run(healthy, 100, (30e3,) * 4)
+    failed = TrainSimulation(scenario(plant={'failures': MAO_FAILURES[:1]}))
+    run(failed, 100, (30e3,) * 4)
+    gain = failed.lead_speed() - healthy.lead_speed()
+    assert gain == pytest.approx((2e5 - 30e3) * 40.0 / 500e3, rel=0.02)
+
+
+def test_run_time_injection_replaces_and_repairs():
+    from ato_common.plant_setup import ActuatorFailure
+    sim = TrainSimulation(scenario())
+    run(sim, 10, (20e3,) * 4)
+    sim.inject_failures([ActuatorFailure('motor_4', 'stuck', sim.time_s, force_n=-5e4)])
+    assert sim.applied[3] == -5e4
+    run(sim, 5, (20e3,) * 4)
+    assert sim.applied[3] == -5e4 and sim.active_failures()['motor_4'].kind == 'stuck'
+    sim.inject_failures([], repaired=['motor_4'])
+    assert sim.applied == (20e3,) * 4 and not sim.active_failures()
+
+
+def test_modes_switch_at_their_times_and_change_the_dynamics():
+    # Mao et al. 2017: the tunnel mode raises c from 3.2e-4 to 9.2e-4 kN/(km/h)^2 at 400 s
+    plant = {'modes': [{'from_s': 0, 'davis_kn_kmh': {'a': 2.25, 'b': -1.9e-3, 'c': 3.2e-4}},
+                       {'from_s': 40, 'davis_kn_kmh': {'a': 2.25, 'b': -1.9e-3, 'c': 9.2e-4}},
+                       {'from_s': 80, 'grade_sine': 0.015, 'curvature': 0.34,
+                        'davis_kn_kmh': {'a': 2.25, 'b': -1.9e-3, 'c': 3.2e-4}}]}
+    sim = TrainSimulation(scenario(plant=plant))
+    sim.state = sim.model.initial_state(0.0, 50.0)
+    force = 120e3
+    trace = run(sim, 100, (force / 4,) * 4,
+                lambda s: (s.time_s, s.mode_index(), s.truth().speeds[0],
+                           s.truth().accelerations[0]))
+    modes = {round(t, 1): m for t, m, _, _ in trace}
+    assert (modes[39.9], modes[40.0], modes[79.9], modes[80.0]) == (0, 1, 1, 2)
+    for t, m, v, a in trace:
+        mode = sim.setup.modes[m]
+        d = mode.davis
+        expected = (force - d.a_n - d.b_n_s_per_m * v - d.c_n_s2_per_m2 * v * v) / 500e3 \
+            - G * mode.grade_sine - mode.curve_accel_mps2
+        assert a == pytest.approx(expected, abs=1e-9), t
+
+
+def test_abrupt_grade_change_and_varying_resistance_are_in_the_truth():
+    plant = {'abrupt_changes': [{'start_s': 10, 'end_s': 11, 'grade_per_mille': 30}],
+             'resistance_variation': {'a': {'amplitude': 0.3, 'omega_rad_per_s': 0.1},
+                                      'b': {'amplitude': 0.2, 'omega_rad_per_s': 0.1},
+                                      'c': {'amplitude': 0.1, 'omega_rad_per_s': 0.1}}}
+    sim = TrainSimulation(scenario('crh3_luo_xu', plant, gradients=[{'start_m': 0,
+                                                                     'per_mille': 5}]))
+    sim.state = sim.model.initial_state(0.0, 60.0)
+    force = 100e3  # below the power limit at 60 m/s
+    trace = run(sim, 12, (force,), lambda s: (s.time_s, s.truth().speeds[0],
+                                              s.truth().accelerations[0]))
+    d, mass = sim.scenario.train.davis, sim.scenario.train.mass_kg
+    for t, v, a in trace:
+        grade = 30.0 if 10.0 <= t < 11.0 else 5.0
+        s = math.sin(0.1 * t)
+        resistance = (d.a_n * (1 + 0.3 * s) + d.b_n_s_per_m * (1 + 0.2 * s) * v
+                      + d.c_n_s2_per_m2 * (1 + 0.1 * s) * v * v)
+        expected = (force - resistance) / mass - G * units.per_mille_to_sine(grade)
+        assert a == pytest.approx(expected, abs=1e-9), t
+
+
+def test_actuator_lag_rate_limit_and_power_share():
+    sim = TrainSimulation(scenario(plant={'actuators': {'time_constant_s': 2.0}}))
+    trace = run(sim, 4, (40e3,) * 4, lambda s: s.applied[0])
+    assert trace[19] == pytest.approx(40e3 * (1 - math.exp(-1.0)), rel=1e-9)  # after one tau
+    assert sim.commanded == (40e3,) * 4
+    sim = TrainSimulation(scenario(plant={'actuators': {'rate_limit_n_per_s': 1e4}}))
+    trace = run(sim, 3, (25e3,) * 4, lambda s: s.applied[0])
+    assert trace[9] == pytest.approx(1e4) and trace[-1] == pytest.approx(25e3)
+    sim = TrainSimulation(scenario())
+    sim.state = sim.model.initial_state(0.0, 80.0)
+    applied = sim.apply_command((1e6,) * 4)
+    traction = sim.scenario.train.traction
+    assert applied[0] == pytest.approx(traction.max_traction_power_w / 80.0 / 4)
+
+
+def test_sensors_bias_quantisation_noise_dropout_and_failed_speed_sensor():
+    sensors = {'seed': 11,
+               'position': {'bias': 2.0, 'quantum': 0.5},
+               'speed': {'noise_std': 0.05, 'failed_from_s': 30},
+               'acceleration': {'dropout_probability': 0.2}}
+    sim = TrainSimulation(scenario(plant={'sensors': sensors}))
+    trace = run(sim, 60, (50e3,) * 4, lambda s: (s.time_s, s.truth(), s.measured()))
+    for t, truth, measured in trace:
+        assert measured.positions[0] == round((truth.positions[0] + 2.0) / 0.5) * 0.5
+        if t >= 30.0:
+            assert math.isnan(measured.speeds[0])  # failed: not measured, NaN
+        assert not math.isnan(truth.speeds[0])      # the truth is untouched
+    errors = np.array([m.speeds[0] - tr.speeds[0] for t, tr, m in trace if t < 30.0])
+    assert abs(errors.mean()) < 0.02 and errors.std() == pytest.approx(0.05, rel=0.2)
+    dropped = np.mean([math.isnan(m.accelerations[0]) for _, _, m in trace])
+    assert 0.12 < dropped < 0.28
+
+
+def test_energy_balance_of_the_point_mass():
+    # work of traction + disturbance = kinetic energy + resistance + line losses, on a line with
+    # grades, a curve and a tunnel, with varying commands, varying resistance and a disturbance
+    plant = {'disturbance': {'kind': 'fast', 'amplitude_n': 5e3, 'omega_rad_per_s': 0.3},
+             'resistance_variation': {'a': {'amplitude': 0.3, 'omega_rad_per_s': 0.1}}}
+    sim = TrainSimulation(scenario('crh3_luo_xu', plant,
+                                   gradients=[{'start_m': 0, 'per_mille': 0},
+                                              {'start_m': 3000, 'per_mille': 8},
+                                              {'start_m': 9000, 'per_mille': -4}],
+                                   curves=[{'start_m': 5000, 'length_m': 800, 'radius_m': 4000}],
+                                   tunnels=[{'start_m': 7000, 'length_m': 1500}]))
+    run(sim, 300, lambda s: (200e3 + 80e3 * math.sin(0.02 * s.time_s),))
+    traction, resistance, line, disturbance = sim.model.work
+    kinetic = 0.5 * sim.scenario.train.mass_kg * sim.lead_speed() ** 2
+    assert sim.lead_position() > 10000  # all the line's features were crossed
+    assert traction + disturbance - resistance - line == pytest.approx(kinetic, rel=1e-6)
