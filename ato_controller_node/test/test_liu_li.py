@@ -3,6 +3,7 @@ saturation handling, and the control-period check."""
 
 import math
 
+from hypothesis import given, settings, strategies as st
 import pytest
 
 from ato_common.trains import train_preset
@@ -97,3 +98,21 @@ def test_controller_adaptation_freezes_into_saturation_but_the_observer_runs(tra
     weights = law.w2.copy()
     law.after_saturation(out.force_n + 1e6, out.force_n)          # wanted more than allowed
     assert (law.w2 > weights).any()                               # W2' = Gamma2 S2 r > 0
+
+
+extreme = st.floats(allow_nan=True, allow_infinity=True) | st.floats(-1e6, 1e6) | \
+    st.sampled_from([0.0, -0.0, 1e-300, 1e300, -1e300])
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.lists(st.tuples(extreme, extreme, extreme, extreme), min_size=1, max_size=30))
+def test_commands_and_estimates_stay_finite_and_within_limits(samples):
+    train = TrainKnowledge.of(train_preset('crh380al_liu_li'))
+    host = ControllerHost(train, 0.005, 'liu_li')
+    for k, (x, x_ref, v_ref, a_ref) in enumerate(samples):
+        result = host.step(Measurement(0.005 * k, x, math.nan),
+                           ReferencePoint(0.005 * k, x_ref, v_ref, a_ref))
+        assert all(math.isfinite(f) for f in result.forces_n)
+        low, high = train.traction.limits_at(0.0)
+        assert low - 1e-6 <= result.total_force_n <= high + 1e-6
+        assert all(math.isfinite(value) for value in result.estimates.values())

@@ -3,12 +3,14 @@ switch, the sign/boundary-layer terms, saturation handling and the control-perio
 
 import math
 
+from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 
 from ato_common.line import parse_line
 from ato_common.trains import train_preset
 from ato_common.types import ReferencePoint
+from ato_controller_node.host import ControllerHost
 from ato_controller_node.laws.base import Measurement, TrainKnowledge, validated_settings
 from ato_controller_node.laws.mao_multibody import (MaoAdaptiveLaw, MaoNominalLaw, MaoState,
                                                     phi_regressors, true_parameters)
@@ -139,3 +141,21 @@ def test_parameters_of_table_2(train):
     assert theta2[0] == 46500 and theta2[2] == pytest.approx(6e8 / 46500)      # 1/m3, k23
     assert theta2[6] == pytest.approx(9.03e-3) and not math.isclose(
         true_parameters(train, as_printed=True)[1][6], theta2[6])              # a3 vs a4
+
+
+extreme = st.floats(allow_nan=True, allow_infinity=True) | st.floats(-1e6, 1e6) | \
+    st.sampled_from([0.0, -0.0, 1e-300, 1e300, -1e300])
+cars = st.tuples(extreme, extreme, extreme, extreme)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.sampled_from(['mao_multibody_nominal', 'mao_multibody_adaptive']),
+       st.lists(st.tuples(cars, cars, extreme, extreme, extreme), min_size=1, max_size=20))
+def test_commands_and_estimates_stay_finite_and_within_limits(train, law, samples):
+    host = ControllerHost(train, DT, law)
+    lowest, highest = train.actuator_limits_at(0.0)
+    for k, (positions, speeds, acceleration, v_ref, a_ref) in enumerate(samples):
+        result = host.step(Measurement(DT * k, positions[0], speeds[0], acceleration, positions,
+                                       speeds), ReferencePoint(DT * k, 0.0, v_ref, a_ref, 0.0))
+        assert all(lowest - 1e-6 <= f <= highest + 1e-6 for f in result.forces_n)
+        assert all(math.isfinite(value) for value in result.estimates.values())

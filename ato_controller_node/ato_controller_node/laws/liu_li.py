@@ -62,6 +62,12 @@ def leaky_step(x, rate: float, drive, leak: float, dt: float):
     return x * kept + drive * ((1.0 - kept) / leak)
 
 
+def _bounded(z: float) -> float:
+    """A normalised NN input clipped to [-10, 10]: every Gaussian node is 0 beyond, and an
+    absurd input must not overflow the square."""
+    return max(-10.0, min(10.0, z))
+
+
 NN1_CENTRES = np.linspace(-1.0, 1.0, 11)                                  # m = 11 nodes
 _G1, _G2 = np.meshgrid(np.linspace(0.0, 1.0, 6), np.linspace(-1.0, 1.0, 5), indexing='ij')
 NN2_CENTRES = np.column_stack([_G1.ravel(), _G2.ravel()])                   # q = 30 nodes
@@ -152,12 +158,13 @@ class LiuLiLaw(ControlLaw):
         self._initialise(measurement.position, speed)
 
     def _s1(self, v_hat: float) -> np.ndarray:
-        z = v_hat / self.settings.speed_scale_mps
+        z = _bounded(v_hat / self.settings.speed_scale_mps)
         return np.exp(-((z - NN1_CENTRES) ** 2) / self.settings.b1 ** 2)          # (15)
 
     def _s2(self, v_hat: float, ref_accel: float) -> np.ndarray:
         s = self.settings
-        d = NN2_CENTRES - (v_hat / s.speed_scale_mps, ref_accel / s.accel_scale_mps2)
+        d = NN2_CENTRES - (_bounded(v_hat / s.speed_scale_mps),
+                           _bounded(ref_accel / s.accel_scale_mps2))
         return np.exp(-np.einsum('ij,ij->i', d, d) / s.b2 ** 2)                   # (15) for NN2
 
     def step(self, measurement, reference):
