@@ -32,7 +32,8 @@ def train(preset):
 @pytest.fixture(scope='module')
 def model(preset):
     line = parse_line({'name': 'flat', 'length_m': 10000,
-                       'stations': [{'name': 'A', 'position_m': 0}, {'name': 'B', 'position_m': 10000}],
+                       'stations': [{'name': 'A', 'position_m': 0},
+                                    {'name': 'B', 'position_m': 10000}],
                        'speed_limits': [{'start_m': 0, 'speed_kmh': 200}]}, 'line')
     return MultiCarModel(preset, line)
 

@@ -11,16 +11,20 @@ Observer, errors s_t = s - s_hat, v_t = v - v_hat (11):
     v_hat' = u/M0 - W1_hat^T S1(Z1_hat) + k2 s_t + D1                         (12), (16)
     S1_j(Z) = exp(-||Z - c1_j||^2 / b1^2)                                    (15)
     W1_hat' = -Gamma1 (S1 s_t + sigma1 (W1_hat - W1_0))                      (18)-(19)
-    D1 = rho1_hat tanh(s_t/eps1),  rho1_hat' = gamma1 (s_t tanh(s_t/eps1) - kappa1 (rho1_hat - rho1_0))  (20)-(21)
+    D1 = rho1_hat tanh(s_t/eps1)                                            (20)
+    rho1_hat' = gamma1 (s_t tanh(s_t/eps1) - kappa1 (rho1_hat - rho1_0))     (21)
 Controller:
     e1 = s - s_d, e2 = v_hat - v_d (22);  r = e2 + lambda e1 (23)
     u = -K r - W2_hat^T S2(Z2_hat) - D2                                      (31)
     W2_hat' = Gamma2 (S2 r - sigma2 (W2_hat - W2_0))                         (32)
-    D2 = rho2_hat tanh(r/eps2),  rho2_hat' = gamma2 (r tanh(r/eps2) - kappa2 (rho2_hat - rho2_0))  (34)-(35)
+    D2 = rho2_hat tanh(r/eps2)                                              (34)
+    rho2_hat' = gamma2 (r tanh(r/eps2) - kappa2 (rho2_hat - rho2_0))         (35)
 
 Choices of the reconstruction (notes section 4 and 8, [REC]):
-- NN1 input Z1 = v_hat / speed_scale, 11 centres evenly on [0, 1] (the notes' 1-D option: the
-  on-board law does not know the line's additional resistance a_add(s) of their 3-D option);
+- NN1 input Z1 = v_hat / speed_scale, 11 centres evenly on [-1, 1] (the notes' 1-D option: the
+  on-board law does not know the line's additional resistance a_add(s) of their 3-D option;
+  the notes normalise to "about [-1, 1]": packed on [0, 1] the nodes overlap so much that the
+  weight loop of Values 7 and 9 is unstable, k1 k2 < Gamma1 sum S1^2);
   NN2 input Z2 = (v_hat / speed_scale, v_d' / accel_scale), 6 x 5 centres on [0, 1] x [-1, 1];
 - a-priori values W1_0, W2_0, rho1_0, rho2_0 = 0; initial weights 0; s_hat, v_hat start from
   the measured position and the measured speed (else the reference speed);
@@ -195,7 +199,8 @@ class LiuLiLaw(ControlLaw):
         # in saturation with weights it can no longer unlearn).
         if abs(excess) <= 1e-9 * max(1.0, abs(wanted_n)) or excess * r > 0.0:
             self.w2 = leaky_step(self.w2, s.Gamma2, s2 * r, s.sigma2, dt)           # (32), W2_0 = 0
-            self.rho2 = leaky_step(self.rho2, s.gamma2, r * math.tanh(r / s.eps2), s.kappa2, dt)  # (35)
+            self.rho2 = leaky_step(self.rho2, s.gamma2, r * math.tanh(r / s.eps2),  # (35)
+                                   s.kappa2, dt)
         self._observe(commanded_n, s_tilde)
 
     def _observe(self, force_n: float, s_tilde: float) -> None:

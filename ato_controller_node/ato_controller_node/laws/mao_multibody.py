@@ -51,7 +51,8 @@ from dataclasses import dataclass
 import math
 
 from ato_common.types import ReferencePoint
-from ato_controller_node.laws.base import ControlLaw, LawOutput, Measurement, TrainKnowledge, setting
+from ato_controller_node.laws.base import (ControlLaw, LawOutput, Measurement, TrainKnowledge,
+                                          setting)
 
 CARS = 4
 
@@ -123,7 +124,8 @@ def nu_signals(s: MaoState, r: ReferencePoint, settings) -> tuple[float, ...]:
 
 
 _ALPHAS = {
-    'alpha1': ('1/s', 'alpha1 of (51) (not reported; notes recommend 1; > 0.5 for p12 = 2, p22 = 4)'),
+    'alpha1': ('1/s', 'alpha1 of (51) (not reported; notes recommend 1; > 0.5 for p12 = 2, '
+                      'p22 = 4)'),
     'alpha2': ('1/s^2', 'alpha2 of (51) (not reported; notes recommend 1)'),
     'alpha3': ('1/s', 'alpha3 of (55) (not reported; notes recommend 1)'),
 }
@@ -315,8 +317,10 @@ class MaoAdaptiveLaw(_MaoBase):
         if any(abs(w - c) > 1e-9 * max(1.0, abs(w)) for w, c in zip(wanted, commanded_forces_n)):
             return  # frozen while an actuator is saturated
         s, dt = self.settings, self.dt
-        self.theta1_hat = [t - dt * s.gamma1 * w * eps for t, w in zip(self.theta1_hat, reg1)]  # (64)
-        self.theta2_hat = [t - dt * s.gamma2 * w * e6 for t, w in zip(self.theta2_hat, reg2)]   # (74)
+        self.theta1_hat = [t - dt * s.gamma1 * w * eps                                  # (64)
+                           for t, w in zip(self.theta1_hat, reg1)]
+        self.theta2_hat = [t - dt * s.gamma2 * w * e6                                   # (74)
+                           for t, w in zip(self.theta2_hat, reg2)]
         for theta, nominal in ((self.theta1_hat, self.nominal1[0]),
                                (self.theta2_hat, self.nominal2[0])):
             theta[0] = min(max(theta[0], s.gain_min_ratio * nominal), s.gain_max_ratio * nominal)
