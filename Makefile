@@ -7,12 +7,15 @@ SCENARIO ?=
 CONTROLLER ?=
 PYTEST_ARGS ?=
 
-.PHONY: help setup build demo test test-unit test-integration bench curves clean
+.PHONY: help setup build demo compare test test-unit test-integration bench curves clean
 
 help:
 	@echo "make setup   create .venv with pinned packages and build ros_ws (idempotent)"
 	@echo "make demo    run the full stack on the default scenario in lockstep and print a summary"
+	@echo "             with the law that make compare ranked best on jinan_xuzhou, else pid"
 	@echo "             (SCENARIO=name-or-file CONTROLLER=law to override)"
+	@echo "make compare every applicable law on every built-in scenario, offline, in parallel:"
+	@echo "             runs/compare/compare.md (tables, ranking) and plots (SCENARIO=name: one only)"
 	@echo "make test    run every test (unit tests of the cores and integration tests over rclpy)"
 	@echo "make bench   lockstep real-time factor through the ROS graph and controller step times"
 	@echo "make curves  plot every built-in scenario's target curve and braking curves to runs/curves/"
@@ -26,6 +29,9 @@ build: setup
 demo: setup
 	@$(ENV) \
 	python -m ato_bringup.run_scenario $(if $(SCENARIO),--scenario $(SCENARIO)) $(if $(CONTROLLER),--controller $(CONTROLLER))
+
+compare: setup
+	@$(ENV) python -m ato_bringup.compare $(if $(SCENARIO),--scenario $(SCENARIO))
 
 test: setup
 	@$(ENV) python -m pytest $(PYTEST_ARGS)

@@ -20,16 +20,15 @@ import tempfile
 
 import numpy as np
 
+from ato_bringup.compare import plan_jobs
+from ato_bringup.offline import run_offline
 from ato_bringup.runner import run_lockstep
 from ato_bringup.stack import StackConfig
 from recorder.bag import bag_info
-from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
+from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
 from ato_common.trains import train_preset
 from ato_common.types import nanoseconds
-from ato_controller_node.host import ControllerHost
 from ato_controller_node.laws import LAWS
-from ato_controller_node.laws.base import Measurement, TrainKnowledge
-from profile_node.planner import plan_reference
 from train_plant_node.simulation import TrainSimulation
 
 
@@ -46,26 +45,24 @@ def graph_rtf(scenario: str, executor: str, domain_id: int, record: bool = False
     return overall, outcome.steady_real_time_factor(), outcome.metrics.samples, recorded
 
 
-def law_step_times(scenario_name: str) -> dict[str, np.ndarray]:
-    scenario = load_scenario(scenario_name)
-    plan = plan_reference(scenario)
-    period_ns = nanoseconds(1.0 / scenario.run.controller_rate_hz)
-    times = {}
+def print_law_step_times(preferred_scenario: str) -> None:
+    """Step time (law plus host) of every registered law, offline, on the preferred scenario
+    if the law applies to it, else on the first built-in scenario it applies to
+    (ato_bringup.compare decides applicability and the plant model)."""
+    jobs, _ = plan_jobs([preferred_scenario] + [s for s in builtin_scenarios()
+                                                 if s != preferred_scenario])
+    print('\ncontroller step time (offline, the law and the host: saturation, bumpless; '
+          'target p99 < 1 ms)')
     for law in sorted(LAWS):
-        sim = TrainSimulation(scenario)
-        host = ControllerHost(TrainKnowledge.of(scenario.train), period_ns / 1e9, law)
-        durations = []
-        while sim.time_s <= plan.trajectory.end_time:
-            state = sim.measured()
-            measurement = Measurement(sim.time_s, state.positions[0], state.speeds[0])
-            reference = plan.trajectory.at(sim.time_s)
-            started = time.perf_counter()
-            result = host.step(measurement, reference)
-            durations.append(time.perf_counter() - started)
-            sim.apply_command(result.forces_n)
-            sim.advance(period_ns)
-        times[law] = np.array(durations)
-    return times
+        job = next((j for j in jobs if j.law == law), None)
+        if job is None:
+            print(f'  {law:12s} no built-in scenario it applies to')
+            continue
+        durations = run_offline(load_scenario(job.scenario), law, model=job.model).step_times_s
+        p50, p99 = np.percentile(durations, [50, 99]) * 1e6
+        print(f'  {law:12s} p50 {p50:7.1f} us   p99 {p99:7.1f} us   max '
+              f'{durations.max() * 1e6:7.1f} us   ({durations.size} steps, {job.scenario}, '
+              f'{job.model})')
 
 
 def plant_speed(scenario_name: str, model: str = 'point_mass', train: str | None = None,
@@ -101,11 +98,7 @@ def main() -> int:
     print(f'  {"with the recorder":24s} {steps} steps: overall {overall:6.1f}x, steady '
           f'{steady:6.1f}x; {recorded} messages recorded, '
           f'{recorded * steady / (steps / 10):.0f} messages/s at the steady rate')
-    print('\ncontroller step time (offline, the law and the host: saturation, bumpless)')
-    for law, durations in law_step_times(args.scenario).items():
-        p50, p99 = np.percentile(durations, [50, 99]) * 1e6
-        print(f'  {law:10s} p50 {p50:7.1f} us   p99 {p99:7.1f} us   max '
-              f'{durations.max() * 1e6:7.1f} us   ({durations.size} steps)')
+    print_law_step_times(args.scenario)
     print('\nplant model alone (one core)')
     print(f'  point_mass  {plant_speed(args.scenario):9.0f}x real time at 10 Hz steps')
     print(f'  multi_car   {plant_speed(args.scenario, "multi_car", "crh2_4car_mao"):9.0f}x real '

@@ -71,8 +71,8 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
     plan = plan_reference(scenario)
     period_ns = nanoseconds(1.0 / (controller_rate_hz or scenario.run.controller_rate_hz))
     sim = TrainSimulation(scenario, model, sensors=sensors, **model_options)
-    host = ControllerHost(TrainKnowledge.of(scenario.train), seconds(period_ns), controller,
-                          settings)
+    host = ControllerHost(TrainKnowledge.of(scenario.train, scenario.plant.modes),
+                          seconds(period_ns), controller, settings)
     end = end_time_s if end_time_s is not None else run_end_time_s(scenario, plan)
     steps = int(end * 1e9 // period_ns)
     pending = sorted((switches or {}).items())

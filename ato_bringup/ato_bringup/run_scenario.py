@@ -2,6 +2,10 @@
 simulated time; then every process is stopped and the run's summary printed.
 
     ros2 run ato_bringup run_scenario --scenario short_line --controller luo_xu
+
+Without --controller the law is the one that ``make compare`` ranked best on jinan_xuzhou
+(runs/compare/compare.json, see ato_bringup.compare), else pid; a ranked law that cannot drive
+the scenario's train falls back to pid, with the reason printed.
 """
 
 from __future__ import annotations
@@ -13,8 +17,9 @@ from pathlib import Path
 import sys
 
 from ato_common.metrics import format_summary
-from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios
+from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
 from ato_common.validation import ConfigError
+from ato_bringup.compare import DEFAULT_DEMO_LAW, DEFAULT_OUT, knowledge_of, ranked_demo_law
 from ato_bringup.runner import RunFailed, run_lockstep
 from ato_bringup.stack import StackConfig
 from ato_controller_node.laws import LAWS
@@ -27,7 +32,12 @@ def parse_args(argv=None) -> argparse.Namespace:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--scenario', default=DEFAULT_SCENARIO,
                         help=f"built-in ({', '.join(builtin_scenarios())}) or a YAML file")
-    parser.add_argument('--controller', default='pid', choices=sorted(LAWS))
+    parser.add_argument('--controller', default=None, choices=sorted(LAWS),
+                        help='the law (default: the best on jinan_xuzhou in '
+                             f'{DEFAULT_OUT / "compare.json"} if present, else '
+                             f'{DEFAULT_DEMO_LAW})')
+    parser.add_argument('--ranking', type=Path, default=DEFAULT_OUT / 'compare.json',
+                        help='the comparison whose best law runs when --controller is not given')
     parser.add_argument('--domain-id', type=int,
                         default=int(os.environ.get('ROS_DOMAIN_ID', '0') or 0),
                         help='ROS_DOMAIN_ID of the run (default: the environment\'s, else 0)')
@@ -40,8 +50,27 @@ def parse_args(argv=None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
+def default_controller(scenario_name: str, ranking: Path) -> tuple[str, str]:
+    """(law, why): the ranked law if it can drive the scenario's train, else the default."""
+    law, why = ranked_demo_law(ranking)
+    if law == DEFAULT_DEMO_LAW:
+        return law, why
+    try:
+        scenario = load_scenario(scenario_name)
+    except ConfigError:
+        return law, why  # the run reports the scenario's error
+    knowledge = knowledge_of(scenario)
+    reason = LAWS[law](knowledge, 1.0 / scenario.run.controller_rate_hz).fits(knowledge)
+    if reason:
+        return DEFAULT_DEMO_LAW, f'default ({law}, {why}, cannot run here: {reason})'
+    return law, why
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
+    if args.controller is None:
+        args.controller, why = default_controller(args.scenario, args.ranking)
+        print(f'controller {args.controller}: {why}', file=sys.stderr)
     stamp = datetime.now().strftime('%Y%m%d-%H%M%S')
     scenario_label = Path(args.scenario).stem
     log_dir = args.log_dir or Path('runs') / f'{stamp}-{scenario_label}-{args.controller}'

@@ -91,7 +91,7 @@ class AtoControllerNode(Node):
         self.rate_hz = p['rate_hz'] or self.scenario.run.controller_rate_hz
         self.dt = 1.0 / self.rate_hz
         self.lockstep = p['lockstep']
-        self.train = TrainKnowledge.of(self.scenario.train)
+        self.train = TrainKnowledge.of(self.scenario.train, self.scenario.plant.modes)
         settings = {law: {f.name: p[f'{law}.{f.name}'] for f in setting_fields(cls.Settings)}
                     for law, cls in LAWS.items()}
         try:

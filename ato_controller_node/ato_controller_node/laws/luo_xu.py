@@ -1,4 +1,5 @@
-"""Luo & Xu, direct adaptive backstepping, Theorem 1.
+"""Luo & Xu, direct adaptive backstepping: Theorem 1 (``luo_xu``) and its robust version with the
+projection law, Theorem 2 (``luo_xu_projection``).
 
 Plant (eq 3): x1' = x2, x2' = u/m - theta^T phi(x2), theta = (c0, cv, ca) per kg,
 phi = (1, x2, x2^2). Both the mass m and theta are unknown and estimated.
@@ -22,13 +23,43 @@ Deviations, all for a sampled, saturating implementation:
 - Gamma and gamma are given in SI (theta per kg, m in kg); the paper's Gamma = diag(1e4, 1, 0.01)
   is tied to its unit choice, so the defaults are retuned as the notes recommend
   (Gamma_ii ~ theta_i / (phi_i z2 T_adapt)); gamma keeps the paper's 1e5.
+
+Theorem 2 (Section 4) replaces the theta law by the projection (24) onto the prior set S of
+eq (20), g(theta) = (theta - theta*)^T (theta - theta*) <= M0^2, theta* = the nominal Table 2
+resistance the train's on-board prior carries (cv corrected from the printed 0.6318 to 0.06318):
+
+    theta_hat' = tau                      inside S, or on its boundary with tau pointing in
+    theta_hat' = tau - Gamma grad_g grad_g^T tau / (grad_g^T Gamma grad_g)
+                                          on the boundary with tau pointing out     (24), (26)
+    tau = -Gamma phi z2,  grad_g = gradient of g at theta_hat
+
+[FIX] The branch conditions printed in (24) are swapped: it projects when (Gamma phi z2)^T grad_g
+>= 0, i.e. when the raw update points into S, and lets outward updates through; its proof and
+(26) project the outward ones. ``paper_as_printed`` runs the printed branches (and the printed
+varphi).
+Deviations of Theorem 2:
+- S is an ellipsoid sum(((theta_i - theta_i*) / (R delta_i))^2) <= 1 with the Table 2 spans
+  delta_i, not the single-radius ball of eq (20): a single radius M0 is dominated by c0
+  (3.138 N/t against 0.014 and 0.00015) and would not constrain cv and ca at all. The default
+  R = sqrt(3) circumscribes the Table 2 box, so the true time-varying theta(t) of eq (34) lies in S
+  at all times (its three coefficients vary in phase and reach 1.46 in this norm).
+- Forward Euler can step a little past the boundary; the estimate is then scaled back onto it
+  along the ray from theta* (a projection in the ellipsoid's own coordinates), so that theta_hat
+  stays in S at every sample, as the continuous law guarantees. Not done when
+  ``paper_as_printed``, whose branches let theta_hat leave S anyway.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 
+from ato_common import units
 from ato_controller_node.laws.base import ControlLaw, LawOutput, setting
+
+#: Luo & Xu Table 2: half-widths of the nominal prior, 3.138 N/t, 0.01417 N/t per km/h,
+#: 0.000152 N/t per (km/h)^2, here per kg in SI (m/s^2, 1/s, 1/m)
+TABLE2_SPANS = units.davis_per_tonne_to_per_kg(3.138, 0.01417, 0.000152)
 
 
 @dataclass(frozen=True)
@@ -87,7 +118,7 @@ class LuoXuLaw(ControlLaw):
         self._pending = (phi, z2, specific)
         return LawOutput(force, {'mass_hat_kg': self.mass_hat, 'c0_hat_mps2': th[0],
                                  'cv_hat_per_s': th[1], 'ca_hat_per_m': th[2],
-                                 'z1_m': z1, 'z2_mps': z2})
+                                 'z1_m': z1, 'z2_mps': z2, **self._extra_estimates()})
 
     def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=()):
         if self._pending is None:
@@ -98,7 +129,78 @@ class LuoXuLaw(ControlLaw):
             return  # frozen under saturation
         s, dt = self.settings, self.dt
         gains = (s.gamma_c0, s.gamma_cv, s.gamma_ca)
-        self.theta_hat = [th - dt * g * p * z2 for th, g, p in zip(self.theta_hat, gains, phi)]  # (16)
+        raw_rate = [-g * p * z2 for g, p in zip(gains, phi)]                          # (16)
+        self.theta_hat = self._next_theta(raw_rate, gains)
         nominal = self.train.nominal_mass_kg
         mass = self.mass_hat - dt * s.gamma_mass * specific * z2                              # (16)
         self.mass_hat = min(max(mass, s.mass_min_ratio * nominal), s.mass_max_ratio * nominal)
+
+    def _extra_estimates(self) -> dict[str, float]:
+        return {}
+
+    def _next_theta(self, raw_rate: list[float], gains: tuple[float, ...]) -> list[float]:
+        """theta_hat one period on, forward Euler of the rate (16)."""
+        return [th + self.dt * r for th, r in zip(self.theta_hat, raw_rate)]
+
+
+@dataclass(frozen=True)
+class LuoXuProjectionSettings(LuoXuSettings):
+    c0_span_mps2: float = setting(TABLE2_SPANS[0], minimum=1e-9, maximum=1.0, units='m/s^2',
+                                  description='half-width of the c0 prior (Table 2: 3.138 N/t)')
+    cv_span_per_s: float = setting(TABLE2_SPANS[1], minimum=1e-12, maximum=1.0, units='1/s',
+                                   description='half-width of the cv prior (Table 2: 0.01417 N/t '
+                                               'per km/h)')
+    ca_span_per_m: float = setting(TABLE2_SPANS[2], minimum=1e-12, maximum=1.0, units='1/m',
+                                   description='half-width of the ca prior (Table 2: 0.000152 N/t '
+                                               'per (km/h)^2)')
+    prior_radius: float = setting(math.sqrt(3.0), minimum=0.1, maximum=100.0, units='-',
+                                  description='radius R of the set S in units of the spans '
+                                              '(sqrt(3) circumscribes the Table 2 box)')
+
+
+class LuoXuProjectionLaw(LuoXuLaw):
+    name = 'luo_xu_projection'
+    summary = ('Luo & Xu Theorem 2: adaptive backstepping with the projection law (24) onto the '
+               'Table 2 prior set S')
+    Settings = LuoXuProjectionSettings
+
+    def _start_from_prior(self) -> None:
+        super()._start_from_prior()
+        self.theta_prior = tuple(self.theta_hat)   # theta* of eq (20): the on-board nominal
+
+    def _scales(self) -> tuple[float, float, float]:
+        s = self.settings
+        r = s.prior_radius
+        return (r * s.c0_span_mps2, r * s.cv_span_per_s, r * s.ca_span_per_m)
+
+    def prior_distance(self, theta) -> float:
+        """sqrt(g(theta)) in units of the boundary: <= 1 inside S."""
+        ratios = [(th - c) / w for th, c, w in zip(theta, self.theta_prior, self._scales())]
+        return math.sqrt(sum(r * r for r in ratios))
+
+    def _extra_estimates(self):
+        return {'prior_distance': self.prior_distance(self.theta_hat)}
+
+    def _next_theta(self, raw_rate, gains):
+        scales = self._scales()
+        offset = [th - c for th, c in zip(self.theta_hat, self.theta_prior)]
+        grad = [2.0 * d / (w * w) for d, w in zip(offset, scales)]          # grad g, eq (20)
+        on_boundary = self.prior_distance(self.theta_hat) >= 1.0
+        outward = sum(r * g for r, g in zip(raw_rate, grad)) > 0.0   # (Gamma phi z2)^T grad_g < 0
+        printed = self.settings.paper_as_printed
+        # (24)/(26): project the outward rate on the boundary; as printed: the inward one
+        project = on_boundary and (outward != printed)
+        rate = raw_rate
+        if project:
+            weight = sum(g * gi * gi for g, gi in zip(gains, grad))
+            if weight > 0.0:
+                along = sum(r * gi for r, gi in zip(raw_rate, grad)) / weight
+                rate = [r - g * gi * along for r, g, gi in zip(raw_rate, gains, grad)]  # (24)
+        theta = super()._next_theta(rate, gains)
+        distance = self.prior_distance(theta)
+        if not math.isfinite(distance):
+            return list(self.theta_hat)   # overflow on absurd input: keep the estimates
+        if distance > 1.0 and not printed:
+            # Euler stepped past the boundary: back onto it along the ray from theta*
+            theta = [c + (th - c) / distance for th, c in zip(theta, self.theta_prior)]
+        return theta

@@ -11,6 +11,11 @@ With the default gains the error dynamics s^3 + kd s^2 + kp s + ki have a triple
 -0.4 rad/s (kd = 3w, kp = 3w^2, ki = w^3): well damped, far below the 10 Hz sampling and the
 actuator lag. The integral removes the steady error of grades and resistance mismatch.
 
+Checked on every built-in scenario with `make compare` (RMS speed error 0.003-0.03 km/h, stop
+errors under 0.02 m on short_line, jinan_xuzhou, liu_li_2020, luo_xu_crh3, mao_4car; on
+mao_2017_modes the error comes from the power-limited motors after the failure, not the gains):
+the default gains were kept; the applied force's max jerk stays at 0.1-0.3 m/s^3 there.
+
 Anti-windup: conditional integration. While the command is saturated the integrator only moves
 in the direction that leaves saturation. Bumpless transfer: on take-over the integrator is set so
 that the first command equals the last one (within the integrator's limit).

@@ -1,0 +1,391 @@
+"""compare: every applicable control law on every built-in scenario, offline, side by side.
+
+    python -m ato_bringup.compare [--out runs/compare] [--jobs 2] [--scenario NAME ...]
+
+A law applies to a scenario when its ``fits`` accepts the scenario's train and plant and the
+plant's sensors do not fail a measurement the law requires (a law without speed measurement
+would only hold its last command; a law that estimates the speed does not require it). The plant
+model is the scenario's, the same for every law on it: ``multi_car`` when the train has per-car
+data (what the 4-car laws need; a single-mass law then sees the lead car), else ``point_mass``.
+Each run is the offline closed loop (ato_bringup.offline), one process per run over ``--jobs``
+cores. The result, ``<out>/compare.md``, has one table per scenario and the plots
+``<out>/<scenario>_{tracking,errors,commands,estimates}.png``; ``<out>/compare.json`` holds the
+same numbers and the ranking that ``make demo`` reads.
+
+A run that raises, produces non-finite values, diverges or has the host hold its command is
+listed with its status and reason, never dropped.
+
+Columns (errors are reference minus truth of the lead car at each control instant):
+- RMS / max speed error [km/h], RMS position error [m];
+- stop error [m]: the largest |position - station| over the scenario's stops (ato_common.metrics);
+- traction energy [kWh]: work of the traction force (ato_common.metrics);
+- max jerk [m/s^3]: the largest change of the applied total force between control instants,
+  divided by the train's mass and the control period, max |F[k+1] - F[k]| / (M dt): the jerk
+  that the commands impose on the train (a passenger-comfort figure);
+- step p99 [us]: 99th percentile of the host's step time (law, saturation, bumpless), measured
+  while the runs share the cores, so it is an upper figure; ``make bench`` measures it alone.
+
+Ranking (``best`` per scenario): among the runs with status ``ok`` whose stop error is at most
+STOP_ERROR_LIMIT_M, the lowest RMS speed error.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from datetime import datetime, timezone
+import json
+import math
+import multiprocessing
+import os
+from pathlib import Path
+import sys
+import time
+import traceback
+
+import numpy as np
+
+from ato_common.scenario import builtin_scenarios, load_scenario
+from ato_controller_node.laws import LAWS
+
+DEFAULT_OUT = Path('runs') / 'compare'
+#: a run whose speed error ever exceeds this has diverged (km/h)
+DIVERGED_SPEED_ERROR_KMH = 50.0
+#: the ranking's stop accuracy constraint (m): the usual ATO platform-stop tolerance
+STOP_ERROR_LIMIT_M = 0.5
+#: scenario on which ``make demo`` takes the best law, and the law used without a comparison
+DEMO_RANKING_SCENARIO = 'jinan_xuzhou'
+DEFAULT_DEMO_LAW = 'pid'
+#: points kept per curve for the plots
+PLOT_POINTS = 3000
+
+
+@dataclass(frozen=True)
+class Job:
+    scenario: str
+    law: str
+    model: str
+
+
+def plant_model_for(scenario) -> str:
+    return 'multi_car' if scenario.train.cars else 'point_mass'
+
+
+def knowledge_of(scenario):
+    """What the on-board software knows of the scenario's train (and its plant's known modes)."""
+    from ato_controller_node.laws.base import TrainKnowledge
+    return TrainKnowledge.of(scenario.train, scenario.plant.modes)
+
+
+def failed_measurement(law: str, scenario, model: str) -> str:
+    """Why the scenario's plant fails a measurement the law requires ('' if it does not)."""
+    lead = scenario.train.cars[0].name if model == 'multi_car' else 'train'
+    for quantity in LAWS[law].requires:
+        sensor = getattr(scenario.plant.sensors, quantity.removeprefix('car_').rstrip('s'))
+        if math.isinf(sensor.failed_from_s):
+            continue
+        if quantity.startswith('car_') or not sensor.failed_cars or lead in sensor.failed_cars:
+            return (f'{law} needs the measured {quantity.replace("_", " ")}, which the plant\'s '
+                    f'sensor fails from {sensor.failed_from_s:g} s')
+    return ''
+
+
+def plan_jobs(scenarios: list[str]) -> tuple[list[Job], list[dict]]:
+    """The runs to make, and the (scenario, law) pairs that do not apply, with the reason."""
+    jobs, skipped = [], []
+    for name in scenarios:
+        scenario = load_scenario(name)
+        knowledge = knowledge_of(scenario)
+        dt = 1.0 / scenario.run.controller_rate_hz
+        model = plant_model_for(scenario)
+        cars = len(scenario.train.cars) if model == 'multi_car' else 1
+        for law in sorted(LAWS):
+            reason = (LAWS[law](knowledge, dt).fits(knowledge, cars)
+                      or failed_measurement(law, scenario, model))
+            if reason:
+                skipped.append({'scenario': name, 'law': law, 'reason': reason})
+            else:
+                jobs.append(Job(name, law, model))
+    return jobs, skipped
+
+
+def _thin(values: np.ndarray, step: int) -> list:
+    return np.asarray(values)[::step].tolist()
+
+
+def run_job(job: Job) -> dict:
+    """One offline run and its figures; never raises (a failure is the result's status)."""
+    from ato_bringup.offline import run_offline
+    result = {'scenario': job.scenario, 'law': job.law, 'model': job.model}
+    started = time.perf_counter()
+    try:
+        scenario = load_scenario(job.scenario)
+        run = run_offline(scenario, job.law, model=job.model)
+    except Exception as error:  # noqa: BLE001 -- any failure of a law is a result to show
+        result.update(status='error', reason=f'{type(error).__name__}: {error}',
+                      detail=traceback.format_exc(limit=3), wall_s=time.perf_counter() - started)
+        return result
+    result['wall_s'] = time.perf_counter() - started
+    dt = 1.0 / scenario.run.controller_rate_hz
+    finite = all(np.all(np.isfinite(a)) for a in (run.positions, run.speeds, run.forces))
+    held = [f for f in run.faults if f]
+    status, reason = 'ok', ''
+    if not finite:
+        status, reason = 'diverged', 'non-finite state or force'
+    else:
+        metrics = run.metrics()
+        stop_error = max((abs(e) for e in metrics.stop_errors_m.values()), default=math.nan)
+        jerk = float(np.max(np.abs(np.diff(run.forces)))) / (scenario.train.mass_kg * dt) \
+            if run.forces.size > 1 else 0.0
+        result.update(
+            rms_speed_error_kmh=metrics.rms_speed_error_kmh,
+            max_speed_error_kmh=metrics.max_speed_error_kmh,
+            rms_position_error_m=metrics.rms_position_error_m,
+            stop_error_m=stop_error, stop_errors_m=metrics.stop_errors_m,
+            traction_energy_kwh=metrics.traction_energy_kwh, max_jerk_mps3=jerk,
+            step_p50_us=float(np.percentile(run.step_times_s, 50) * 1e6),
+            step_p99_us=float(np.percentile(run.step_times_s, 99) * 1e6))
+        if metrics.max_speed_error_kmh > DIVERGED_SPEED_ERROR_KMH:
+            status = 'diverged'
+            reason = (f'speed error reached {metrics.max_speed_error_kmh:.1f} km/h '
+                      f'(> {DIVERGED_SPEED_ERROR_KMH:g})')
+    if held:
+        if status == 'ok':
+            status = 'faults'
+        reason = '; '.join(filter(None, [reason, f'{len(held)} steps held: {held[0]}']))
+    result.update(status=status, reason=reason)
+    step = max(1, run.times_s.size // PLOT_POINTS)
+    keys = sorted({k for e in run.estimates for k in e if 'hat' in k})
+    result['curves'] = {
+        'time_s': _thin(run.times_s, step), 'position_m': _thin(run.positions, step),
+        'speed_mps': _thin(run.speeds, step), 'ref_speed_mps': _thin(run.ref_speeds, step),
+        'ref_position_m': _thin(run.ref_positions, step), 'force_n': _thin(run.forces, step),
+        'estimates': {k: _thin(run.estimate(k), step) for k in keys}}
+    return result
+
+
+class ProgressBar:
+    """A one-line bar on the terminal (stderr): done/total, elapsed time, the last finished."""
+
+    def __init__(self, total: int, width: int = 30, stream=None):
+        self.total, self.width = total, width
+        self.stream = stream if stream is not None else sys.stderr
+        self.done, self.started = 0, time.monotonic()
+        self.interactive = self.stream.isatty()
+        self.show('', force=True)
+
+    def show(self, last: str, force: bool = False) -> None:
+        if not (self.interactive or force):
+            return  # in a log, one line per finished run
+        filled = self.width * self.done // max(self.total, 1)
+        elapsed = time.monotonic() - self.started
+        line = (f'[{"#" * filled}{"." * (self.width - filled)}] {self.done}/{self.total} runs, '
+                f'{elapsed:5.0f} s{"  " + last if last else ""}')
+        if self.interactive:
+            self.stream.write('\r' + line[:150].ljust(150))
+        else:
+            self.stream.write(line + '\n')
+        self.stream.flush()
+
+    def advance(self, last: str) -> None:
+        self.done += 1
+        self.show(last, force=True)
+
+    def close(self) -> None:
+        if self.interactive:
+            self.stream.write('\n')
+            self.stream.flush()
+
+
+def run_all(jobs: list[Job], processes: int) -> list[dict]:
+    bar = ProgressBar(len(jobs))
+    results = []
+    if processes <= 1:
+        outputs = map(run_job, jobs)
+        for result in outputs:
+            results.append(result)
+            bar.advance(f'{result["law"]} on {result["scenario"]}: {result["status"]}')
+    else:
+        # Spawned workers do not inherit a half-initialised parent; one run per task.
+        with multiprocessing.get_context('spawn').Pool(processes) as pool:
+            pending = pool.imap_unordered(run_job, jobs)
+            last = ''
+            while len(results) < len(jobs):
+                try:
+                    result = pending.next(timeout=1.0)
+                except multiprocessing.TimeoutError:
+                    bar.show(last)  # keep the elapsed time moving during long runs
+                    continue
+                results.append(result)
+                last = f'{result["law"]} on {result["scenario"]}: {result["status"]}'
+                bar.advance(last)
+    bar.close()
+    return results
+
+
+def best_law(results: list[dict]) -> str | None:
+    """The ranking: lowest RMS speed error among the runs with status ok and a stop error
+    within STOP_ERROR_LIMIT_M."""
+    eligible = [r for r in results if r['status'] == 'ok'
+                and not r['stop_error_m'] > STOP_ERROR_LIMIT_M]
+    if not eligible:
+        return None
+    return min(eligible, key=lambda r: r['rms_speed_error_kmh'])['law']
+
+
+def _number(result: dict, key: str, fmt: str) -> str:
+    value = result.get(key)
+    return '-' if value is None or (isinstance(value, float) and math.isnan(value)) \
+        else format(value, fmt)
+
+
+def markdown(results: list[dict], skipped: list[dict], scenarios: list[str], stamp: str,
+             command: str) -> str:
+    load = ', '.join(f'{x:.1f}' for x in os.getloadavg())
+    lines = ['# Comparison of the control laws', '',
+             f'`{command}`, {stamp}, offline closed loop (ato_bringup.offline), '
+             f'{os.cpu_count()} cores, load average {load} at the end (step times grow with '
+             'it).', '',
+             'Columns: RMS/max speed error (km/h), RMS position error (m), worst stop error '
+             '|x - station| (m), traction energy (kWh), max jerk max|dF|/(M dt) (m/s^3), host '
+             'step time p99 (us, measured while the runs share the cores). Best: lowest RMS '
+             f'speed error among the `ok` runs with a stop error <= {STOP_ERROR_LIMIT_M} m.', '']
+    for name in scenarios:
+        rows = sorted((r for r in results if r['scenario'] == name), key=lambda r: r['law'])
+        best = best_law(rows)
+        lines += [f'## {name}', '', f'Best: **{best or "none"}**', '',
+                  '| law | model | status | RMS speed err | max speed err | RMS pos err | '
+                  'stop err | energy | max jerk | step p99 |',
+                  '|---|---|---|---|---|---|---|---|---|---|']
+        for r in rows:
+            status = r['status'] + (f' ({r["reason"]})' if r.get('reason') else '')
+            lines.append(
+                f'| {r["law"]} | {r["model"]} | {status.replace("|", "/")} | '
+                f'{_number(r, "rms_speed_error_kmh", ".4f")} | '
+                f'{_number(r, "max_speed_error_kmh", ".3f")} | '
+                f'{_number(r, "rms_position_error_m", ".3f")} | '
+                f'{_number(r, "stop_error_m", ".3f")} | '
+                f'{_number(r, "traction_energy_kwh", ".0f")} | '
+                f'{_number(r, "max_jerk_mps3", ".3f")} | {_number(r, "step_p99_us", ".0f")} |')
+        for s in skipped:
+            if s['scenario'] == name:
+                lines.append(f'| {s["law"]} | - | not applicable ({s["reason"]}) '
+                             '| - | - | - | - | - | - | - |')
+        plots = ', '.join(f'[{kind}]({name}_{kind}.png)'
+                          for kind in ('tracking', 'errors', 'commands', 'estimates'))
+        lines += ['', f'Plots: {plots}', '']
+    return '\n'.join(lines)
+
+
+def plot_scenario(name: str, results: list[dict], folder: Path) -> list[Path]:
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    runs = [r for r in sorted(results, key=lambda r: r['law'])
+            if r['scenario'] == name and 'curves' in r]
+    paths = []
+
+    def save(fig, kind):
+        path = folder / f'{name}_{kind}.png'
+        fig.tight_layout()
+        fig.savefig(path, dpi=90)
+        plt.close(fig)
+        paths.append(path)
+
+    fig, ax = plt.subplots(figsize=(10, 4))
+    if runs:
+        c = runs[0]['curves']
+        ax.plot(c['time_s'], np.array(c['ref_speed_mps']) * 3.6, 'k--', lw=1, label='reference')
+    for r in runs:
+        c = r['curves']
+        ax.plot(c['time_s'], np.array(c['speed_mps']) * 3.6, lw=1, label=r['law'])
+    ax.set(xlabel='time (s)', ylabel='speed (km/h)', title=f'{name}: speed tracking')
+    ax.legend(fontsize=8)
+    save(fig, 'tracking')
+
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    for r in runs:
+        c = r['curves']
+        top.plot(c['time_s'], (np.array(c['ref_speed_mps']) - c['speed_mps']) * 3.6, lw=1,
+                 label=r['law'])
+        bottom.plot(c['time_s'], np.array(c['ref_position_m']) - c['position_m'], lw=1,
+                    label=r['law'])
+    top.set(ylabel='speed error (km/h)', title=f'{name}: errors (reference - truth)')
+    bottom.set(xlabel='time (s)', ylabel='position error (m)')
+    top.legend(fontsize=8)
+    save(fig, 'errors')
+
+    fig, ax = plt.subplots(figsize=(10, 4))
+    for r in runs:
+        c = r['curves']
+        ax.plot(c['time_s'], np.array(c['force_n']) / 1e3, lw=1, label=r['law'])
+    ax.set(xlabel='time (s)', ylabel='applied force (kN)', title=f'{name}: commands (applied)')
+    ax.legend(fontsize=8)
+    save(fig, 'commands')
+
+    with_estimates = [r for r in runs if r['curves']['estimates']]
+    fig, axes = plt.subplots(max(1, len(with_estimates)), 1,
+                             figsize=(10, 2.6 * max(1, len(with_estimates))), squeeze=False)
+    for ax, r in zip(axes[:, 0], with_estimates):
+        c = r['curves']
+        for key, values in c['estimates'].items():
+            values = np.array(values, dtype=float)
+            first = values[np.isfinite(values)][:1]
+            scale = first[0] if first.size and first[0] != 0.0 else 1.0
+            ax.plot(c['time_s'], values / scale, lw=1, label=key)
+        ax.set(ylabel='estimate / initial', title=f'{r["law"]}')
+        ax.legend(fontsize=7, ncol=4)
+    if not with_estimates:
+        axes[0, 0].text(0.5, 0.5, 'no law with estimates ran on this scenario', ha='center')
+    axes[-1, 0].set_xlabel('time (s)')
+    save(fig, 'estimates')
+    return paths
+
+
+def ranked_demo_law(compare_json: Path = DEFAULT_OUT / 'compare.json',
+                    scenario: str = DEMO_RANKING_SCENARIO) -> tuple[str, str]:
+    """(law, why): the comparison's best law on ``scenario`` if ``compare_json`` ranks one,
+    else DEFAULT_DEMO_LAW."""
+    try:
+        data = json.loads(compare_json.read_text())
+        best = data['best'][scenario]
+    except (OSError, ValueError, KeyError, TypeError):
+        return DEFAULT_DEMO_LAW, (f'default ({compare_json} does not rank {scenario}; '
+                                  'run make compare)')
+    if best not in LAWS:
+        return DEFAULT_DEMO_LAW, f'default ({compare_json} ranks no known law best on {scenario})'
+    return best, f'ranked best on {scenario} by {compare_json} ({data.get("generated", "?")})'
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--out', type=Path, default=DEFAULT_OUT)
+    parser.add_argument('--jobs', type=int, default=min(2, os.cpu_count() or 1))
+    parser.add_argument('--scenario', action='append', choices=builtin_scenarios(),
+                        help='only this built-in scenario (repeatable; default: all)')
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = parser.parse_args(argv)
+    scenarios = args.scenario or builtin_scenarios()
+    jobs, skipped = plan_jobs(scenarios)
+    print(f'{len(jobs)} runs ({len(skipped)} law/scenario pairs not applicable) on '
+          f'{args.jobs} processes', file=sys.stderr)
+    results = run_all(jobs, args.jobs)
+    args.out.mkdir(parents=True, exist_ok=True)
+    stamp = datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
+    command = ' '.join(['python -m ato_bringup.compare', *argv]) if argv else 'make compare'
+    (args.out / 'compare.md').write_text(markdown(results, skipped, scenarios, stamp, command))
+    best = {name: best_law([r for r in results if r['scenario'] == name]) for name in scenarios}
+    summary = [{k: v for k, v in r.items() if k not in ('curves', 'detail')} for r in results]
+    (args.out / 'compare.json').write_text(json.dumps(
+        {'generated': stamp, 'best': best, 'results': summary, 'not_applicable': skipped},
+        indent=1))
+    for name in scenarios:
+        plot_scenario(name, results, args.out)
+    failed = [r for r in results if r['status'] != 'ok']
+    print(f'wrote {args.out / "compare.md"} ({len(results)} runs, {len(failed)} not ok); '
+          f'best: ' + ', '.join(f'{n}: {b or "none"}' for n, b in best.items()))
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,136 @@
+"""make compare (ato_bringup.compare): applicability, failures shown not hidden, the ranking
+and the file make demo reads."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from ato_bringup import compare
+from ato_controller_node.laws import LAWS
+from ato_controller_node.laws.base import LawOutput
+from ato_controller_node.laws.pid import PidLaw
+
+
+class ExplodingLaw(PidLaw):
+    name = 'exploding'
+
+    def step(self, measurement, reference):
+        if measurement.time_s > 5.0:
+            raise ZeroDivisionError('estimate reached zero')
+        return super().step(measurement, reference)
+
+
+class RunawayLaw(PidLaw):
+    name = 'runaway'
+
+    def step(self, measurement, reference):
+        return LawOutput(1e9, {})  # full traction whatever the reference: the train runs away
+
+
+class HoldingLaw(PidLaw):
+    name = 'holding'
+
+    def step(self, measurement, reference):
+        if 100.0 < measurement.time_s < 110.0:
+            return LawOutput(float('nan'), {})  # the host holds the last command
+        return super().step(measurement, reference)
+
+
+def test_applicability_follows_fits_and_picks_the_plant_model():
+    jobs, skipped = compare.plan_jobs(['short_line'])
+    assert {(j.law, j.model) for j in jobs} >= {('pid', 'point_mass'), ('luo_xu', 'point_mass')}
+    reasons = {s['law']: s['reason'] for s in skipped}
+    assert 'drives 4 actuators but the train has 1' in reasons['mao_2017']
+
+
+def test_a_failing_or_diverging_law_is_shown_with_its_reason(monkeypatch, tmp_path):
+    for cls in (ExplodingLaw, RunawayLaw, HoldingLaw):
+        monkeypatch.setitem(LAWS, cls.name, cls)
+    jobs = [compare.Job('short_line', law, 'point_mass')
+            for law in ('exploding', 'runaway', 'holding', 'pid')]
+    results = {r['law']: r for r in compare.run_all(jobs, processes=1)}
+    assert results['exploding']['status'] == 'error'
+    assert 'ZeroDivisionError: estimate reached zero' in results['exploding']['reason']
+    assert results['runaway']['status'] == 'diverged'
+    assert 'speed error reached' in results['runaway']['reason']
+    assert results['holding']['status'] == 'faults'
+    assert 'steps held: holding produced a non-finite force' in results['holding']['reason']
+    assert results['pid']['status'] == 'ok'
+    # The comparison's own figures: pid on short_line tracks within its test's bounds.
+    assert results['pid']['rms_speed_error_kmh'] < 0.2
+    assert results['pid']['stop_error_m'] < 0.1
+    assert 0.0 < results['pid']['max_jerk_mps3'] < 1.0
+    assert results['pid']['step_p99_us'] > 0.0
+    text = compare.markdown(list(results.values()), [], ['short_line'], 'now', 'make compare')
+    assert '| exploding | point_mass | error (ZeroDivisionError: estimate reached zero) |' in text
+    assert '| runaway | point_mass | diverged (speed error reached' in text
+    assert 'Best: **pid**' in text   # the ranking never picks a failed run
+
+
+def test_ranking_lowest_rms_speed_error_within_the_stop_constraint():
+    results = [
+        {'law': 'a', 'status': 'ok', 'rms_speed_error_kmh': 0.01, 'stop_error_m': 0.8},
+        {'law': 'b', 'status': 'ok', 'rms_speed_error_kmh': 0.05, 'stop_error_m': 0.1},
+        {'law': 'c', 'status': 'ok', 'rms_speed_error_kmh': 0.03, 'stop_error_m': 0.4},
+        {'law': 'd', 'status': 'diverged', 'rms_speed_error_kmh': 0.001, 'stop_error_m': 0.0},
+    ]
+    assert compare.best_law(results) == 'c'
+    assert compare.best_law(results[:1]) is None
+
+
+def test_compare_writes_tables_plots_and_the_ranking_demo_reads(tmp_path, capsys):
+    assert compare.main(['--scenario', 'short_line', '--jobs', '2', '--out', str(tmp_path)]) == 0
+    text = (tmp_path / 'compare.md').read_text()
+    assert '## short_line' in text and '| pid | point_mass | ok |' in text
+    for kind in ('tracking', 'errors', 'commands', 'estimates'):
+        assert (tmp_path / f'short_line_{kind}.png').stat().st_size > 10_000
+    data = json.loads((tmp_path / 'compare.json').read_text())
+    best = data['best']['short_line']
+    assert best in ('pid', 'luo_xu')
+    law, why = compare.ranked_demo_law(tmp_path / 'compare.json', 'short_line')
+    assert law == best and 'ranked best on short_line' in why
+    law, why = compare.ranked_demo_law(tmp_path / 'missing.json')
+    assert law == compare.DEFAULT_DEMO_LAW and 'run make compare' in why
+
+
+@pytest.mark.parametrize('content', ['not json', '{"best": {"jinan_xuzhou": "bogus"}}'])
+def test_demo_falls_back_to_the_default_on_a_bad_ranking_file(tmp_path, content):
+    path = tmp_path / 'compare.json'
+    path.write_text(content)
+    assert compare.ranked_demo_law(path)[0] == compare.DEFAULT_DEMO_LAW
+
+
+def test_demo_runs_the_ranked_law_only_where_it_can_drive_the_train(tmp_path):
+    from ato_bringup.run_scenario import default_controller
+    path = tmp_path / 'compare.json'
+    path.write_text(json.dumps({'generated': 'then', 'best': {'jinan_xuzhou': 'mao_2017'}}))
+    assert default_controller('mao_2017_modes', path)[0] == 'mao_2017'
+    law, why = default_controller('short_line', path)
+    assert law == 'pid' and 'drives 4 actuators' in why
+
+
+def test_progress_bar_in_a_log_writes_one_line_per_finished_run():
+    import io
+    log = io.StringIO()
+    bar = compare.ProgressBar(4, width=8, stream=log)
+    bar.show('running')          # a refresh between runs: nothing in a log
+    bar.advance('pid on short_line: ok')
+    bar.close()
+    lines = log.getvalue().splitlines()
+    assert len(lines) == 2
+    assert lines[1].startswith('[##......] 1/4 runs,')
+    assert lines[1].endswith('pid on short_line: ok')
+
+
+def test_a_law_that_needs_a_failed_measurement_does_not_apply():
+    from dataclasses import replace
+    from ato_common.plant_setup import QuantitySensor, SensorSetup
+    from ato_common.scenario import load_scenario
+    scenario = load_scenario('short_line')
+    assert compare.failed_measurement('pid', scenario, 'point_mass') == ''
+    failed = replace(scenario, plant=replace(scenario.plant, sensors=SensorSetup(
+        speed=QuantitySensor(failed_from_s=300.0))))
+    assert compare.failed_measurement('pid', failed, 'point_mass') == (
+        "pid needs the measured speed, which the plant's sensor fails from 300 s")
