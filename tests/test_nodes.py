@@ -2,6 +2,7 @@
 
 import math
 import os
+import re
 from pathlib import Path
 import subprocess
 import xml.etree.ElementTree as ET
@@ -62,7 +63,7 @@ def test_an_unknown_controller_at_start_is_refused_with_the_valid_names(domain_i
                              'controller:=bogus'], capture_output=True, text=True, timeout=60,
                             env=dict(os.environ, ROS_DOMAIN_ID=str(domain_id)))
     assert result.returncode == 2
-    assert 'valid: luo_xu, mao_2017, pid' in result.stderr
+    assert re.search(r'valid: (.*, )?luo_xu, (.*, )?pid', result.stderr)
 
 
 def test_plant_rejects_bad_commands_and_keeps_running(tmp_path, domain_id):

@@ -15,6 +15,22 @@ def test_every_topic_is_in_the_readme_with_its_type_and_qos():
         assert f'| `{t.name}` | `{t.type_name}` | {t.qos.describe()} |' in README, t.name
 
 
+def test_the_readme_tables_are_the_ones_the_code_prints():
+    """Every row of scripts/readme_tables.py's output (types, QoS, units, defaults, ranges,
+    descriptions) is in the README as printed: a changed description fails here."""
+    import contextlib
+    import io
+    import runpy
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        runpy.run_path(str(Path(__file__).resolve().parents[1] / 'scripts/readme_tables.py'),
+                       run_name='__main__')
+    rows = [line for line in printed.getvalue().splitlines() if line.startswith('| `')]
+    assert len(rows) > 50
+    stale = [row for row in rows if row not in README]
+    assert not stale, 'run scripts/readme_tables.py and update the README:\n' + '\n'.join(stale)
+
+
 def test_every_parameter_is_in_the_readme():
     for p in PLANT_PARAMS + PROFILE_PARAMS + NODE_PARAMS + tuple(gain_params()):
         assert f'| `{p.name}` |' in README, p.name

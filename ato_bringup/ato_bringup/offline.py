@@ -63,11 +63,13 @@ def run_end_time_s(scenario: Scenario, plan: Plan) -> float:
 def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
                 switches: dict[float, str] | None = None,
                 sensors: SensorSettings = SensorSettings(), model: str = 'point_mass',
-                end_time_s: float | None = None, **model_options) -> OfflineRun:
+                end_time_s: float | None = None, controller_rate_hz: float | None = None,
+                **model_options) -> OfflineRun:
     """Run ``controller`` on ``scenario`` with the plant ``model``; ``switches`` maps times to
-    law names selected then; ``end_time_s`` overrides the scenario's end."""
+    law names selected then; ``end_time_s`` and ``controller_rate_hz`` override the scenario's
+    (a law that must run faster than a node can, e.g. Mao et al.'s feedback linearisation)."""
     plan = plan_reference(scenario)
-    period_ns = nanoseconds(1.0 / scenario.run.controller_rate_hz)
+    period_ns = nanoseconds(1.0 / (controller_rate_hz or scenario.run.controller_rate_hz))
     sim = TrainSimulation(scenario, model, sensors=sensors, **model_options)
     host = ControllerHost(TrainKnowledge.of(scenario.train, scenario.plant.modes),
                           seconds(period_ns), controller, settings)

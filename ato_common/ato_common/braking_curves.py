@@ -50,6 +50,9 @@ DV_SPEEDS_KMH = (110.0, 210.0)
 CURVE_STEP_M = 2.0
 CURVE_HEADROOM_MPS = 10.0
 
+# Distance before a step of a limit at which a sampled limit takes its second sample, m.
+SAMPLE_EDGE_M = 1e-3
+
 CURVE_NAMES = ('ebd', 'ebi', 'sbd', 'sbi', 'warning', 'permitted', 'indication')
 
 
@@ -141,6 +144,14 @@ class DecelerationCurve:
             return math.inf
         return float(np.interp(position, self.positions, self.speeds))
 
+    def at(self, positions: np.ndarray) -> np.ndarray:
+        """The curve's speed at every position of an array (the rules of ``__call__``)."""
+        speeds = np.interp(positions, self.positions, self.speeds)
+        beyond = np.where((positions <= self.target_m) | (self.end_speed == 0.0),
+                          self.end_speed, math.inf)
+        speeds = np.where(positions > self.end_m, beyond, speeds)
+        return np.where(positions < self.start_m, math.inf, speeds)
+
     def shifted(self, time_s: float) -> 'DecelerationCurve':
         """The curve a train must be on ``time_s`` earlier (SUBSET-026 3.13.9.3: each point moves
         back by the distance run at its speed in that time)."""
@@ -200,6 +211,7 @@ class SpeedSupervision:
         self.targets.append(Target(kind, stopping_point_m, 0.0, stop_name))
         top = max(self.mrsp.values) + units.kmh_to_mps(DV_EBI_KMH[1]) + CURVE_HEADROOM_MPS
         self.curves: dict[str, list[DecelerationCurve]] = {name: [] for name in CURVE_NAMES}
+        self._sampled: dict[str, SampledLimit] = {}
         for target in self.targets:
             if target.kind == 'speed_decrease':
                 ebd_from = (target.location_m,
@@ -245,6 +257,61 @@ class SpeedSupervision:
         """min(MRSP, the permitted curves of every target), m/s; 0 beyond the SvL."""
         return self.curve('permitted', position_m)
 
+    def sampled(self, name: str) -> 'SampledLimit':
+        """The named limit tabulated once (see :class:`SampledLimit`), for supervision every
+        control period; built on first use and kept."""
+        if name not in self._sampled:
+            boundaries = [x for x in self.mrsp.starts if x <= self.supervised_location_m]
+            boundaries += [self.start_m, self.supervised_location_m]
+            samples = []
+            for curve in self.curves[name]:
+                boundaries += [curve.start_m, curve.end_m, curve.target_m]
+                samples.append(curve.positions)
+            edges = np.array(boundaries)
+            xs = np.unique(np.concatenate(samples + [edges, edges - SAMPLE_EDGE_M]))
+            xs = xs[xs <= self.supervised_location_m]
+            self._sampled[name] = SampledLimit(xs.tolist(), self._curve_at(name, xs).tolist())
+        return self._sampled[name]
+
+    def _curve_at(self, name: str, xs: np.ndarray) -> np.ndarray:
+        """``curve(name, x)`` for every x of an array (the same rules, vectorised)."""
+        lowest = np.full(xs.shape, math.inf)
+        for c in self.curves[name]:
+            lowest = np.minimum(lowest, c.at(xs))
+        if name == 'sbi':
+            lowest = np.minimum(lowest, self._curve_at('ebi', xs))
+        dv = {'ebi': DV_EBI_KMH, 'sbi': DV_SBI_KMH, 'warning': DV_WARNING_KMH}
+        if name in dv or name in ('permitted', 'indication'):
+            margins = [ceiling_margin(v, dv[name]) if name in dv else 0.0
+                       for v in self.mrsp.values]
+            section = np.maximum(np.searchsorted(self.mrsp.starts, xs, side='right') - 1, 0)
+            lowest = np.minimum(lowest, (np.array(self.mrsp.values) + np.array(margins))[section])
+        return np.where(xs > self.supervised_location_m, 0.0, np.maximum(lowest, 0.0))
+
+
+class SampledLimit:
+    """A supervision limit tabulated along an authority: linear between the samples of its
+    curves, with a sample on each side of every step (MRSP changes, curve ends) and zero beyond
+    the last sample (the SvL). Between two samples the exact limit is the lowest of linear
+    pieces and a constant ceiling, a concave function, so the chord never lies above it: the
+    table is exact at the samples and on the safe side between them. About 0.5 us per look-up
+    instead of several for the exact curves."""
+
+    def __init__(self, positions: list[float], speeds: list[float]):
+        self.positions = positions
+        self.speeds = speeds
+
+    def __call__(self, position_m: float) -> float:
+        xs = self.positions
+        i = bisect_right(xs, position_m)
+        if i == 0:
+            return self.speeds[0]
+        if i == len(xs):
+            return self.speeds[-1] if position_m == xs[-1] else 0.0
+        x0, x1 = xs[i - 1], xs[i]
+        v0, v1 = self.speeds[i - 1], self.speeds[i]
+        return v0 + (v1 - v0) * (position_m - x0) / (x1 - x0)
+
 
 class RunSupervision:
     """One movement authority per leg of a run (station to station): a train standing at, or
@@ -279,3 +346,8 @@ class RunSupervision:
 
     def curve(self, name: str, position_m: float, leg: int | None = None) -> float:
         return self.legs[self.leg_at(position_m) if leg is None else leg].curve(name, position_m)
+
+    def sampled_curve(self, name: str, position_m: float) -> float:
+        """``curve(name, position_m)`` from the tabulated limits (exact at the samples, never
+        above the exact limit between them); for supervision at every control period."""
+        return self.legs[self.leg_at(position_m)].sampled(name)(position_m)

@@ -12,6 +12,7 @@ from ato_common.braking_curves import (CURVE_NAMES, DV_EBI_KMH, RunSupervision, 
                                        deceleration_curve, most_restrictive_speed_profile,
                                        tabulated_deceleration)
 from ato_common.line import Line, PiecewiseConstant, Station
+from ato_common.scenario import load_scenario
 
 
 def line(limits=((0.0, 300.0),), grades=((0.0, 0.0),), length=40000.0):
@@ -130,3 +131,19 @@ def test_a_run_has_one_authority_per_leg():
     # approaching the intermediate stop the first leg's curve restricts; past it, it does not
     assert run.permitted_speed(14990.0) < 10.0
     assert run.permitted_speed(15010.0) == pytest.approx(units.kmh_to_mps(300.0))
+
+
+@pytest.mark.parametrize('name', ['short_line', 'jinan_xuzhou', 'mao_2017_modes'])
+def test_the_sampled_limits_match_the_exact_curves_and_never_exceed_them(name):
+    scenario = load_scenario(name)
+    supervision = RunSupervision.for_scenario(scenario)
+    positions = np.random.default_rng(7).uniform(0.0, scenario.line.length_m + 500.0, 4000)
+    for curve in ('ebi', 'permitted'):
+        for leg in supervision.legs:
+            sampled = leg.sampled(curve)
+            for x in positions:
+                exact = leg.curve(curve, x)
+                assert sampled(x) <= exact + 1e-9
+                assert sampled(x) >= exact - 0.01  # within 0.036 km/h between samples
+            for x in sampled.positions:  # exact at every sample
+                assert sampled(x) == pytest.approx(leg.curve(curve, x), abs=1e-9)

@@ -45,10 +45,20 @@ def test_applicability_follows_fits_and_picks_the_plant_model():
     assert 'drives 4 actuators but the train has 1' in reasons['mao_2017']
 
 
+def test_a_law_that_needs_a_faster_rate_runs_at_it_over_a_window():
+    jobs = {j.law: j for j in compare.plan_jobs(['mao_4car'])[0]}
+    fast = jobs['mao_multibody_adaptive']
+    assert fast.rate_hz == 10000.0   # its sampled-time design refuses 10 Hz, 200 Hz and 1 kHz
+    assert fast.end_time_s == pytest.approx(compare.MAX_STEPS / 10000.0)
+    assert jobs['pid'].rate_hz == 10.0 and jobs['pid'].end_time_s is None
+    assert not compare.best_law([{'status': 'ok', 'end_time_s': 150.0, 'stop_error_m': 0.0,
+                                  'rms_speed_error_kmh': 0.0, 'law': 'windowed'}])
+
+
 def test_a_failing_or_diverging_law_is_shown_with_its_reason(monkeypatch, tmp_path):
     for cls in (ExplodingLaw, RunawayLaw, HoldingLaw):
         monkeypatch.setitem(LAWS, cls.name, cls)
-    jobs = [compare.Job('short_line', law, 'point_mass')
+    jobs = [compare.Job('short_line', law, 'point_mass', 10.0)
             for law in ('exploding', 'runaway', 'holding', 'pid')]
     results = {r['law']: r for r in compare.run_all(jobs, processes=1)}
     assert results['exploding']['status'] == 'error'
@@ -64,8 +74,9 @@ def test_a_failing_or_diverging_law_is_shown_with_its_reason(monkeypatch, tmp_pa
     assert 0.0 < results['pid']['max_jerk_mps3'] < 1.0
     assert results['pid']['step_p99_us'] > 0.0
     text = compare.markdown(list(results.values()), [], ['short_line'], 'now', 'make compare')
-    assert '| exploding | point_mass | error (ZeroDivisionError: estimate reached zero) |' in text
-    assert '| runaway | point_mass | diverged (speed error reached' in text
+    assert ('| exploding | point_mass, 10 Hz | error (ZeroDivisionError: estimate reached zero) |'
+            in text)
+    assert '| runaway | point_mass, 10 Hz | diverged (speed error reached' in text
     assert 'Best: **pid**' in text   # the ranking never picks a failed run
 
 
@@ -81,9 +92,10 @@ def test_ranking_lowest_rms_speed_error_within_the_stop_constraint():
 
 
 def test_compare_writes_tables_plots_and_the_ranking_demo_reads(tmp_path, capsys):
-    assert compare.main(['--scenario', 'short_line', '--jobs', '2', '--out', str(tmp_path)]) == 0
+    assert compare.main(['--scenario', 'short_line', '--law', 'pid', '--law', 'luo_xu',
+                         '--jobs', '2', '--out', str(tmp_path)]) == 0
     text = (tmp_path / 'compare.md').read_text()
-    assert '## short_line' in text and '| pid | point_mass | ok |' in text
+    assert '## short_line' in text and '| pid | point_mass, 10 Hz | ok |' in text
     for kind in ('tracking', 'errors', 'commands', 'estimates'):
         assert (tmp_path / f'short_line_{kind}.png').stat().st_size > 10_000
     data = json.loads((tmp_path / 'compare.json').read_text())

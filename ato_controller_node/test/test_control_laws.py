@@ -23,7 +23,7 @@ def train(scenario):
 
 def test_registry_lists_the_laws_and_rejects_unknown_names():
     assert {'pid', 'luo_xu'} <= set(LAWS)
-    with pytest.raises(KeyError, match='valid: luo_xu, mao_2017, pid'):
+    with pytest.raises(KeyError, match='valid: (.*, )?luo_xu, (.*, )?pid'):
         law_class('mpc')
 
 
@@ -98,7 +98,7 @@ def test_switching_mid_run_keeps_tracking(scenario):
 
 def test_host_rejects_unknown_law_and_keeps_the_running_one(train):
     host = ControllerHost(train, 0.1, 'pid')
-    with pytest.raises(LawRejected, match="unknown controller 'bogus'; valid: luo_xu, mao_2017, pid"):
+    with pytest.raises(LawRejected, match="unknown controller 'bogus'; valid: (.*, )?luo_xu, (.*, )?pid"):
         host.select('bogus')
     assert host.law.name == 'pid'
 

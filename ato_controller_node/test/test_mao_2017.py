@@ -170,25 +170,24 @@ def test_printed_sign_of_35_drives_k_nu_the_wrong_way(paper_run):
 
 
 def test_preset_mao_2017_modes_on_the_suite_plant():
-    """The built-in scenario: same modes and failure, 250 km/h cruise, the mao_2017_500t limits.
-    From 1200 s (motor 1 out) on mode (iii)'s 15 per mille slope the three healthy motors are
-    at their power limit (8.8 MW / 4 each), which the paper's unlimited actuators never are:
-    the train falls behind (measured: 30.6 m at 1400 s) and the law, its adaptation frozen
-    meanwhile, catches up once braking starts. Everywhere else the paper's result holds."""
+    """The built-in scenario: same modes and failure, 200 km/h cruise, the mao_2017_500t
+    limits (the healthy motors stay within them after the failure). The paper's result holds
+    on the suite's plant: the position error goes back to about zero after every mode switch
+    (400, 800, 1400 s) and every change of the failure (600, 1000, 1200 s)."""
     scenario = load_scenario('mao_2017_modes')
     run = run_offline(scenario, 'mao_2017')
     t, ex = run.times_s, run.ref_positions - run.positions
     assert not any(run.faults)
-    for event in (400.0, 600.0, 800.0, 1000.0):   # measured at most 0.042 m
+    for event in (400.0, 600.0, 800.0, 1000.0, 1200.0, 1400.0):   # measured at most 0.048 m
         window = (t > event + 100.0) & (t < event + 200.0)
         assert np.max(np.abs(ex[window])) < 0.15, event
     outage = (t > 1250.0) & (t < 1400.0)
     limits = np.array([scenario.train.traction.limits_at(v)[1] / 4 for v in run.speeds[outage]])
-    assert np.all(run.actuator_forces[outage, 1:] >= limits[:, None] * (1 - 1e-9))
+    assert np.all(run.actuator_forces[outage, 1:] < limits[:, None])  # measured 75 % at most
     assert np.all(run.actuator_forces[outage, 0] == 0.0)          # the failed motor
-    assert np.max(np.abs(ex)) < 50.0
-    assert np.max(np.abs(ex[t > 1700.0])) < 0.1                   # measured 0.018 m
-    assert abs(run.metrics().stop_errors_m['Stop']) < 0.05        # measured 0.009 m
+    assert np.max(np.abs(ex)) < 1.0                               # measured 0.30 m
+    assert np.max(np.abs(ex[t > 1700.0])) < 0.05                  # measured 0.006 m
+    assert abs(run.metrics().stop_errors_m['Stop']) < 0.05        # measured 0.006 m
 
 
 def law(modes=paper_modes(), **settings) -> Mao2017Law:

@@ -25,8 +25,14 @@ extreme = st.floats(allow_nan=True, allow_infinity=True) | st.floats(-1e6, 1e6) 
     st.sampled_from([0.0, -0.0, 1e-300, 1e300, -1e300])
 
 
+# the laws that can drive this train at 10 Hz (the multi-car and high-rate laws have their own
+# property tests next to their other tests)
+FITTING = sorted(name for name, law in LAWS.items()
+                 if law(train_for(name), 0.1).fits(train_for(name)) is None)
+
+
 @settings(max_examples=150, deadline=None)
-@given(st.sampled_from(sorted(LAWS)),
+@given(st.sampled_from(FITTING),
        st.lists(st.tuples(extreme, extreme, extreme, extreme, extreme), min_size=1, max_size=30))
 def test_commands_are_finite_and_within_limits(law, samples):
     host = ControllerHost(train_for(law), 0.1, law)

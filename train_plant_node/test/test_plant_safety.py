@@ -52,19 +52,37 @@ def test_rejected_commands_do_not_feed_the_watchdog_by_themselves():
     assert sim.watchdog == NORMAL  # the node counts a missed period, the simulation does not guess
 
 
-def test_atp_intervenes_above_the_permitted_speed_until_back_under_it():
-    sim = TrainSimulation(scenario(limit_kmh=30.0), safety=SafetySettings(
-        overspeed_margin_mps=5.0 / 3.6))
+def test_atp_intervenes_above_the_ebi_until_back_under_the_permitted_speed():
+    sim = TrainSimulation(scenario(limit_kmh=30.0))
+    # Ceiling supervision at 30 km/h: EBI = MRSP + dV_ebi (7.5 km/h, ETCS default below 110)
+    assert sim.intervention_speed() == pytest.approx((30.0 + 7.5) / 3.6)
+    assert sim.permitted_speed() == pytest.approx(30.0 / 3.6)
     trace = []
     for _ in range(1200):
         sim.apply_command((300e3,))  # the ATO keeps asking for full traction
         sim.advance(PERIOD_NS)
         trace.append((sim.truth().speeds[0], sim.atp_intervention, sim.applied[0]))
     speeds = [v for v, _, _ in trace]
-    assert max(speeds) <= (35.0 + 1.0) / 3.6  # caught within a control period of the margin
+    assert max(speeds) <= (37.5 + 0.5) / 3.6  # caught within a control period of the EBI
     assert sim.atp_interventions >= 1
     during = [a for v, on, a in trace if on]
     assert during and all(a == -sim.scenario.train.traction.max_emergency_brake_force_n
                           for a in during)
     released = [v for (v, on, _), (_, was_on, _) in zip(trace[1:], trace) if was_on and not on]
     assert released and all(v <= 30.0 / 3.6 + 1e-9 for v in released)
+
+
+def test_atp_supervises_the_braking_curve_to_the_stop():
+    """Near the end of authority the EBI follows the braking curve, far below the line limit:
+    a train that does not brake for the stop is emergency-braked before the station."""
+    sim = TrainSimulation(scenario(limit_kmh=300.0))
+    sim.state = sim.model.initial_state(87000.0, 200.0 / 3.6)  # 3 km before B, 200 km/h
+    assert 200.0 / 3.6 < sim.intervention_speed()  # not yet
+    for _ in range(3000):
+        sim.apply_command((0.0,))  # coasting: the ATO does not brake
+        sim.advance(PERIOD_NS)
+        if sim.truth().speeds[0] == 0.0:
+            break
+    assert sim.atp_interventions >= 1
+    # stopped before the supervised location (EOA 50 m and overlap 50 m past the stop)
+    assert sim.truth().positions[0] < 90000.0 + 100.0

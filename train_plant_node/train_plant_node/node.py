@@ -68,8 +68,6 @@ PARAMS = (
           'braking', minimum=1, maximum=1000),
     Param('emergency_periods', 10, 'control periods without a valid command before emergency '
           'braking', minimum=1, maximum=10000),
-    Param('overspeed_margin_kmh', 5.0, 'ATP: emergency brake intervention above the permitted '
-          'speed plus this margin, km/h', minimum=0.0, maximum=100.0),
 )
 
 DIAGNOSTIC_PERIOD_S = 1.0
@@ -95,8 +93,7 @@ class TrainPlantNode(Node):
                 self.scenario, p['model'],
                 SensorSettings(p['sensor_position_noise_m'], p['sensor_speed_noise_mps'],
                                p['seed']),
-                SafetySettings(p['watchdog_periods'], p['emergency_periods'],
-                               units.kmh_to_mps(p['overspeed_margin_kmh'])),
+                SafetySettings(p['watchdog_periods'], p['emergency_periods']),
                 max_substep_s=p['max_substep_s'])
         except ValueError as error:  # e.g. multi_car with a train that has no car description
             raise ConfigError(f"model {p['model']}: {error}") from None
@@ -189,8 +186,10 @@ class TrainPlantNode(Node):
     def safety_message(self) -> str:
         sim = self.sim
         if sim.atp_intervention:
-            return (f'ATP emergency brake intervention: {units.mps_to_kmh(sim.lead_speed()):.1f} km/h '
-                    f'over the permitted {units.mps_to_kmh(sim.permitted_speed()):.0f} km/h')
+            return ('ATP emergency brake intervention: '
+                    f'{units.mps_to_kmh(sim.lead_speed()):.1f} km/h, intervention speed '
+                    f'{units.mps_to_kmh(sim.intervention_speed()):.1f} km/h, until at or under '
+                    f'the permitted {units.mps_to_kmh(sim.permitted_speed()):.1f} km/h')
         if sim.watchdog != NORMAL:
             return (f'command watchdog: {sim.watchdog} after {sim.missed_periods} control '
                     'periods without a valid command')

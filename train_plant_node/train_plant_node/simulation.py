@@ -23,6 +23,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ato_common.braking_curves import RunSupervision
 from ato_common.plant_setup import ActuatorFailure, PlantSetup, QuantitySensor, SensorSetup
 from ato_common.scenario import Scenario
 from ato_common.types import NS_PER_S, TrainState, nanoseconds
@@ -40,7 +41,6 @@ class SafetySettings:
 
     watchdog_periods: int = 3      # control periods without a valid command before service braking
     emergency_periods: int = 10    # ... before emergency braking
-    overspeed_margin_mps: float = 5.0 / 3.6  # ATP intervention above the permitted speed + this
 
 
 NORMAL, SERVICE_BRAKE, EMERGENCY_BRAKE = 'normal', 'service brake', 'emergency brake'
@@ -77,9 +77,10 @@ class TrainSimulation:
     - command watchdog: after ``watchdog_periods`` control periods without a valid command the
       train is service-braked, after ``emergency_periods`` emergency-braked; a valid command
       ends it;
-    - ATP supervision: above the permitted speed (the line's static limit) plus the margin, an
-      emergency brake intervention that the ATO cannot override until the train is back at or
-      under the permitted speed.
+    - ATP supervision (``ato_common.braking_curves``, ETCS-style): above the emergency brake
+      intervention curve EBI (the static limits plus dV_ebi, and the braking curves to the
+      run's targets) an emergency brake intervention that the ATO cannot override until the
+      train is back at or under the permitted speed.
     A failed actuator keeps delivering its failure force whatever the safety functions ask.
     """
 
@@ -88,6 +89,7 @@ class TrainSimulation:
                  safety: SafetySettings = SafetySettings(), **model_options):
         self.scenario = scenario
         self.setup: PlantSetup = scenario.plant
+        self.supervision = RunSupervision.for_scenario(scenario)
         self.model: PlantModel = make_model(model_name, scenario.train, scenario.line,
                                             **model_options)
         self.sensors = merged_sensors(self.setup.sensors, sensors)
@@ -212,7 +214,8 @@ class TrainSimulation:
         return NORMAL
 
     def permitted_speed(self) -> float:
-        return self.scenario.line.speed_limit_mps(self.lead_position())  # at the lead car
+        """The ATP's permitted speed at the lead car (static limits and braking curves), m/s."""
+        return self.supervision.sampled_curve('permitted', self.lead_position())
 
     def targets(self) -> list[float]:
         """What each healthy drive is asked for: the command within the unit's share of the
@@ -265,12 +268,16 @@ class TrainSimulation:
                            for f, target in zip(self._drive, targets)]
         return self._failed(self._drive, time_s, h)
 
+    def intervention_speed(self) -> float:
+        """The ATP's emergency brake intervention speed (EBI) at the lead car, m/s."""
+        return self.supervision.sampled_curve('ebi', self.lead_position())
+
     def _supervise(self) -> None:
-        speed, permitted = self.lead_speed(), self.permitted_speed()
-        if not self.atp_intervention and speed > permitted + self.safety.overspeed_margin_mps:
+        speed = self.lead_speed()
+        if not self.atp_intervention and speed > self.intervention_speed():
             self.atp_intervention = True
             self.atp_interventions += 1
-        elif self.atp_intervention and speed <= permitted:
+        elif self.atp_intervention and speed <= self.permitted_speed():
             self.atp_intervention = False
         self._update_applied()
 

@@ -33,6 +33,7 @@ class TrainKnowledge:
     actuator_names: tuple[str, ...]
     cars: tuple[CarParameters, ...] = ()    # nominal per-car data of a multi-car train
     couplers: tuple[Coupler, ...] = ()
+    car_length_m: float = 25.0  # rest spacing of consecutive cars (coupler extension = 0)
     #: known modes of a piecewise-constant plant (the scenario's ``plant.modes``: records with
     #: mass_kg, davis, grade_sine, curve_accel_mps2), indexed by ``Measurement.mode``
     modes: tuple[Any, ...] = ()
@@ -40,7 +41,7 @@ class TrainKnowledge:
     @classmethod
     def of(cls, train: TrainParameters, modes: tuple[Any, ...] = ()) -> 'TrainKnowledge':
         return cls(train.mass_kg, train.davis_nominal, train.traction, train.actuator_names,
-                   train.cars, train.couplers, tuple(modes))
+                   train.cars, train.couplers, train.car_length_m, tuple(modes))
 
     def actuator_limits_at(self, speed: float) -> tuple[float, float]:
         """(lowest, highest) force of one actuator: an equal share of the train's limits."""

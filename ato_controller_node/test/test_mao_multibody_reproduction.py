@@ -1,0 +1,86 @@
+"""Mao, Tao, Jiang & Yan reproduction (offline loop on the multi-car plant, no ROS), on the
+`mao_4car` preset: with the estimates starting at 95 % of the true values (Section VI), the
+adaptive controllers (60), (71) drive the speed errors of cars 1 and 3 to about zero, and the
+relative positions z1 - z2 and z3 - z4 (the paper's Figs. 13-14) stay bounded and settle.
+
+Differences from Section VI: the train starts at rest at a station (x(0) has speeds 0.01 m/s and
+z1 = 0.5 m; the plant starts every car at rest, and position offsets do not enter the speed
+loop); v_m(t) is the preset's jerk-limited plan (the paper does not give v_m); the first 7 s
+(the start and the rise to 0.48 m/s^2). The actuator limits are lifted, as in the paper: the law
+leaves the split of force between cars 2 and 3 to the coupler, and with the preset's limit of
+53.8 kN per car, car 3 saturates after 4 s (measured). The law runs at 10 kHz: sampled slower
+it is unstable (last test).
+"""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from ato_bringup.offline import run_offline
+from ato_common.scenario import load_scenario
+
+RATE_HZ = 10_000.0
+END_S = 7.0
+
+
+def mao_scenario(limits=False):
+    scenario = load_scenario('mao_4car')
+    if limits:
+        return scenario
+    unlimited = dataclasses.replace(scenario.train.traction, max_traction_force_n=1e8,
+                                    max_traction_power_w=1e11, max_service_brake_force_n=1e8,
+                                    max_emergency_brake_force_n=1e8)
+    return dataclasses.replace(scenario, train=dataclasses.replace(scenario.train,
+                                                                   traction=unlimited))
+
+
+def _coupler_extensions(run):
+    z = run.car_positions
+    return z[:, :-1] - z[:, 1:] - run.scenario.train.car_length_m
+
+
+@pytest.fixture(scope='module')
+def run():
+    return run_offline(mao_scenario(), 'mao_multibody_adaptive', model='multi_car',
+                       controller_rate_hz=RATE_HZ, end_time_s=END_S)
+
+
+def test_speed_errors_of_cars_1_and_3_go_to_about_zero(run):
+    assert not any(run.faults)
+    errors = run.car_speeds[:, [0, 2]] - run.ref_speeds[:, None]
+    last = run.times_s > END_S - 0.5
+    peak, final = np.abs(errors).max(), np.abs(errors[last]).max()
+    # measured: peak 6.6e-3 m/s at 2.4 s (start from rest: the standstill resistance is not
+    # the law's constant a_p; the reference jerk), 1.0e-4 m/s over the last 0.5 s
+    assert 1e-3 < peak < 0.02
+    assert final < 3e-4 and final < 0.05 * peak
+
+
+def test_relative_positions_stay_bounded_and_settle(run):
+    extensions = _coupler_extensions(run)
+    # bounded: 2e-4 m of a coupler is a force of 1.2e5 - 1.6e5 N
+    assert np.abs(extensions).max() < 2e-4
+    # z1 - z2 and z3 - z4 settle at the constant that carries the accelerating cars 1 and 4
+    # (measured -2.73e-5 and +2.67e-5 m; M1 a / k1 with a = 0.48 m/s^2 is 2.6e-5 m).
+    # z2 - z3 does not settle within the run: it drifts at v1 - v3 (2e-5 m/s measured at 7 s),
+    # and the stiff coupler turns that into an internal force cars 2 and 3 hold against each
+    # other (README: Control laws).
+    tail = run.times_s > END_S - 2.0
+    for column in (0, 2):
+        assert np.ptp(extensions[tail, column]) < 3e-7
+        assert abs(extensions[-1, column]) == pytest.approx(42800 * 0.48 / 8e8, rel=0.1)
+
+
+def test_sampled_at_1_khz_the_same_law_goes_unstable():
+    # Why the law refuses periods above 1e-4 s: it cancels the coupler zero at -k1/d1 = -1e4
+    # 1/s, which a zero-order hold at 1 ms cannot follow (sampled closed-loop eigenvalue 8.9).
+    slow = run_offline(mao_scenario(limits=True), 'mao_multibody_adaptive', model='multi_car',
+                       controller_rate_hz=1000.0, end_time_s=1.0,
+                       settings={'mao_multibody_adaptive': {'max_control_period_s': 1e-3}})
+    # the forces hit an actuator limit (the braking limit is the larger one)...
+    limit = slow.scenario.train.traction.max_traction_force_n / 2
+    assert np.abs(slow.actuator_forces).max() >= limit * (1 - 1e-9)
+    # ...and the errors exceed the 10 kHz run's peak (6.6e-3 m/s) several times
+    errors = slow.car_speeds[:, [0, 2]] - slow.ref_speeds[:, None]
+    assert np.abs(errors).max() > 0.02
