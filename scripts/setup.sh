@@ -53,7 +53,7 @@ if [ ! -f ros_ws/install/setup.bash ] || [ "$(cat "$stamp" 2>/dev/null)" != "$sr
     rm -f build.err
     # The plant's numba kernels: compiled once here (cached next to the installed sources)
     # instead of in the first node start or test process.
-    . install/setup.bash
+    set +u; . install/setup.bash
     python -m train_plant_node.jit
   )
   echo "$src_hash" > "$stamp"

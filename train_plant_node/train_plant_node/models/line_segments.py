@@ -35,21 +35,21 @@ class LineSegments:
             self.slope.append((line.line_force_per_kg(mid, gravity) - g - o) / (mid - s))
         self.slope = [0.0 if abs(k) < 1e-15 else k for k in self.slope]
         self.gravity = gravity
-        # What the kernels read: the bounds closed by +inf (so that a search needs no length
-        # check), and one row per segment quantity.
-        self.bound_array = np.array(self.bounds + [math.inf])
-        self.table = np.array([starts, self.grade, self.other, self.slope], dtype=float)
+        # What the kernels read: one row per segment quantity, and the bounds closed by +inf
+        # (so that a search needs no length check; one more bound than segments).
+        self.table = np.array([starts, self.grade, self.other, self.slope,
+                               self.bounds + [math.inf]], dtype=float)
 
 
 # Rows of LineSegments.table.
-START, GRADE, OTHER, SLOPE = 0, 1, 2, 3
+START, GRADE, OTHER, SLOPE, BOUNDS = range(5)
 
 
 @kernel
-def segment_index(bounds, position, moving_back):
-    """The segment holding ``position`` (``bounds``: LineSegments.bound_array)."""
+def segment_index(table, position, moving_back):
+    """The segment holding ``position`` (``table``: LineSegments.table)."""
     nudged = position - BOUNDARY_NUDGE_M if moving_back else position + BOUNDARY_NUDGE_M
-    return np.searchsorted(bounds, nudged, side='right')
+    return np.searchsorted(table[BOUNDS], nudged, side='right')
 
 
 @kernel
@@ -69,9 +69,9 @@ def segment_accel_at(table, index, position, has_override, override_accel):
 
 
 @kernel
-def boundary_between(bounds, index_from, index_to):
+def boundary_between(table, index_from, index_to):
     """The first boundary crossed going from one segment towards another."""
-    return bounds[index_from] if index_to > index_from else bounds[index_from - 1]
+    return table[BOUNDS, index_from] if index_to > index_from else table[BOUNDS, index_from - 1]
 
 
 @kernel

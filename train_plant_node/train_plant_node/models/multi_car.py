@@ -51,11 +51,11 @@ STANDSTILL_SPEED_MPS = 0.01
 
 # The kernels' parameter array: the mode's extra grade and curve term (m/s^2), its total mass,
 # gravity, then the surroundings (surroundings.py). Rows of _ModeMatrices.cars: each car's a, b,
-# c per kg and 1 / mass. Propagator array (one per step length): e^(Ah/2), its phi_1 map on the
+# c per kg, 1 / mass, rest offset (m) and the index of its actuator's force (-1: unpowered). Propagator array (one per step length): e^(Ah/2), its phi_1 map on the
 # velocities, e^(Ah), and the three ETDRK4 maps of the non-linear terms (velocity columns).
 EXTRA_ACCEL, TOTAL_MASS, GRAVITY, ENV = range(4)
 PARAMETERS = ENV + ENV_SIZE
-CAR_A, CAR_B, CAR_C, CAR_INVERSE_MASS = range(4)
+CAR_A, CAR_B, CAR_C, CAR_INVERSE_MASS, CAR_OFFSET, CAR_ACTUATOR = range(6)
 E_HALF, PHI1_HALF, E_FULL, F1, F2, F3 = range(6)
 
 
@@ -183,7 +183,11 @@ class _ModeMatrices:
         self.A[n:, n:] = -inverse_mass @ damping - np.diag(self.b)
         self.inverse_mass = 1.0 / self.masses
         self.total_mass = float(np.sum(self.masses))
-        self.cars = np.array([self.a, self.b, self.c, self.inverse_mass], dtype=float)
+        actuator = [-1.0] * n
+        for j, i in enumerate(model.powered):
+            actuator[i] = float(j)
+        self.cars = np.array([self.a, self.b, self.c, self.inverse_mass, model.offsets, actuator],
+                             dtype=float)
         self._propagators: dict[float, tuple] = {}
 
     def _balancing(self):
@@ -241,33 +245,43 @@ def _matvec(matrix, x, columns):
 
 
 @kernel
-def segment_indices(x, offsets, bounds):
-    """Each car's line segment (positions shifted by the rest spacing ``offsets``)."""
+def _add_matvec(out, matrix, x, alpha, y, beta, columns):
+    """out += matrix[:, :columns] @ (alpha x + beta y), in place."""
+    for i in range(out.shape[0]):
+        total = 0.0
+        for j in range(columns):
+            total += matrix[i, j] * (alpha * x[j] + beta * y[j])
+        out[i] += total
+
+
+@kernel
+def segment_indices(x, table, cars):
+    """Each car's line segment (positions shifted by the rest spacing)."""
     n = x.shape[0] // 2
     out = np.empty(n, np.int64)
     for q in range(n):
-        out[q] = segment_index(bounds, x[q] - offsets[q], x[n + q] < 0.0)
+        out[q] = segment_index(table, x[q] - cars[CAR_OFFSET, q], x[n + q] < 0.0)
     return out
 
 
 @kernel
-def _step_line(indices, table, offsets, shift, p):
+def _step_line(indices, table, cars, shift, p):
     """Each car's line force in its segment: at the segment start, its slope per metre and
     where the slope is anchored in the state's coordinates (positions relative to ``shift``)."""
     n = indices.shape[0]
-    accels, slopes, anchors = np.empty(n), np.empty(n), np.empty(n)
+    line = np.empty((3, n))  # accelerations, slopes, anchors
     has_override = p[ENV + HAS_OVERRIDE] != 0.0
     override_accel = p[GRAVITY] * p[ENV + OVERRIDE_SINE]
     for q in range(n):
         i = indices[q]
-        accels[q] = segment_accel(table, i, has_override, override_accel)
-        slopes[q] = table[SLOPE, i]
-        anchors[q] = table[START, i] + offsets[q] - shift
-    return accels, slopes, anchors
+        line[0, q] = segment_accel(table, i, has_override, override_accel)
+        line[1, q] = table[SLOPE, i]
+        line[2, q] = table[START, i] + cars[CAR_OFFSET, q] - shift
+    return line
 
 
 @kernel
-def _nonlinear(x, time_s, forces, powered, accels, slopes, anchors, cars, p):
+def _nonlinear(x, time_s, forces, line, cars, p):
     """Specific forces outside the exact linear part (velocity rows), m/s^2; the actuator
     forces are included here (constant over the step, so phi_1 integrates them exactly)."""
     n = x.shape[0] // 2
@@ -276,19 +290,20 @@ def _nonlinear(x, time_s, forces, powered, accels, slopes, anchors, cars, p):
     out = np.empty(n)
     for q in range(n):
         v = x[n + q]
-        line = accels[q]
-        if slopes[q] != 0.0:  # a transition curve: the force follows the car's position
-            line += slopes[q] * (x[q] - anchors[q])
+        accel = line[0, q]
+        if line[1, q] != 0.0:  # a transition curve: the force follows the car's position
+            accel += line[1, q] * (x[q] - line[2, q])
         out[q] = (base - fa * cars[CAR_A, q] * math.tanh(v / STANDSTILL_SPEED_MPS)
                   - (fb - 1.0) * cars[CAR_B, q] * v - fc * cars[CAR_C, q] * v * abs(v)
-                  - fl * line)
-    for j in range(powered.shape[0]):
-        out[powered[j]] += forces[j] * cars[CAR_INVERSE_MASS, powered[j]]
+                  - fl * accel)
+        actuator = int(cars[CAR_ACTUATOR, q])
+        if actuator >= 0:
+            out[q] += forces[actuator] * cars[CAR_INVERSE_MASS, q]
     return out
 
 
 @kernel
-def etdrk4_kernel(x, t, h, props, forces, powered, indices, table, offsets, cars, p):
+def etdrk4_kernel(x, t, h, props, forces, indices, table, cars, p):
     """Cox & Matthews (2002) ETDRK4, eqs (26). The line forces of the step are given, so
     the non-linear term does not depend on positions; a uniform shift of the positions is
     invariant under the linear part (unstretched couplers), so the step runs relative to
@@ -299,29 +314,34 @@ def etdrk4_kernel(x, t, h, props, forces, powered, indices, table, offsets, cars
     y = x.copy()
     for q in range(n):
         y[q] -= shift
-    accels, slopes, anchors = _step_line(indices, table, offsets, shift, p)
-    n_x = _nonlinear(y, t, forces, powered, accels, slopes, anchors, cars, p)
+    line = _step_line(indices, table, cars, shift, p)
+    n_x = _nonlinear(y, t, forces, line, cars, p)
     ex = _matvec(props[E_HALF], y, m)
-    a = ex + _matvec(props[PHI1_HALF], n_x, n)
-    n_a = _nonlinear(a, t + h / 2, forces, powered, accels, slopes, anchors, cars, p)
-    b = ex + _matvec(props[PHI1_HALF], n_a, n)
-    n_b = _nonlinear(b, t + h / 2, forces, powered, accels, slopes, anchors, cars, p)
-    c = _matvec(props[E_HALF], a, m) + _matvec(props[PHI1_HALF], 2.0 * n_b - n_x, n)
-    n_c = _nonlinear(c, t + h, forces, powered, accels, slopes, anchors, cars, p)
-    out = (_matvec(props[E_FULL], y, m) + _matvec(props[F1], n_x, n)
-           + _matvec(props[F2], n_a + n_b, n) + _matvec(props[F3], n_c, n))
+    a = ex.copy()
+    _add_matvec(a, props[PHI1_HALF], n_x, 1.0, n_x, 0.0, n)
+    n_a = _nonlinear(a, t + h / 2, forces, line, cars, p)
+    b = ex
+    _add_matvec(b, props[PHI1_HALF], n_a, 1.0, n_a, 0.0, n)
+    n_b = _nonlinear(b, t + h / 2, forces, line, cars, p)
+    c = _matvec(props[E_HALF], a, m)
+    _add_matvec(c, props[PHI1_HALF], n_b, 2.0, n_x, -1.0, n)
+    n_c = _nonlinear(c, t + h, forces, line, cars, p)
+    out = _matvec(props[E_FULL], y, m)
+    _add_matvec(out, props[F1], n_x, 1.0, n_x, 0.0, n)
+    _add_matvec(out, props[F2], n_a, 1.0, n_b, 1.0, n)
+    _add_matvec(out, props[F3], n_c, 1.0, n_c, 0.0, n)
     for q in range(n):
         out[q] += shift
     return out
 
 
 @kernel
-def substep_kernel(x, t, h, props, forces, powered, table, bounds, offsets, cars, p):
+def substep_kernel(x, t, h, props, forces, table, cars, p):
     """One ETDRK4 step in the cars' current segments: (the state after it, whether a car has
     reached another segment by its end)."""
-    indices = segment_indices(x, offsets, bounds)
-    x1 = etdrk4_kernel(x, t, h, props, forces, powered, indices, table, offsets, cars, p)
-    after = segment_indices(x1, offsets, bounds)
+    indices = segment_indices(x, table, cars)
+    x1 = etdrk4_kernel(x, t, h, props, forces, indices, table, cars, p)
+    after = segment_indices(x1, table, cars)
     crossed = False
     for q in range(indices.shape[0]):
         if after[q] != indices[q]:
@@ -330,8 +350,7 @@ def substep_kernel(x, t, h, props, forces, powered, table, bounds, offsets, cars
 
 
 @kernel
-def derivative_kernel(state, shift, time_s, linear, forces, powered, table, bounds, offsets,
-                      cars, p):
+def derivative_kernel(state, shift, time_s, linear, forces, table, cars, p):
     """x' at one instant, the line forces looked up at the cars' positions (``state`` holds
     positions relative to ``shift``)."""
     m = state.shape[0]
@@ -339,22 +358,20 @@ def derivative_kernel(state, shift, time_s, linear, forces, powered, table, boun
     absolute = state.copy()
     for q in range(n):
         absolute[q] += shift
-    indices = segment_indices(absolute, offsets, bounds)
-    accels, slopes, anchors = _step_line(indices, table, offsets, shift, p)
+    line = _step_line(segment_indices(absolute, table, cars), table, cars, shift, p)
     out = _matvec(linear, state, m)
-    out[n:] += _nonlinear(state, time_s, forces, powered, accels, slopes, anchors, cars, p)
+    out[n:] += _nonlinear(state, time_s, forces, line, cars, p)
     return out
 
 
 @kernel
-def outputs_kernel(state, time_s, linear, forces, powered, table, bounds, offsets, cars, p):
+def outputs_kernel(state, time_s, linear, forces, table, cars, p):
     """[positions of the cars, their speeds, their accelerations]."""
     n = state.shape[0] // 2
     out = np.empty(3 * n)
-    derivative = derivative_kernel(state, 0.0, time_s, linear, forces, powered, table, bounds,
-                                   offsets, cars, p)
+    derivative = derivative_kernel(state, 0.0, time_s, linear, forces, table, cars, p)
     for q in range(n):
-        out[q] = state[q] - offsets[q]
+        out[q] = state[q] - cars[CAR_OFFSET, q]
         out[n + q] = state[n + q]
         out[2 * n + q] = derivative[n + q]
     return out
@@ -378,8 +395,7 @@ class MultiCarModel:
             raise ValueError(f'actuators {train.actuator_names} are not the powered cars '
                              f'{self.actuator_names}')
         self.offsets = np.arange(n) * train.car_length_m
-        self._powered = np.array([i for i, c in enumerate(cars) if c.powered], dtype=np.int64)
-        self._powered_list = self._powered.tolist()
+        self.powered = [i for i, c in enumerate(cars) if c.powered]
         self.segments = LineSegments(line, gravity)
         self.nominal = Surroundings(nominal_mode(train), 0)
         self._modes: dict[int, _ModeMatrices] = {}
@@ -387,6 +403,8 @@ class MultiCarModel:
         self.parameters = np.zeros(PARAMETERS)
         self._parameters_of = None  # the surroundings ``parameters`` holds, and their matrices
         self._matrices_of_parameters: _ModeMatrices | None = None
+        self._forces: tuple = ()
+        self._forces_array = np.zeros(0)
         self._warm_up()
 
     def _warm_up(self) -> None:
@@ -394,21 +412,18 @@ class MultiCarModel:
         process: that takes from a tenth of a second to seconds), so that no lockstep step pays
         it. Changes nothing."""
         mm, p = self._prepare(self.nominal, 0.0, 0.0)
-        table, bounds, offsets = self.segments.table, self.segments.bound_array, self.offsets
+        table = self.segments.table
         x = self.initial_state(0.0, 1.0)
         forces = np.zeros(len(self.actuator_names))
         props = mm.propagators(self.max_substep_s)
         if mm._eigen_decomposition() is not None:
             eigen_propagators(*mm._eigen_decomposition(), self.max_substep_s)
-        indices = segment_indices(x, offsets, bounds)
-        substep_kernel(x, 0.0, self.max_substep_s, props, forces, self._powered, table, bounds,
-                       offsets, mm.cars, p)
-        etdrk4_kernel(x, 0.0, self.max_substep_s, props, forces, self._powered, indices, table,
-                      offsets, mm.cars, p)
-        derivative_kernel(x, 0.0, 0.0, mm.A, forces, self._powered, table, bounds, offsets,
-                          mm.cars, p)
-        outputs_kernel(x, 0.0, mm.A, forces, self._powered, table, bounds, offsets, mm.cars, p)
-        boundary_between(bounds, 0, 0)
+        indices = segment_indices(x, table, mm.cars)
+        substep_kernel(x, 0.0, self.max_substep_s, props, forces, table, mm.cars, p)
+        etdrk4_kernel(x, 0.0, self.max_substep_s, props, forces, indices, table, mm.cars, p)
+        derivative_kernel(x, 0.0, 0.0, mm.A, forces, table, mm.cars, p)
+        outputs_kernel(x, 0.0, mm.A, forces, table, mm.cars, p)
+        boundary_between(table, 0, 0)
         crossing_time(0.0, 1.0, 1.0, 1.0, 1.0, 0.5)
 
     def mode_matrices(self, env: Surroundings) -> _ModeMatrices:
@@ -432,6 +447,13 @@ class MultiCarModel:
             p[ENV + DISTURBANCE_VALUE] = env.disturbance.force(time_s + 0.5 * duration_s)
         return self._matrices_of_parameters, p
 
+    def _force_array(self, forces: Sequence[float]) -> np.ndarray:
+        """The actuator forces as the kernels read them (the last array, if they are equal)."""
+        if type(forces) is not tuple or forces != self._forces:
+            self._forces = tuple(forces)
+            self._forces_array = np.array(self._forces, dtype=float)
+        return self._forces_array
+
     def initial_state(self, position_m: float, speed_mps: float = 0.0) -> np.ndarray:
         return np.concatenate([np.full(self.n, position_m), np.full(self.n, speed_mps)])
 
@@ -445,31 +467,31 @@ class MultiCarModel:
              time_s: float = 0.0, env: Surroundings | None = None) -> np.ndarray:
         """State after ``duration_s`` with the forces held (zero-order hold) from ``time_s``."""
         mm, p = self._prepare(env or self.nominal, time_s, duration_s)
-        forces = np.array(forces, dtype=float)
+        forces = self._force_array(forces)
         substeps = max(1, math.ceil(duration_s / self.max_substep_s - 1e-9))
         h_max = duration_s / substeps
         x = np.asarray(state, dtype=float)
         t, end = float(time_s), time_s + duration_s
         n = self.n
-        table, bounds, offsets = self.segments.table, self.segments.bound_array, self.offsets
+        table, cars = self.segments.table, mm.cars
         while end - t > 1e-12 * max(1.0, abs(end)):
             h = h_max if end - t > h_max * (1.0 - 1e-9) else end - t
-            x1, crossed = substep_kernel(x, t, h, mm.propagators(h, h == h_max), forces,
-                                         self._powered, table, bounds, offsets, mm.cars, p)
+            x1, crossed = substep_kernel(x, t, h, mm.propagators(h, h == h_max), forces, table,
+                                         cars, p)
             if crossed:  # a car reaches another segment: stop the step there
-                indices = segment_indices(x, offsets, bounds)
-                after = segment_indices(x1, offsets, bounds)
+                indices = segment_indices(x, table, cars)
+                after = segment_indices(x1, table, cars)
                 crossings = []
                 for q, (i0, i1) in enumerate(zip(indices.tolist(), after.tolist())):
                     if i0 != i1:
-                        boundary = boundary_between(bounds, i0, i1) + offsets[q]
+                        boundary = boundary_between(table, i0, i1) + self.offsets[q]
                         crossings.append((crossing_time(x[q], x[n + q], x1[q], x1[n + q], h,
                                                         boundary), q, boundary))
                 h, q, boundary = min(crossings)
 
                 def etdrk4(h):
-                    return etdrk4_kernel(x, t, h, mm.propagators(h, False), forces,
-                                         self._powered, indices, table, offsets, mm.cars, p)
+                    return etdrk4_kernel(x, t, h, mm.propagators(h, False), forces, indices,
+                                         table, cars, p)
                 x1 = etdrk4(h)
                 for _ in range(3):  # Newton on the crossing time, with the car's speed
                     miss = float(x1[q]) - boundary
@@ -487,19 +509,18 @@ class MultiCarModel:
         extensions exact when the positions are tens of kilometres."""
         mm, p = self._prepare(env or self.nominal, time_s, 0.0)
         return derivative_kernel(np.asarray(state, dtype=float), float(shift), float(time_s),
-                                 mm.A, np.array(forces, dtype=float), self._powered,
-                                 self.segments.table, self.segments.bound_array, self.offsets,
-                                 mm.cars, p)
+                                 mm.A, self._force_array(forces), self.segments.table, mm.cars,
+                                 p)
 
     def outputs(self, state: np.ndarray, forces: Sequence[float], time_s: float = 0.0,
                 env: Surroundings | None = None):
         n = self.n
         mm, p = self._prepare(env or self.nominal, time_s, 0.0)
         values = outputs_kernel(np.asarray(state, dtype=float), float(time_s), mm.A,
-                                np.array(forces, dtype=float), self._powered, self.segments.table,
-                                self.segments.bound_array, self.offsets, mm.cars, p).tolist()
+                                self._force_array(forces), self.segments.table, mm.cars,
+                                p).tolist()
         applied = [0.0] * n
-        for force, i in zip(forces, self._powered_list):
+        for force, i in zip(forces, self.powered):
             applied[i] = float(force)
         return (tuple(values[:n]), tuple(values[n:2 * n]), tuple(values[2 * n:]),
                 tuple(applied))

@@ -67,8 +67,8 @@ def _parts(p, speed, force, line_accel, time_s):
 
 
 @kernel
-def acceleration_kernel(p, table, bounds, position, speed, force, time_s):
-    segment = segment_index(bounds, position, False)
+def acceleration_kernel(p, table, position, speed, force, time_s):
+    segment = segment_index(table, position, False)
     return _parts(p, speed, force, _line_accel(p, table, segment, position), time_s)[0]
 
 
@@ -94,7 +94,7 @@ def _rk4(p, table, s, v, t, h, force, segment):
 
 
 @kernel
-def step_kernel(p, table, bounds, work, s, v, time_s, duration_s, max_substep_s, force):
+def step_kernel(p, table, work, s, v, time_s, duration_s, max_substep_s, force):
     """(s, v) after ``duration_s`` with the force held from ``time_s``, in RK4 steps of at most
     ``max_substep_s`` split at segment boundaries; adds the work integrals to ``work``."""
     t, end = time_s, time_s + duration_s
@@ -102,11 +102,11 @@ def step_kernel(p, table, bounds, work, s, v, time_s, duration_s, max_substep_s,
     h_max = duration_s / substeps
     while end - t > 1e-12 * max(1.0, abs(end)):
         h = h_max if end - t > h_max * (1.0 - 1e-9) else end - t
-        segment = segment_index(bounds, s, False)
+        segment = segment_index(table, s, False)
         s1, v1, w0, w1, w2, w3 = _rk4(p, table, s, v, t, h, force, segment)
-        after = segment_index(bounds, s1, False)
+        after = segment_index(table, s1, False)
         if after != segment:  # the train reaches the next segment within this step
-            boundary = boundary_between(bounds, segment, after)
+            boundary = boundary_between(table, segment, after)
             h = crossing_time(s, v, s1, v1, h, boundary)
             s1, v1, w0, w1, w2, w3 = _rk4(p, table, s, v, t, h, force, segment)
             s1 = boundary  # on it, within the step's error: continue in the next segment
@@ -165,15 +165,14 @@ class PointMassModel:
     def acceleration(self, position: float, speed: float, force: float, time_s: float = 0.0,
                      env: Surroundings | None = None) -> float:
         p = self._parameters(env or self.nominal, time_s, 0.0)
-        return acceleration_kernel(p, self.segments.table, self.segments.bound_array,
-                                   float(position), float(speed), float(force), float(time_s))
+        return acceleration_kernel(p, self.segments.table, float(position), float(speed),
+                                   float(force), float(time_s))
 
     def step(self, state, duration_s: float, forces: Sequence[float], time_s: float = 0.0,
              env: Surroundings | None = None) -> np.ndarray:
         """State after ``duration_s`` with the forces held (zero-order hold) from ``time_s``."""
         p = self._parameters(env or self.nominal, time_s, duration_s)
-        segments = self.segments
-        s, v = step_kernel(p, segments.table, segments.bound_array, self.work, float(state[0]),
+        s, v = step_kernel(p, self.segments.table, self.work, float(state[0]),
                            float(state[1]), float(time_s), float(duration_s),
                            self.max_substep_s, math.fsum(forces))
         return np.array((s, v))
