@@ -336,17 +336,17 @@ def etdrk4_kernel(x, t, h, props, forces, indices, table, cars, p):
 
 
 @kernel
-def substep_kernel(x, t, h, props, forces, table, cars, p):
-    """One ETDRK4 step in the cars' current segments: (the state after it, whether a car has
-    reached another segment by its end)."""
+def substep_kernel(x, out, t, h, props, forces, table, cars, p):
+    """One ETDRK4 step in the cars' current segments into ``out`` (allocated by the caller:
+    cheaper than returning a new array); returns whether a car has reached another segment."""
     indices = segment_indices(x, table, cars)
-    x1 = etdrk4_kernel(x, t, h, props, forces, indices, table, cars, p)
-    after = segment_indices(x1, table, cars)
+    out[:] = etdrk4_kernel(x, t, h, props, forces, indices, table, cars, p)
+    after = segment_indices(out, table, cars)
     crossed = False
     for q in range(indices.shape[0]):
         if after[q] != indices[q]:
             crossed = True
-    return x1, crossed
+    return crossed
 
 
 @kernel
@@ -365,16 +365,14 @@ def derivative_kernel(state, shift, time_s, linear, forces, table, cars, p):
 
 
 @kernel
-def outputs_kernel(state, time_s, linear, forces, table, cars, p):
-    """[positions of the cars, their speeds, their accelerations]."""
+def outputs_kernel(state, out, time_s, linear, forces, table, cars, p):
+    """[positions of the cars, their speeds, their accelerations] into ``out``."""
     n = state.shape[0] // 2
-    out = np.empty(3 * n)
     derivative = derivative_kernel(state, 0.0, time_s, linear, forces, table, cars, p)
     for q in range(n):
         out[q] = state[q] - cars[CAR_OFFSET, q]
         out[n + q] = state[n + q]
         out[2 * n + q] = derivative[n + q]
-    return out
 
 
 class MultiCarModel:
@@ -403,6 +401,7 @@ class MultiCarModel:
         self.parameters = np.zeros(PARAMETERS)
         self._parameters_of = None  # the surroundings ``parameters`` holds, and their matrices
         self._matrices_of_parameters: _ModeMatrices | None = None
+        self._outputs = np.empty(3 * n)  # outputs_kernel's
         self._forces: tuple = ()
         self._forces_array = np.zeros(0)
         self._warm_up()
@@ -419,10 +418,11 @@ class MultiCarModel:
         if mm._eigen_decomposition() is not None:
             eigen_propagators(*mm._eigen_decomposition(), self.max_substep_s)
         indices = segment_indices(x, table, mm.cars)
-        substep_kernel(x, 0.0, self.max_substep_s, props, forces, table, mm.cars, p)
+        substep_kernel(x, np.empty_like(x), 0.0, self.max_substep_s, props, forces, table,
+                       mm.cars, p)
         etdrk4_kernel(x, 0.0, self.max_substep_s, props, forces, indices, table, mm.cars, p)
         derivative_kernel(x, 0.0, 0.0, mm.A, forces, table, mm.cars, p)
-        outputs_kernel(x, 0.0, mm.A, forces, table, mm.cars, p)
+        outputs_kernel(x, self._outputs, 0.0, mm.A, forces, table, mm.cars, p)
         boundary_between(table, 0, 0)
         crossing_time(0.0, 1.0, 1.0, 1.0, 1.0, 0.5)
 
@@ -476,8 +476,9 @@ class MultiCarModel:
         table, cars = self.segments.table, mm.cars
         while end - t > 1e-12 * max(1.0, abs(end)):
             h = h_max if end - t > h_max * (1.0 - 1e-9) else end - t
-            x1, crossed = substep_kernel(x, t, h, mm.propagators(h, h == h_max), forces, table,
-                                         cars, p)
+            x1 = np.empty(2 * n)
+            crossed = substep_kernel(x, x1, t, h, mm.propagators(h, h == h_max), forces, table,
+                                     cars, p)
             if crossed:  # a car reaches another segment: stop the step there
                 indices = segment_indices(x, table, cars)
                 after = segment_indices(x1, table, cars)
@@ -516,9 +517,9 @@ class MultiCarModel:
                 env: Surroundings | None = None):
         n = self.n
         mm, p = self._prepare(env or self.nominal, time_s, 0.0)
-        values = outputs_kernel(np.asarray(state, dtype=float), float(time_s), mm.A,
-                                self._force_array(forces), self.segments.table, mm.cars,
-                                p).tolist()
+        outputs_kernel(np.asarray(state, dtype=float), self._outputs, float(time_s), mm.A,
+                       self._force_array(forces), self.segments.table, mm.cars, p)
+        values = self._outputs.tolist()
         applied = [0.0] * n
         for force, i in zip(forces, self.powered):
             applied[i] = float(force)
