@@ -359,7 +359,12 @@ def derivative_kernel(state, shift, time_s, linear, forces, table, cars, p):
     for q in range(n):
         absolute[q] += shift
     line = _step_line(segment_indices(absolute, table, cars), table, cars, shift, p)
-    out = _matvec(linear, state, m)
+    # The couplers see only differences of positions: relative to the lead car's, their forces
+    # do not lose digits to positions of kilometres (stiffness x position ~ 1e7 m/s^2 each).
+    relative = state.copy()
+    for q in range(n):
+        relative[q] -= state[0]
+    out = _matvec(linear, relative, m)
     out[n:] += _nonlinear(state, time_s, forces, line, cars, p)
     return out
 
