@@ -2,9 +2,10 @@
 
 The kernels (one integration step of a model, the line force of a segment, the varying
 resistance factors) are plain Python functions on floats and preallocated numpy arrays. With
-numba installed they are compiled to machine code on first use (cached on disk, see
-``NUMBA_CACHE_DIR`` in scripts/env.sh); without it the same functions run as Python, slower.
-There is one copy of the physics either way.
+numba installed they are compiled to machine code on first use and cached on disk (in
+``__pycache__`` next to the sources, or numba's per-user cache directory where that is not
+writable); without it the same functions run as Python, much slower. There is one copy of the
+physics either way.
 """
 
 from __future__ import annotations

@@ -3,7 +3,8 @@
 The simulation splits its steps at every scheduled time (mode switches by time, abrupt changes,
 failures, jumps of a random disturbance), so within a step the mode, an abrupt change and the
 actuator forces are constant; the slowly varying resistance and the disturbance d(t) are
-continuous functions of time that the integrators evaluate at their stage times.
+continuous functions of time that the integrators evaluate at their stage times (a random
+disturbance is piecewise constant: the models hold its value in the middle of the step).
 """
 
 from __future__ import annotations
@@ -36,10 +37,6 @@ class Surroundings:
     resistance_factor: float = 1.0
     variation: ResistanceVariation | None = None
     disturbance: Disturbance | None = None     # None: d = 0
-
-    @property
-    def time_varying(self) -> bool:
-        return self.variation is not None or self.disturbance is not None
 
     @property
     def held_disturbance(self) -> bool:

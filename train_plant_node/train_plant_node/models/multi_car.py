@@ -465,9 +465,6 @@ class MultiCarModel:
     def lead_speed(self, state) -> float:
         return float(state[self.n])
 
-    def positions(self, state: np.ndarray) -> np.ndarray:
-        return state[:self.n] - self.offsets
-
     def step(self, state: np.ndarray, duration_s: float, forces: Sequence[float],
              time_s: float = 0.0, env: Surroundings | None = None) -> np.ndarray:
         """State after ``duration_s`` with the forces held (zero-order hold) from ``time_s``."""
