@@ -51,8 +51,9 @@ STANDSTILL_SPEED_MPS = 0.01
 
 # The kernels' parameter array: the mode's extra grade and curve term (m/s^2), its total mass,
 # gravity, then the surroundings (surroundings.py). Rows of _ModeMatrices.cars: each car's a, b,
-# c per kg, 1 / mass, rest offset (m) and the index of its actuator's force (-1: unpowered). Propagator array (one per step length): e^(Ah/2), its phi_1 map on the
-# velocities, e^(Ah), and the three ETDRK4 maps of the non-linear terms (velocity columns).
+# c per kg, 1 / mass, rest offset (m) and the index of its actuator's force (-1: unpowered).
+# Propagator array (one per step length): e^(Ah/2), its phi_1 map on the velocities, e^(Ah), and
+# the three ETDRK4 maps of the non-linear terms (velocity columns).
 EXTRA_ACCEL, TOTAL_MASS, GRAVITY, ENV = range(4)
 PARAMETERS = ENV + ENV_SIZE
 CAR_A, CAR_B, CAR_C, CAR_INVERSE_MASS, CAR_OFFSET, CAR_ACTUATOR = range(6)

@@ -52,7 +52,8 @@ def _line_accel(p, table, segment, position):
 
 @kernel
 def _parts(p, speed, force, line_accel, time_s):
-    """(acceleration, resistance force, line force, disturbance force) at one instant."""
+    """(acceleration, resistance force, line force, disturbance force) at one instant: the
+    module's equation (Luo & Xu eq 3 with eq 34, Mao et al. 2017 eq 12, Liu & Li eqs 2-6, 9)."""
     fa, fb, fc, fl, dist = env_factors(p, ENV, time_s)
     mass, a_n = p[MASS], p[DAVIS_A]
     line_force = mass * (line_accel * fl + p[MODE_ACCEL])
