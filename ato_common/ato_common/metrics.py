@@ -3,7 +3,8 @@
 The same definitions serve ``make demo``, the tests and reports from recordings:
 - speed and position errors are reference minus truth of the lead car at each control instant;
 - the stopping error at a stop is the lead car's position minus the station position at the end
-  of the dwell (or at the end of the run for the last stop);
+  of the dwell (at the arrival for the last stop); a stop later than the run's end (a run over
+  a window of the scenario) has none;
 - traction energy is the work of the traction force: the sum over control intervals of
   max(F dx, 0), F the force applied (held) from one sample to the next and dx the distance run
   meanwhile (exact for a held force; braking work is not counted).
@@ -51,6 +52,8 @@ def compute_metrics(times_s, positions, speeds, forces, ref_positions, ref_speed
     energy = float(np.sum(np.maximum(f[:-1] * np.diff(x), 0.0))) if t.size > 1 else 0.0
     stop_errors = {}
     for stop in stops:
+        if stop.time_s > t[-1] + 1e-9:
+            continue  # the run ended before this stop: no stopping error to read
         i = min(int(np.searchsorted(t, stop.time_s, side='right')) - 1, t.size - 1)
         stop_errors[stop.station] = float(x[max(i, 0)] - stop.station_position_m)
     return RunMetrics(

@@ -51,8 +51,11 @@ def test_a_law_that_needs_a_faster_rate_runs_at_it_over_a_window():
     assert fast.rate_hz == 10000.0   # its sampled-time design refuses 10 Hz, 200 Hz and 1 kHz
     assert fast.end_time_s == pytest.approx(compare.MAX_STEPS / 10000.0)
     assert jobs['pid'].rate_hz == 10.0 and jobs['pid'].end_time_s is None
-    assert not compare.best_law([{'status': 'ok', 'end_time_s': 150.0, 'stop_error_m': 0.0,
-                                  'rms_speed_error_kmh': 0.0, 'law': 'windowed'}])
+    ranked = {'status': 'ok', 'end_time_s': None, 'stop_error_m': 0.0, 'rate_hz': 10.0,
+              'scenario_rate_hz': 10.0, 'rms_speed_error_kmh': 0.01, 'law': 'ranked'}
+    windowed = dict(ranked, end_time_s=150.0, rms_speed_error_kmh=0.0, law='windowed')
+    faster = dict(ranked, rate_hz=200.0, rms_speed_error_kmh=0.0, law='faster')
+    assert compare.best_law([ranked, windowed, faster]) == 'ranked'
 
 
 def test_a_failing_or_diverging_law_is_shown_with_its_reason(monkeypatch, tmp_path):
