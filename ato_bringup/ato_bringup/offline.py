@@ -6,6 +6,7 @@ command is held while the plant advances one period."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import math
 import time
 
 import numpy as np
@@ -77,6 +78,7 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
     steps = int(end * 1e9 // period_ns)
     pending = sorted((switches or {}).items())
     rows, car_positions, car_speeds, actuator_forces, step_times = [], [], [], [], []
+    mode = 0
     laws, estimates, faults = [], [], []
     for _ in range(steps + 1):
         t = sim.time_s
@@ -85,13 +87,12 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
         truth = sim.truth()
         measured = sim.measured(truth)
         reference = plan.trajectory.at(t)
+        mode = scenario.plant.known_mode(t, measured.positions[0], mode)
         started = time.perf_counter()
-        mode = scenario.plant.mode_index(t, measured.positions[0])
         result = host.step(Measurement.from_state(t, measured, mode), reference)
         step_times.append(time.perf_counter() - started)
         sim.apply_command(result.forces_n)
-        applied = sim.truth()
-        rows.append((t, truth.positions[0], truth.speeds[0], sum(applied.forces),
+        rows.append((t, truth.positions[0], truth.speeds[0], math.fsum(sim.applied),
                      reference.position, reference.speed, reference.acceleration))
         car_positions.append(truth.positions)
         car_speeds.append(truth.speeds)

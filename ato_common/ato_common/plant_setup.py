@@ -261,6 +261,13 @@ class PlantSetup:
                              f'mode, got {key}')
         return max(bisect_right([m.start for m in self.modes], key) - 1, 0)
 
+    def known_mode(self, time_s: float, measured_position_m: float, previous: int) -> int:
+        """The mode on-board software takes as active from its measurements: ``mode_index``,
+        or ``previous`` while modes switch by position and the position is not measured."""
+        if self.mode_switch != 'time' and not math.isfinite(measured_position_m):
+            return previous
+        return self.mode_index(time_s, measured_position_m)
+
     def abrupt_change(self, time_s: float) -> AbruptChange | None:
         for change in self.abrupt_changes:
             if change.active(time_s):

@@ -116,23 +116,25 @@ class ControllerHost:
                               'actuators; holding the last command', reference, measurement)
         if not all(math.isfinite(f) for f in (output.force_n, *(output.forces_n or ()))):
             self.faults += 1
+            self.started = False  # restart the law from the current state at the next step
             return self._held(law, f'{law.name} produced a non-finite force; holding the last '
                               'command', reference, measurement)
+        law_total = sum(output.forces_n) if output.forces_n is not None else output.force_n
         if not self.started:
             # Nothing to be bumpless to before the first command.
-            self._offset_n = self.last_force_n - output.force_n if self._has_commanded else 0.0
+            self._offset_n = self.last_force_n - law_total if self._has_commanded else 0.0
             self.started = True
         else:
             self._offset_n *= math.exp(-self.dt / self.bumpless_time_constant_s)
         offset_each = self._offset_n / n
-        law_each = output.forces_n if output.forces_n is not None else (output.force_n / n,) * n
+        law_each = output.forces_n if output.forces_n is not None else (law_total / n,) * n
         wanted_each = [f + offset_each for f in law_each]
         lowest, highest = self.train.actuator_limits_at(self._speed_for_limits(
             measurement, reference, output.estimates))
         forces = tuple(min(max(f, lowest), highest) for f in wanted_each)
         total, wanted = sum(forces), sum(wanted_each)
         law.after_saturation(wanted - self._offset_n, total - self._offset_n,
-                             tuple(f - offset_each for f in forces))
+                             tuple(f - offset_each for f in forces), applied_n=total)
         self.last_force_n, self.last_forces_n = total, forces
         self._has_commanded = True
         return self._result(total, forces, wanted, law, dict(output.estimates), reference,

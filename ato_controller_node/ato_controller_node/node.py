@@ -112,6 +112,7 @@ class AtoControllerNode(Node):
         self.period_warning_given = False
         self.input_fault = ''
         self.last_fault_logged = ''
+        self.mode = 0  # the known operating mode, kept while it cannot be determined
         self.state_received_wall = 0.0
         self.stale_reported_wall = 0.0
 
@@ -227,16 +228,17 @@ class AtoControllerNode(Node):
                 self.report_stale(age)
             return
         now_ns = self.get_clock().now().nanoseconds
-        self.step(now_ns, state, Reference(now_ns, (reference_now(reference, now_ns),)),
-                  seconds(now_ns))
+        target = reference_now(reference, now_ns)
+        # The laws and the mode schedule work in run time (the curve's time), not clock time.
+        self.step(now_ns, state, Reference(now_ns, (target,)), target.time_s)
 
     # --- the step -----------------------------------------------------------------------------
     def step(self, stamp_ns: int, state, reference, time_s: float) -> None:
         started = time.perf_counter()
         # The operating mode is known on board (line data), as the indicators chi_i of
         # Mao et al. 2017 assume; taken at the lead car's measured position.
-        mode = self.scenario.plant.mode_index(time_s, state.positions[0])
-        measurement = Measurement.from_state(time_s, state, mode)
+        self.mode = self.scenario.plant.known_mode(time_s, state.positions[0], self.mode)
+        measurement = Measurement.from_state(time_s, state, self.mode)
         result = self.host.step(measurement, reference.now)
         if result.fault and result.fault != self.last_fault_logged:
             self.get_logger().error(result.fault)

@@ -37,8 +37,8 @@ class _PerActuatorProbe(ControlLaw):
     def step(self, measurement, reference):
         return LawOutput(sum(self.wanted), {}, self.wanted)
 
-    def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=()):
-        self.reported = (wanted_n, commanded_n, commanded_forces_n)
+    def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=(), applied_n=None):
+        self.reported = (wanted_n, commanded_n, commanded_forces_n, applied_n)
 
 
 @pytest.fixture
@@ -60,9 +60,10 @@ def test_per_actuator_forces_are_saturated_each_and_reported_back(probe_register
     assert result.forces_n == (highest, -5e3)
     assert result.total_force_n == pytest.approx(highest - 5e3)
     assert result.saturated
-    wanted, commanded, forces = host.law.reported
+    wanted, commanded, forces, applied = host.law.reported
     assert wanted == pytest.approx(1e9 - 5e3) and commanded == pytest.approx(highest - 5e3)
     assert forces == (highest, -5e3)
+    assert applied == result.total_force_n  # no bumpless offset before the first command
 
 
 def test_a_law_needing_four_cars_is_refused_on_a_single_mass_plant(probe_registered):
@@ -102,3 +103,22 @@ def test_pid_ignores_a_missing_acceleration_but_not_a_missing_speed():
     assert 'needs the measured speed' in host.step(Measurement(0.1, 1.0, math.nan), ref).fault
     assert 'non-finite reference' in host.step(
         Measurement(0.2, 1.0, 10.0), ReferencePoint(0.2, 0.0, 10.0, 0.0, math.nan)).fault
+
+
+def test_a_law_whose_output_turns_non_finite_is_restarted_not_held_forever():
+    train = TrainKnowledge.of(load_scenario('short_line').train)
+    host = ControllerHost(train, 0.1, 'luo_xu')
+    ref = ReferencePoint(0.0, 100.0, 10.0, 0.0)
+    host.step(Measurement(0.0, 100.0, 10.0), ref)
+    host.law.mass_hat = math.nan  # its state poisoned (e.g. by an overflow)
+    assert 'non-finite force' in host.step(Measurement(0.1, 101.0, 10.0), ref).fault
+    recovered = host.step(Measurement(0.2, 102.0, 10.0), ref)  # reset from its prior
+    assert not recovered.fault and math.isfinite(recovered.total_force_n)
+
+
+def test_a_law_requiring_an_unknown_measurement_is_refused_with_the_valid_names(
+        probe_registered, monkeypatch):
+    monkeypatch.setattr(_PerActuatorProbe, 'requires', ('car_speed',))
+    train = TrainKnowledge.of(train_preset('crh2_4car_mao'))
+    with pytest.raises(LawRejected, match=r"unknown measurements \['car_speed'\]; valid: "):
+        ControllerHost(train, 0.1, _PerActuatorProbe.name)

@@ -124,11 +124,14 @@ class TrainPlantNode(Node):
         self.applied_pub = self.create_publisher(
             JointState, topic('actuators_applied').name,
             qos_profile(topic('actuators_applied').qos))
-        self.params.extra_checks.append(self.on_inject_failure)
+        # Validate in the set callback, apply once the change is accepted (validate-then-apply).
+        self.params.extra_checks.append(self.check_inject_failure)
+        self.add_post_set_parameters_callback(self.apply_parameters)
         if p['inject_failure']:  # given at start-up: like scenario failures
-            reason = self.on_inject_failure({'inject_failure': p['inject_failure']})
+            reason = self.check_inject_failure({'inject_failure': p['inject_failure']})
             if reason:
                 raise ConfigError(reason)
+            self.inject_failure(p['inject_failure'])
         self.create_subscription(JointState, topic('command').name, self.on_command,
                                  qos_profile(topic('command').qos))
         # Wall-clock timer: start-up, re-sends in lockstep, integration in real time.
@@ -227,23 +230,33 @@ class TrainPlantNode(Node):
         return Header(stamp=to_time(self.stamp_ns()))
 
     # --- events -------------------------------------------------------------------------------
-    def on_inject_failure(self, changes) -> str | None:
-        """``ros2 param set /train_plant_node inject_failure '...'``: validated, then applied at
-        once (a rejected text returns the reason and changes nothing)."""
+    def check_inject_failure(self, changes) -> str | None:
+        """``ros2 param set /train_plant_node inject_failure '...'``: a text that does not parse
+        is rejected with the reason and changes nothing."""
         if 'inject_failure' not in changes:
             return None
         try:
-            failures, repaired = parse_failure_injection(
-                changes['inject_failure'], self.sim.actuator_names, self.sim.time_s)
+            parse_failure_injection(changes['inject_failure'], self.sim.actuator_names,
+                                    self.sim.time_s)
         except ConfigError as error:
             return str(error)
+        return None
+
+    def apply_parameters(self, parameters) -> None:
+        for parameter in parameters:
+            if parameter.name == 'inject_failure':
+                self.inject_failure(parameter.value)
+
+    def inject_failure(self, text: str) -> None:
+        """Apply an accepted ``inject_failure`` text at once."""
+        failures, repaired = parse_failure_injection(text, self.sim.actuator_names,
+                                                     self.sim.time_s)
         self.sim.inject_failures(failures, repaired)
         for failure in failures:
             self.get_logger().warning(f'failure injected: {failure.describe()}')
         for name in repaired:
             self.get_logger().info(f'actuator {name} repaired')
         self.next_diagnostic_ns = 0
-        return None
 
     def on_timer(self) -> None:
         if self.finished:

@@ -150,6 +150,10 @@ class ControlLaw(ABC):
     def fits(self, train: TrainKnowledge, measured_cars: int | None = None) -> str | None:
         """None if the law can drive this train (and the running plant, which measures
         ``measured_cars`` cars; None before its first measurement), else the reason."""
+        unknown = [q for q in self.requires if q not in MEASURED_QUANTITIES]
+        if unknown:
+            return f'{self.name} requires unknown measurements {unknown}; valid: ' \
+                   f'{", ".join(MEASURED_QUANTITIES)}'
         if self.actuators is not None and self.actuators != len(train.actuator_names):
             return (f'{self.name} drives {self.actuators} actuators but the train has '
                     f'{len(train.actuator_names)} ({", ".join(train.actuator_names)})')
@@ -178,6 +182,9 @@ class ControlLaw(ABC):
         ``after_saturation`` in the same period."""
 
     def after_saturation(self, wanted_n: float, commanded_n: float,
-                         commanded_forces_n: tuple[float, ...] = ()) -> None:
+                         commanded_forces_n: tuple[float, ...] = (),
+                         applied_n: float | None = None) -> None:
         """Told what was actually commanded (after limits), once per step, after ``step``:
-        the total and the force of each actuator."""
+        the total and the force of each actuator, both net of the host's bumpless offset (so
+        that wanted and commanded compare for anti-windup), and ``applied_n``, the total the
+        actuators are really asked for (offset included: what a law's plant model must use)."""

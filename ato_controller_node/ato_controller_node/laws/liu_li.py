@@ -187,7 +187,7 @@ class LiuLiLaw(ControlLaw):
             'resistance_hat_mps2': float(self.w1 @ self._s1(self.v_hat)),
             'rho1_hat': self.rho1, 'rho2_hat_n': self.rho2})
 
-    def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=()):
+    def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=(), applied_n=None):
         if self._pending is None:
             return
         s_tilde, r, s2 = self._pending
@@ -201,7 +201,8 @@ class LiuLiLaw(ControlLaw):
             self.w2 = leaky_step(self.w2, s.Gamma2, s2 * r, s.sigma2, dt)           # (32), W2_0 = 0
             self.rho2 = leaky_step(self.rho2, s.gamma2, r * math.tanh(r / s.eps2),  # (35)
                                    s.kappa2, dt)
-        self._observe(commanded_n, s_tilde)
+        # the observer integrates the force the plant gets (the bumpless offset included)
+        self._observe(commanded_n if applied_n is None else applied_n, s_tilde)
 
     def _observe(self, force_n: float, s_tilde: float) -> None:
         """Integrate the observer over one control period: force and innovation held."""

@@ -120,7 +120,7 @@ class LuoXuLaw(ControlLaw):
                                  'cv_hat_per_s': th[1], 'ca_hat_per_m': th[2],
                                  'z1_m': z1, 'z2_mps': z2, **self._extra_estimates()})
 
-    def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=()):
+    def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=(), applied_n=None):
         if self._pending is None:
             return
         phi, z2, specific = self._pending

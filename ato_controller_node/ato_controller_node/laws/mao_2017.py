@@ -181,7 +181,7 @@ class Mao2017Law(ControlLaw):
                      'c_hat_per_m': c, 'vartheta_hat': vartheta, 'd_hat': d}
         return LawOutput(n * nu0, estimates, (nu0,) * n)
 
-    def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=()):
+    def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=(), applied_n=None):
         if self._pending is None:
             return
         i, x2, z2, varpi, failure, shaped = self._pending

@@ -309,7 +309,7 @@ class MaoAdaptiveLaw(_MaoBase):
         estimates.update({f'theta2{k + 1}_hat': t for k, t in enumerate(th2)})
         return LawOutput(f2 + f3, estimates, (f2, f3))
 
-    def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=()):
+    def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=(), applied_n=None):
         if self._pending is None:
             return
         reg1, eps, reg2, e6, wanted = self._pending

@@ -86,7 +86,7 @@ class PidLaw(ControlLaw):
         self._pending_error = reference.position - measurement.position
         return LawOutput(force, {'integral_action_mps2': self.settings.ki_position * self.integral})
 
-    def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=()):
+    def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=(), applied_n=None):
         error = self._pending_error
         saturated_high = commanded_n < wanted_n
         saturated_low = commanded_n > wanted_n

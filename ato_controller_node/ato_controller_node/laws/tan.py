@@ -268,7 +268,7 @@ class _MultipleModelLaw(ControlLaw):
     def step(self, measurement, reference):
         x = (measurement.position, measurement.speed)
         if self._last_x is not None and \
-                abs(measurement.time_s - self._last_time - self.dt) <= 1e-6 * max(1.0, self.dt):
+                abs(measurement.time_s - self._last_time - self.dt) <= 0.5 * self.dt:
             self.bank.advance(self._last_x, x, self._last_force)
         else:
             # first step, or a gap (a held command): (re)start the models from the measured
@@ -283,8 +283,9 @@ class _MultipleModelLaw(ControlLaw):
         self._last_x, self._last_time, self._last_force = x, measurement.time_s, force
         return LawOutput(force, estimates)
 
-    def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=()):
-        self._last_force = commanded_n   # the models see the force the plant gets
+    def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=(), applied_n=None):
+        # the models see the force the plant gets (the host's bumpless offset included)
+        self._last_force = commanded_n if applied_n is None else applied_n
 
     def _controller(self, x, reference, theta, g_floor: float) -> float:
         """(24) for one parameter vector: u = (k1*^T x + k2* r - Z) / G, written with the
