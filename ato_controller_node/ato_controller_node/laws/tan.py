@@ -61,6 +61,7 @@ non-positive is not taken); even then the division is guarded by a floor of 1e-3
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from dataclasses import dataclass
 import math
 import sys
@@ -303,14 +304,18 @@ class _MultipleModelLaw(ControlLaw):
                 'resistance_a_hat_mps2': float(theta[1]), 'resistance_b_hat_per_s': float(theta[2]),
                 'resistance_c_hat_per_m': float(theta[3])}
 
+    @abstractmethod
     def _start_weights(self) -> None:
-        raise NotImplementedError
+        """Set the method's weights (or index) to their initial values."""
 
+    @abstractmethod
     def _update(self, errors: list[tuple[float, float]], x) -> None:
-        raise NotImplementedError
+        """One control period of the method's weight (or index) update from the models'
+        identification errors."""
 
+    @abstractmethod
     def _control(self, x, reference) -> tuple[float, dict[str, float]]:
-        raise NotImplementedError
+        """The force wanted now and the estimates to report."""
 
 
 class SecondLevelFixedLaw(_MultipleModelLaw):
