@@ -98,8 +98,8 @@ def failed_measurement(law: str, scenario, model: str) -> str:
     lead = scenario.train.cars[0].name if model == 'multi_car' else 'train'
     for quantity in LAWS[law].requires:
         sensor = getattr(scenario.plant.sensors, quantity.removeprefix('car_').rstrip('s'))
-        if math.isinf(sensor.failed_from_s):
-            continue
+        if math.isinf(sensor.failed_from_s) or math.isfinite(sensor.failed_until_s):
+            continue  # never fails, or only for a while (the run then shows the held steps)
         if quantity.startswith('car_') or not sensor.failed_cars or lead in sensor.failed_cars:
             return (f'{law} needs the measured {quantity.replace("_", " ")}, which the plant\'s '
                     f'sensor fails from {sensor.failed_from_s:g} s')

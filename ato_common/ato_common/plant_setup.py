@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from bisect import bisect_right
 from dataclasses import dataclass, field
+from functools import cached_property
 import math
 from typing import Sequence
 
@@ -259,7 +260,11 @@ class PlantSetup:
         if not math.isfinite(key):
             raise ValueError(f'mode_index: the {self.mode_switch} must be finite to find the '
                              f'mode, got {key}')
-        return max(bisect_right([m.start for m in self.modes], key) - 1, 0)
+        return max(bisect_right(self._mode_starts, key) - 1, 0)
+
+    @cached_property
+    def _mode_starts(self) -> tuple[float, ...]:
+        return tuple(m.start for m in self.modes)  # once: mode_index runs every substep
 
     def known_mode(self, time_s: float, measured_position_m: float, previous: int) -> int:
         """The mode on-board software takes as active from its measurements: ``mode_index``,
