@@ -351,3 +351,12 @@ class RunSupervision:
         """``curve(name, position_m)`` from the tabulated limits (exact at the samples, never
         above the exact limit between them); for supervision at every control period."""
         return self.legs[self.leg_at(position_m)].sampled(name)(position_m)
+
+    def packed_curve(self, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every leg's ``sampled(name)`` table in flat arrays, for compiled look-ups: (offsets,
+        positions, speeds), leg i's samples at ``offsets[i]:offsets[i + 1]``."""
+        tables = [leg.sampled(name) for leg in self.legs]
+        offsets = np.cumsum([0] + [len(t.positions) for t in tables]).astype(np.int64)
+        positions = np.array([x for t in tables for x in t.positions], dtype=float)
+        speeds = np.array([v for t in tables for v in t.speeds], dtype=float)
+        return offsets, positions, speeds

@@ -35,9 +35,10 @@ def compile_kernels() -> None:
     from train_plant_node.simulation import TrainSimulation
 
     scenario = load_scenario('short_line')
-    TrainSimulation(scenario, 'point_mass')
-    TrainSimulation(dataclasses.replace(scenario, train=train_preset('crh2_4car_mao')),
-                    'multi_car')
+    for model, train in (('point_mass', scenario.train), ('multi_car',
+                                                         train_preset('crh2_4car_mao'))):
+        sim = TrainSimulation(dataclasses.replace(scenario, train=train), model)
+        sim.run_commands([[0.0] * len(sim.actuator_names)] * 2, 100_000_000)  # periods.py
 
 
 if __name__ == '__main__':

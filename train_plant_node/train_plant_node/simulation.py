@@ -28,6 +28,7 @@ from ato_common.plant_setup import ActuatorFailure, PlantSetup, QuantitySensor, 
 from ato_common.scenario import Scenario
 from ato_common.types import NS_PER_S, TrainState, nanoseconds
 from train_plant_node.models import PlantModel, make_model
+from train_plant_node.periods import period_kernel
 from train_plant_node.surroundings import Surroundings, surroundings_at
 
 
@@ -69,6 +70,28 @@ def merged_sensors(setup: SensorSetup, overrides: SensorSettings | None) -> Sens
 
 # A scheduled time this close to a step boundary is on it (time is float seconds here).
 EVENT_TOLERANCE_S = 1e-9
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """The truth after each control period of :meth:`TrainSimulation.run_commands`: row k is
+    what ``truth()`` returns after the k-th period (columns: the cars, lead car first)."""
+
+    car_names: tuple[str, ...]
+    stamps_ns: np.ndarray          # (periods,) int64
+    positions: np.ndarray          # (periods, cars), m
+    speeds: np.ndarray             # m/s
+    accelerations: np.ndarray      # m/s^2
+    forces: np.ndarray             # applied longitudinal force per car, N
+    atp_intervention: np.ndarray   # (periods,) bool: the ATP's emergency brake after the period
+
+    def __len__(self) -> int:
+        return len(self.stamps_ns)
+
+    def state(self, k: int) -> TrainState:
+        return TrainState(int(self.stamps_ns[k]), self.car_names,
+                          tuple(self.positions[k].tolist()), tuple(self.speeds[k].tolist()),
+                          tuple(self.accelerations[k].tolist()), tuple(self.forces[k].tolist()))
 
 
 class TrainSimulation:
@@ -118,6 +141,7 @@ class TrainSimulation:
         self._one_step_possible = self._instant_actuators and \
             self.setup.disturbance.kind != 'random'
         self._applied_for = None  # the state ``applied`` was last computed for
+        self._packed_supervision = None  # the ATP's tables for ``periods.py``'s kernels
         self._update_applied()
 
     # --- time and state ----------------------------------------------------------------------
@@ -170,10 +194,14 @@ class TrainSimulation:
         if not all(math.isfinite(f) for f in values):
             self.rejected_commands += 1
             raise CommandRejected(f'non-finite force in {list(values)}')
-        self.commanded = values
+        self._hold(values)
+        return self.applied
+
+    def _hold(self, forces: tuple[float, ...]) -> None:
+        """A valid command: in force from now on, and the watchdog is quiet."""
+        self.commanded = forces
         self.missed_periods = 0
         self._update_applied()
-        return self.applied
 
     def command_missed(self, periods: int | None = None) -> None:
         """A control period passed without a valid command (the watchdog counts it); or, with
@@ -320,13 +348,117 @@ class TrainSimulation:
         self.stamp_ns += duration_ns
         self._supervise()
 
+    def run_commands(self, commands, period_ns: int) -> Trajectory:
+        """Hold each row of ``commands`` (one force per actuator, N) for one control period:
+        the same as ``apply_command(row)``, ``advance(period_ns)`` and ``truth()`` for each
+        row, to the last bit, and many times faster where the compiled path applies
+        (``periods.py``: instant actuators, constant surroundings, no failure active, one
+        integration step per period; elsewhere, around every scheduled time and in a period
+        where a car of the multi-car model crosses a line boundary, period by period). For
+        open-loop runs: commands from a file, identification, Monte Carlo. The sensors are not
+        sampled on the way (``measured()`` afterwards reads the final state).
+
+        Every row is checked before the first period: a wrong shape or a non-finite force
+        raises CommandRejected naming the row, and the simulation is left as it was."""
+        names = self.actuator_names
+        try:
+            forces = np.array(commands, dtype=float, ndmin=2)
+        except (TypeError, ValueError) as error:
+            raise CommandRejected(f'commands must be a table of forces: {error}') from None
+        if forces.ndim != 2 or forces.shape[1] != len(names):
+            raise CommandRejected(f'commands of shape {forces.shape}: need one row per period '
+                                  f'of {len(names)} forces {list(names)}')
+        finite = np.isfinite(forces).all(axis=1)
+        if not finite.all():
+            row = int(np.argmin(finite))
+            raise CommandRejected(f'row {row}: non-finite force in {forces[row].tolist()}')
+        if isinstance(period_ns, bool) or not isinstance(period_ns, (int, np.integer)) \
+                or period_ns <= 0:
+            raise ValueError(f'period_ns must be a positive integer, got {period_ns!r}')
+        period_ns = int(period_ns)
+        periods, cars = len(forces), len(self.model.car_names)
+        stamps = self.stamp_ns + period_ns * np.arange(1, periods + 1, dtype=np.int64)
+        quantities = [np.empty((periods, cars)) for _ in range(4)]
+        interventions = np.empty(periods, dtype=bool)
+        rows = None  # the commands as tuples of floats, once some periods run one by one
+        k = 0
+        while k < periods:
+            batch = self._compiled_periods(periods - k, period_ns)
+            if batch:
+                done = self._run_compiled(forces[k:k + batch], period_ns,
+                                          [q[k:k + batch] for q in quantities],
+                                          interventions[k:k + batch])
+                k += done
+                if done:
+                    continue
+            end = k  # then at least one period by the interface
+            outputs, held = [], []
+            rows = rows or forces.tolist()
+            while end < periods and (end == k or not self._compiled_periods(1, period_ns)):
+                self._hold(tuple(rows[end]))  # ``apply_command``, checked above
+                self.advance(period_ns)
+                outputs.append(self._outputs())
+                held.append(self.atp_intervention)
+                end += 1
+            for q, values in zip(quantities, zip(*outputs)):
+                q[k:end] = values
+            interventions[k:end] = held
+            k = end
+        return Trajectory(self.model.car_names, stamps, *quantities, interventions)
+
+    def _compiled_periods(self, wanted: int, period_ns: int) -> int:
+        """How many of the next ``wanted`` periods ``periods.py``'s kernels may run: those in
+        which ``advance`` would take its one-step path with nothing switching, and that end
+        before the next scheduled time, so that no failure acts at any of them."""
+        if not (self._one_step_possible and self._constant_env
+                and period_kernel(self.model) is not None
+                and period_ns / NS_PER_S <= self.model.max_substep_s):
+            return 0
+        if self.failures and self.active_failures():
+            return 0
+        i = bisect_right(self._events, self.time_s + EVENT_TOLERANCE_S)
+        if i == len(self._events):
+            return wanted
+        before = self._events[i] - EVENT_TOLERANCE_S
+        count = max(0, int((before - self.time_s) * NS_PER_S / period_ns))
+        while count > 0 and (self.stamp_ns + count * period_ns) / NS_PER_S >= before:
+            count -= 1
+        while count < wanted and (self.stamp_ns + (count + 1) * period_ns) / NS_PER_S < before:
+            count += 1
+        return min(count, wanted)
+
+    def _run_compiled(self, forces: np.ndarray, period_ns: int, out: list[np.ndarray],
+                      interventions: np.ndarray) -> int:
+        """Up to ``len(forces)`` periods in ``periods``' kernel; returns how many ran."""
+        if self._packed_supervision is None:
+            run = self.supervision
+            self._packed_supervision = (np.array(run.stations_m, dtype=float),
+                                        run.STOP_WINDOW_M, *run.packed_curve('ebi'),
+                                        *run.packed_curve('permitted'))
+        traction = self.scenario.train.traction
+        state = np.array(self.state, dtype=float)
+        done, intervention, began = period_kernel(self.model)(
+            state, self.stamp_ns, period_ns, forces,
+            (traction.max_traction_force_n, traction.max_traction_power_w,
+             traction.max_emergency_brake_force_n), self._packed_supervision,
+            self.atp_intervention, *out, interventions,
+            self.model.kernel_inputs(self.surroundings(), period_ns / NS_PER_S))
+        if done:
+            self.state = state
+            self.stamp_ns += period_ns * done
+            self.atp_intervention = bool(intervention)
+            self.atp_interventions += began
+            self._hold(tuple(forces[done - 1].tolist()))
+        return done
+
     # --- outputs -------------------------------------------------------------------------------
     def truth(self) -> TrainState:
+        return TrainState(self.stamp_ns, self.model.car_names, *self._outputs())
+
+    def _outputs(self) -> tuple:
+        """(positions, speeds, accelerations, forces) per car now."""
         env = self._env if self._constant_env and self._env is not None else self.surroundings()
-        positions, speeds, accelerations, forces = self.model.outputs(
-            self.state, self.applied, self.stamp_ns / NS_PER_S, env)
-        return TrainState(self.stamp_ns, self.model.car_names, positions, speeds, accelerations,
-                          forces)
+        return self.model.outputs(self.state, self.applied, self.stamp_ns / NS_PER_S, env)
 
     def _measure(self, values: Sequence[float], sensor: QuantitySensor,
                  cars: Sequence[str]) -> tuple[float, ...]:

@@ -453,6 +453,13 @@ class MultiCarModel:
             p[ENV + DISTURBANCE_VALUE] = env.disturbance.force(time_s + 0.5 * duration_s)
         return self._matrices_of_parameters, p
 
+    def kernel_inputs(self, env: Surroundings, duration_s: float) -> tuple:
+        """What ``periods.run_multi_car_periods`` reads of the model under ``env`` (without a
+        held disturbance) for steps of ``duration_s``: ``step``'s propagators, line table,
+        per-car parameters, parameter array, and ``outputs``' linear dynamics."""
+        mm, p = self._prepare(env, 0.0, 0.0)
+        return mm.propagators(duration_s), self.segments.table, mm.cars, p, mm.A
+
     def _force_array(self, forces: Sequence[float]) -> np.ndarray:
         """The actuator forces as the kernels read them (the last array, if they are equal)."""
         if type(forces) is not tuple or forces != self._forces:

@@ -163,6 +163,12 @@ class PointMassModel:
             p[ENV + DISTURBANCE_VALUE] = env.disturbance.force(time_s + 0.5 * duration_s)
         return p
 
+    def kernel_inputs(self, env: Surroundings, duration_s: float) -> tuple:
+        """What ``periods.run_point_mass_periods`` reads of the model under ``env`` (without a
+        held disturbance: then the parameters do not change with time)."""
+        return self._parameters(env, 0.0, 0.0), self.segments.table, self.work, \
+            self.max_substep_s
+
     def acceleration(self, position: float, speed: float, force: float, time_s: float = 0.0,
                      env: Surroundings | None = None) -> float:
         p = self._parameters(env or self.nominal, time_s, 0.0)

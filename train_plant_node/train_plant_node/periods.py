@@ -1,0 +1,211 @@
+"""Many control periods of the plant in one compiled call.
+
+``TrainSimulation.run_commands`` (simulation.py) defines the result: for each row of commands,
+``apply_command`` then ``advance`` by one period, then ``truth``. Per period that path costs
+several microseconds of Python around a compiled physics step of one or two (the actuator
+limits, the ATP's table look-ups, the state snapshot), so a plant driven from Python cannot run
+much faster than 10,000x real time at 10 Hz. These kernels do the same work per period in
+compiled code: the actuator limits (``TrainSimulation.targets``), the integration (the models'
+step kernels), the ATP supervision (``TrainSimulation._supervise`` with ``SampledLimit``
+look-ups) and the truth (the models' ``outputs``), in the same floating-point operations in the
+same order, so that both paths give the same numbers to the last bit (the tests check this).
+The simulation uses them only where that holds: instant actuators, no failure active,
+surroundings constant, one integration step per period, nothing scheduled within the periods.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from train_plant_node.jit import kernel
+from train_plant_node.models.multi_car import (CAR_ACTUATOR, MultiCarModel, outputs_kernel,
+                                               substep_kernel)
+from train_plant_node.models.point_mass import PointMassModel, acceleration_kernel, step_kernel
+
+
+@kernel
+def exact_sum(values, count, partials):
+    """``math.fsum(values[:count])``: the correctly rounded sum (Shewchuk's algorithm with
+    CPython's final half-even correction), so that the compiled and the Python paths agree to
+    the last bit. ``partials`` is scratch space of at least ``count`` floats."""
+    used = 0
+    for k in range(count):
+        x = values[k]
+        i = 0
+        for j in range(used):
+            y = partials[j]
+            if abs(x) < abs(y):
+                x, y = y, x
+            hi = x + y
+            lo = y - (hi - x)
+            if lo != 0.0:
+                partials[i] = lo
+                i += 1
+            x = hi
+        partials[i] = x
+        used = i + 1
+    if used == 0:
+        return 0.0
+    n = used - 1
+    hi = partials[n]
+    lo = 0.0
+    while n > 0:
+        x = hi
+        n -= 1
+        y = partials[n]
+        hi = x + y
+        lo = y - (hi - x)
+        if lo != 0.0:
+            break
+    if n > 0 and ((lo < 0.0 and partials[n - 1] < 0.0) or (lo > 0.0 and partials[n - 1] > 0.0)):
+        y = lo * 2.0
+        x = hi + y
+        if y == x - hi:
+            hi = x
+    return hi
+
+
+@kernel
+def limit_at(stations, offsets, positions, speeds, stop_window_m, position):
+    """``RunSupervision.sampled_curve`` on one curve's tables packed by
+    ``RunSupervision.packed_curve``: the leg (``leg_at``), then its ``SampledLimit``."""
+    passed = np.searchsorted(stations, position + stop_window_m, side='right') - 1
+    leg = min(max(passed, 0), offsets.size - 2)
+    first, end = offsets[leg], offsets[leg + 1]
+    i = np.searchsorted(positions[first:end], position, side='right')
+    if i == 0:
+        return speeds[first]
+    if i == end - first:
+        return speeds[end - 1] if position == positions[end - 1] else 0.0
+    x0, x1 = positions[first + i - 1], positions[first + i]
+    v0, v1 = speeds[first + i - 1], speeds[first + i]
+    return v0 + (v1 - v0) * (position - x0) / (x1 - x0)
+
+
+@kernel
+def actuator_targets(out, commanded, speed, intervention, max_force_n, max_power_w,
+                     emergency_brake_n):
+    """``TrainSimulation.targets`` with the watchdog quiet (every period has a command): each
+    unit's share of the traction characteristic and of the emergency brake."""
+    count = commanded.size
+    share = 1.0 / count
+    lowest = -emergency_brake_n * share
+    if intervention:
+        for i in range(count):
+            out[i] = lowest
+        return
+    v = abs(speed)
+    highest = (max_force_n if v <= 0.0 else min(max_force_n, max_power_w / v)) * share
+    for i in range(count):
+        f = commanded[i]
+        out[i] = lowest if f < lowest else highest if f > highest else f
+
+
+@kernel
+def supervise(atp, position, speed, intervention):
+    """``TrainSimulation._supervise``: (intervention after this period, 1 if one began)."""
+    stations, stop_window_m, ebi_offsets, ebi_positions, ebi_speeds, permitted_offsets, \
+        permitted_positions, permitted_speeds = atp
+    if not intervention and speed > limit_at(stations, ebi_offsets, ebi_positions, ebi_speeds,
+                                             stop_window_m, position):
+        return True, 1
+    if intervention and speed <= limit_at(stations, permitted_offsets, permitted_positions,
+                                          permitted_speeds, stop_window_m, position):
+        return False, 0
+    return intervention, 0
+
+
+# The kernels below share one signature: the state (updated in place), the time, the commands
+# (one row per period), the traction limits (force N, power W, emergency brake N), the ATP's
+# packed tables, its intervention state, the truth per period (positions, speeds,
+# accelerations, forces: one column per car; the ATP's state), and the model's own inputs
+# (``kernel_inputs`` of the model). They return how many periods they ran (fewer than asked
+# where the interface would have split a step), the intervention state and how many began.
+
+@kernel
+def run_point_mass_periods(state, stamp_ns, period_ns, commands, traction, atp, intervention,
+                           out_positions, out_speeds, out_accelerations, out_forces,
+                           out_intervention, model):
+    p, table, work, max_substep_s = model
+    max_force_n, max_power_w, emergency_brake_n = traction
+    count = commands.shape[1]
+    forces = np.empty(count)
+    scratch = np.empty(count + 1)
+    duration_s = period_ns / 1_000_000_000
+    position, speed = state[0], state[1]
+    began = 0
+    for k in range(commands.shape[0]):
+        row = commands[k]
+        actuator_targets(forces, row, speed, intervention, max_force_n, max_power_w,
+                         emergency_brake_n)
+        time_s = stamp_ns / 1_000_000_000
+        position, speed = step_kernel(p, table, work, position, speed, time_s, duration_s,
+                                      max_substep_s, exact_sum(forces, count, scratch))
+        stamp_ns += period_ns
+        intervention, new = supervise(atp, position, speed, intervention)
+        began += new
+        # The truth holds the forces for the new state: the ATP's decision, the same command.
+        actuator_targets(forces, row, speed, intervention, max_force_n, max_power_w,
+                         emergency_brake_n)
+        force = exact_sum(forces, count, scratch)
+        out_positions[k, 0] = position
+        out_speeds[k, 0] = speed
+        out_accelerations[k, 0] = acceleration_kernel(p, table, position, speed, force,
+                                                      stamp_ns / 1_000_000_000)
+        out_forces[k, 0] = force
+        out_intervention[k] = intervention
+    state[0], state[1] = position, speed
+    return commands.shape[0], intervention, began
+
+
+@kernel
+def run_multi_car_periods(state, stamp_ns, period_ns, commands, traction, atp, intervention,
+                          out_positions, out_speeds, out_accelerations, out_forces,
+                          out_intervention, model):
+    """``MultiCarModel.step`` when it takes one ETDRK4 step: it stops before a period in which
+    a car reaches another line segment (the interface splits that step at the boundary)."""
+    props, table, cars, p, linear = model
+    max_force_n, max_power_w, emergency_brake_n = traction
+    n = state.size // 2
+    count = commands.shape[1]
+    forces = np.empty(count)
+    moved = np.empty(2 * n)
+    outputs = np.empty(3 * n)
+    duration_s = period_ns / 1_000_000_000
+    began = 0
+    for k in range(commands.shape[0]):
+        row = commands[k]
+        actuator_targets(forces, row, state[n], intervention, max_force_n, max_power_w,
+                         emergency_brake_n)
+        time_s = stamp_ns / 1_000_000_000
+        end = time_s + duration_s
+        if not end - time_s > duration_s * (1.0 - 1e-9):
+            return k, intervention, began  # the interface would step end - time_s
+        if substep_kernel(state, moved, time_s, duration_s, props, forces, table, cars, p):
+            return k, intervention, began
+        if end - (time_s + duration_s) > 1e-12 * max(1.0, abs(end)):
+            return k, intervention, began  # the interface would add a sliver of a step
+        state[:] = moved
+        stamp_ns += period_ns
+        intervention, new = supervise(atp, state[0], state[n], intervention)
+        began += new
+        actuator_targets(forces, row, state[n], intervention, max_force_n, max_power_w,
+                         emergency_brake_n)
+        outputs_kernel(state, outputs, stamp_ns / 1_000_000_000, linear, forces, table, cars, p)
+        for q in range(n):
+            out_positions[k, q] = outputs[q]
+            out_speeds[k, q] = outputs[n + q]
+            out_accelerations[k, q] = outputs[2 * n + q]
+            actuator = int(cars[CAR_ACTUATOR, q])
+            out_forces[k, q] = forces[actuator] if actuator >= 0 else 0.0
+        out_intervention[k] = intervention
+    return commands.shape[0], intervention, began
+
+
+def period_kernel(model):
+    """The compiled periods of a plant model, or None."""
+    if isinstance(model, PointMassModel):
+        return run_point_mass_periods
+    if isinstance(model, MultiCarModel):
+        return run_multi_car_periods
+    return None
