@@ -95,6 +95,8 @@ class TrainPlantNode(Node):
                                p['seed']),
                 SafetySettings(p['watchdog_periods'], p['emergency_periods']),
                 max_substep_s=p['max_substep_s'])
+        except ConfigError:
+            raise  # names the scenario's field already (plant.sensors...)
         except ValueError as error:  # e.g. multi_car with a train that has no car description
             raise ConfigError(f"model {p['model']}: {error}") from None
         self.last_valid_command_wall = time.monotonic()
