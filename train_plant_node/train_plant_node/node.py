@@ -21,8 +21,8 @@ from trajectory_msgs.msg import JointTrajectory
 from ato_common.params import Param, ParameterTable
 from ato_common.plant_setup import parse_failure_injection
 from ato_common.ros import (MessageError, actuator_forces_to_msg, command_from_msg,
-                            diagnostic_status, from_time, qos_profile, run_node, state_to_msg,
-                            to_duration, to_time, topic)
+                            diagnostic_status, freeze_startup_objects, from_time, qos_profile,
+                            run_node, state_to_msg, to_duration, to_time, topic)
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import TrainState, nanoseconds, seconds
 from train_plant_node.models import MODELS
@@ -143,6 +143,7 @@ class TrainPlantNode(Node):
             f"scenario {self.scenario.name} ({self.scenario.origin}), model {p['model']}, "
             f"{'lockstep at ' + format(rate, 'g') + ' Hz' if self.lockstep else 'real time'}, "
             f'actuators {list(self.sim.actuator_names)}')
+        freeze_startup_objects()
 
     # --- time ----------------------------------------------------------------------------------
     def stamp_ns(self) -> int:
