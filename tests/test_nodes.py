@@ -58,6 +58,25 @@ def test_the_multi_car_model_with_a_single_mass_train_is_refused_at_start(domain
     assert 'Traceback' not in result.stderr
 
 
+def test_a_failed_sensor_car_the_plant_model_does_not_have_is_refused_at_start(tmp_path,
+                                                                             domain_id):
+    bad = tmp_path / 'sensor.yaml'
+    bad.write_text('name: sensor\ntrain: {preset: crh2_4car_mao}\n'
+                   'line: {name: l, length_m: 1000, stations: [{name: A, position_m: 0}, '
+                   '{name: B, position_m: 900}], speed_limits: [{start_m: 0, speed_kmh: 80}]}\n'
+                   'planning: {max_acceleration_mps2: 0.5, service_deceleration_mps2: 0.5, '
+                   'max_jerk_mps3: 0.5}\n'
+                   'plant: {sensors: {speed: {failed_from_s: 10, failed_cars: [train]}}}\n')
+    result = subprocess.run([executable_path(*EXECUTABLES['plant']), '--ros-args', '-p',
+                             f'scenario:={bad}', '-p', 'model:=multi_car'], capture_output=True,
+                            text=True, timeout=60,
+                            env=dict(os.environ, ROS_DOMAIN_ID=str(domain_id)))
+    assert result.returncode == 2
+    assert ("error: plant.sensors.speed.failed_cars[0]: car 'train' is not a car of the "
+            'multi_car model; valid: car_1, car_2, car_3, car_4') in result.stderr
+    assert 'Traceback' not in result.stderr
+
+
 def test_an_unknown_controller_at_start_is_refused_with_the_valid_names(domain_id):
     result = subprocess.run([executable_path(*EXECUTABLES['controller']), '--ros-args', '-p',
                              'controller:=bogus'], capture_output=True, text=True, timeout=60,

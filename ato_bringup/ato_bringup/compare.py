@@ -1,7 +1,7 @@
 """compare: every applicable control law on every built-in scenario, offline, side by side.
 
     python -m ato_bringup.compare [--out runs/compare] [--jobs 2] [--scenario NAME ...]
-                                  [--law NAME ...]
+                                  [--law NAME ...] [--timeout-s 1800]
 
 A law applies to a scenario when its ``fits`` accepts the scenario's train and plant and the
 plant's sensors do not fail a measurement the law requires (a law without speed measurement
@@ -9,15 +9,17 @@ would only hold its last command; a law that estimates the speed does not requir
 model is the scenario's, the same for every law on it: ``multi_car`` when the train has per-car
 data (what the 4-car laws need; a single-mass law then sees the lead car), else ``point_mass``.
 Each run is the offline closed loop (ato_bringup.offline), one process per run over ``--jobs``
-cores, at the scenario's control rate; a law whose sampled-time design refuses that rate (its
-``fits`` names the period it needs) runs at the first of FASTER_RATES_HZ it accepts, and if that
-makes more than MAX_STEPS steps, over the scenario's first MAX_STEPS steps only (the table shows
-the rate and the window; such a run is not ranked). The result, ``<out>/compare.md``, has one table per scenario and the plots
+cores, stopped after ``--timeout-s`` of wall time, at the scenario's control rate; a law whose
+sampled-time design refuses that rate (its ``fits`` names the period it needs) runs at the first
+of FASTER_RATES_HZ it accepts, and if that makes more than MAX_STEPS steps, over the scenario's
+first MAX_STEPS steps only (the table shows the rate and the window; such a run is not ranked).
+The result, ``<out>/compare.md``, has one table per scenario and the plots
 ``<out>/<scenario>_{tracking,errors,commands,estimates}.png``; ``<out>/compare.json`` holds the
 same numbers and the ranking that ``make demo`` reads.
 
-A run that raises, produces non-finite values, diverges or has the host hold its command is
-listed with its status and reason, never dropped.
+A run that raises, produces non-finite values, diverges, has the host hold its command or
+exceeds the wall-time limit (status ``timeout``: a law that hangs must not block the comparison)
+is listed with its status and reason, never dropped.
 
 Columns (errors are reference minus truth of the lead car at each control instant):
 - RMS / max speed error [km/h], RMS position error [m];
@@ -41,11 +43,13 @@ from datetime import datetime, timezone
 import json
 import math
 import multiprocessing
+import multiprocessing.connection
 import os
 from pathlib import Path
 import sys
 import time
 import traceback
+from typing import Callable
 
 import numpy as np
 
@@ -69,6 +73,10 @@ PLOT_POINTS = 3000
 #: control rates tried, in order, for a law that refuses the scenario's rate (its sampled-time
 #: design needs a shorter period: the Liu & Li observer, the Mao multibody laws)
 FASTER_RATES_HZ = (200.0, 1000.0, 10000.0)
+#: wall-time limit of one run by default, s: the slowest runs took about 870 s on 2 shared cores
+DEFAULT_TIMEOUT_S = 1800.0
+#: after its result, a run's process has this long to exit before it is terminated, s
+EXIT_GRACE_S = 10.0
 #: control steps at most in one run; a law that needs a fast rate on a long scenario runs the
 #: scenario's first MAX_STEPS steps (the table says so)
 MAX_STEPS = 1_500_000
@@ -140,12 +148,17 @@ def _thin(values: np.ndarray, step: int) -> list:
     return np.asarray(values)[::step].tolist()
 
 
+def job_fields(job: Job) -> dict:
+    """What every result of ``job`` holds, whatever became of the run."""
+    return {'scenario': job.scenario, 'law': job.law, 'model': job.model,
+            'rate_hz': job.rate_hz, 'end_time_s': job.end_time_s}
+
+
 def run_job(job: Job) -> dict:
     """One offline run and its figures; never raises (a failure is the result's status)."""
     from ato_bringup.offline import run_offline
-    result = {'scenario': job.scenario, 'law': job.law, 'model': job.model,
-              'rate_hz': job.rate_hz, 'end_time_s': job.end_time_s,
-              'scenario_rate_hz': load_scenario(job.scenario).run.controller_rate_hz}
+    result = dict(job_fields(job),
+                  scenario_rate_hz=load_scenario(job.scenario).run.controller_rate_hz)
     started = time.perf_counter()
     try:
         scenario = load_scenario(job.scenario)
@@ -227,30 +240,105 @@ class ProgressBar:
             self.stream.flush()
 
 
-def run_all(jobs: list[Job], processes: int) -> list[dict]:
+def run_all(jobs: list[Job], processes: int, timeout_s: float | None = None,
+            run: Callable[[Job], dict] = run_job) -> list[dict]:
+    """The result of ``run`` (a module-level function) on every job, in the order the runs end.
+    With ``processes`` > 1 or a ``timeout_s``, each run has a process of its own, at most
+    ``processes`` at a time; one that takes more than ``timeout_s`` of wall time (None: no
+    limit) is terminated and its result has status ``timeout``. Else the runs take turns in
+    this process."""
     bar = ProgressBar(len(jobs))
     results = []
-    if processes <= 1:
-        outputs = map(run_job, jobs)
-        for result in outputs:
-            results.append(result)
-            bar.advance(f'{result["law"]} on {result["scenario"]}: {result["status"]}')
+
+    def finished(result: dict) -> str:
+        results.append(result)
+        last = f'{result["law"]} on {result["scenario"]}: {result["status"]}'
+        bar.advance(last)
+        return last
+
+    if processes <= 1 and timeout_s is None:
+        for job in jobs:
+            finished(run(job))
     else:
-        # Spawned workers do not inherit a half-initialised parent; one run per task.
-        with multiprocessing.get_context('spawn').Pool(processes) as pool:
-            pending = pool.imap_unordered(run_job, jobs)
-            last = ''
-            while len(results) < len(jobs):
-                try:
-                    result = pending.next(timeout=1.0)
-                except multiprocessing.TimeoutError:
-                    bar.show(last)  # keep the elapsed time moving during long runs
-                    continue
-                results.append(result)
-                last = f'{result["law"]} on {result["scenario"]}: {result["status"]}'
-                bar.advance(last)
+        _run_in_processes(jobs, max(processes, 1), timeout_s, run, finished, bar)
     bar.close()
     return results
+
+
+def _run_in_child(run: Callable[[Job], dict], job: Job, connection) -> None:
+    """Body of a run's process: the result goes back through ``connection``."""
+    try:
+        connection.send(run(job))
+    finally:
+        connection.close()
+
+
+def _stop(process, grace_s: float) -> None:
+    """Wait ``grace_s`` for ``process`` to end, then terminate it (kill it if that fails)."""
+    process.join(grace_s)
+    if process.is_alive():
+        process.terminate()
+        process.join(EXIT_GRACE_S)
+    if process.is_alive():
+        process.kill()
+        process.join()
+    process.close()
+
+
+def _run_in_processes(jobs: list[Job], processes: int, timeout_s: float | None,
+                      run: Callable[[Job], dict], finished: Callable[[dict], str],
+                      bar: ProgressBar) -> None:
+    # One process per run (a Pool's worker cannot be stopped alone) with a pipe of its own (a
+    # terminated writer can corrupt a shared queue). Spawned: a child does not inherit a
+    # half-initialised parent.
+    context = multiprocessing.get_context('spawn')
+    waiting = list(reversed(jobs))
+    running: dict = {}  # reading end of the run's pipe -> (job, process, time.monotonic() at start)
+    last = ''
+    try:
+        while waiting or running:
+            while waiting and len(running) < processes:
+                job = waiting.pop()
+                reader, writer = context.Pipe(duplex=False)
+                process = context.Process(target=_run_in_child, args=(run, job, writer),
+                                          name=f'{job.law} on {job.scenario}', daemon=True)
+                process.start()
+                writer.close()  # the child holds the only writer: its exit is the reader's EOF
+                running[reader] = (job, process, time.monotonic())
+            wait_s = 1.0  # at least once a second: the bar's elapsed time keeps moving
+            if timeout_s is not None:
+                first_deadline = min(start for _, _, start in running.values()) + timeout_s
+                wait_s = min(wait_s, max(first_deadline - time.monotonic(), 0.0))
+            ended = multiprocessing.connection.wait(list(running), timeout=wait_s)
+            for reader in ended:
+                job, process, start = running.pop(reader)
+                try:
+                    result = reader.recv()
+                    grace_s = EXIT_GRACE_S
+                except EOFError:  # the process died before it sent a result
+                    process.join(EXIT_GRACE_S)
+                    result = dict(job_fields(job), status='error', wall_s=time.monotonic() - start,
+                                  reason=f"the run's process ended (exit code {process.exitcode}) "
+                                         'without a result')
+                    grace_s = 0.0
+                reader.close()
+                _stop(process, grace_s)
+                last = finished(result)
+            now = time.monotonic()
+            for reader, (job, process, start) in list(running.items()):
+                if timeout_s is not None and now - start >= timeout_s:
+                    del running[reader]
+                    reader.close()
+                    _stop(process, 0.0)
+                    last = finished(dict(
+                        job_fields(job), status='timeout', wall_s=now - start,
+                        reason=f'exceeded the wall-time limit of {timeout_s:g} s (--timeout-s)'))
+            if not ended:
+                bar.show(last)
+    finally:  # also on KeyboardInterrupt: no run outlives the comparison
+        for reader, (_, process, _) in running.items():
+            reader.close()
+            _stop(process, 0.0)
 
 
 def best_law(results: list[dict]) -> str | None:
@@ -394,6 +482,17 @@ def ranked_demo_law(compare_json: Path = DEFAULT_OUT / 'compare.json',
     return best, f'ranked best on {scenario} by {compare_json} ({data.get("generated", "?")})'
 
 
+def _timeout(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0.0):
+        raise argparse.ArgumentTypeError(f'must be a finite number of seconds >= 0 (0: no '
+                                         f'limit), got {text!r}')
+    return value
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--out', type=Path, default=DEFAULT_OUT)
@@ -402,13 +501,18 @@ def main(argv=None) -> int:
                         help='only this built-in scenario (repeatable; default: all)')
     parser.add_argument('--law', action='append', choices=sorted(LAWS),
                         help='only this law (repeatable; default: all)')
+    parser.add_argument('--timeout-s', type=_timeout, default=DEFAULT_TIMEOUT_S,
+                        help='wall-time limit of one run, s: a run that exceeds it is stopped '
+                        'and listed with status timeout, the others go on (default '
+                        f'{DEFAULT_TIMEOUT_S:g}; 0: no limit, and with --jobs 1 the runs then '
+                        'take turns in this process)')
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
     scenarios = args.scenario or builtin_scenarios()
     jobs, skipped = plan_jobs(scenarios, args.law)
     print(f'{len(jobs)} runs ({len(skipped)} law/scenario pairs not applicable) on '
           f'{args.jobs} processes', file=sys.stderr)
-    results = run_all(jobs, args.jobs)
+    results = run_all(jobs, args.jobs, args.timeout_s or None)
     args.out.mkdir(parents=True, exist_ok=True)
     stamp = datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
     command = ' '.join(['python -m ato_bringup.compare', *argv]) if argv else 'make compare'

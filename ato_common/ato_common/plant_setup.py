@@ -236,6 +236,17 @@ class SensorSetup:
     def ideal(self) -> bool:
         return self.position.ideal and self.speed.ideal and self.acceleration.ideal
 
+    def check_cars(self, car_names: Sequence[str], model_name: str) -> None:
+        """ConfigError if a sensor's ``failed_cars`` names a car that the plant model
+        ``model_name`` does not have: the scenario accepts the cars of every model ('train' and
+        the train's cars), and a name of the other model would fail nothing."""
+        for quantity in ('position', 'speed', 'acceleration'):
+            for i, car in enumerate(getattr(self, quantity).failed_cars):
+                if car not in car_names:
+                    raise ConfigError(
+                        f"plant.sensors.{quantity}.failed_cars[{i}]: car '{car}' is not a car "
+                        f"of the {model_name} model; valid: {', '.join(car_names)}")
+
 
 MODE_SWITCHES = ('time', 'position')
 

@@ -5,6 +5,7 @@ Only the node adapters import this module; the cores use :mod:`ato_common.types`
 
 from __future__ import annotations
 
+import gc
 import math
 import os
 import signal
@@ -185,6 +186,16 @@ def make_executor(context=None):
             pass
     from rclpy.executors import SingleThreadedExecutor
     return SingleThreadedExecutor(context=context)
+
+
+def freeze_startup_objects() -> None:
+    """Call once at the end of a node's start-up (everything built, publishers and subscriptions
+    created). A full cyclic-GC collection visits every tracked object, and numba's, scipy's and
+    the start-up's own are many: tens of ms, every few thousand control periods of a long run,
+    each time a late step. Start-up garbage is collected first; what is left is moved out of
+    the collector's sight for good (objects made later are collected as usual)."""
+    gc.collect()
+    gc.freeze()
 
 
 def run_node(make_node: Callable[[], 'rclpy.node.Node'], args=None) -> int:

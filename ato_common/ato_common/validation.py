@@ -3,11 +3,30 @@
 from __future__ import annotations
 
 import math
+import re
 from typing import Any, Mapping
+
+# A float in YAML 1.2 (core schema) and Python syntax, without the special values: PyYAML reads
+# YAML 1.1, where an exponent without a dot ('2e5') is not a float but text.
+NUMBER_TEXT = re.compile(r'[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?')
 
 
 class ConfigError(ValueError):
     """A configuration file or value is wrong; the message names where and what."""
+
+
+def as_number(value: Any) -> float | None:
+    """``value`` as a float if it is a number (an int or a float, not a bool) or text that
+    NUMBER_TEXT matches ('2e5', '-1.5E-3'); None if it is neither ('nan', 'inf', 'true', 'far').
+    A NaN or an infinity (a float, or text that overflows such as '1e999') is returned as it
+    is, for the caller to reject."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, (int, float)):
+        return float(value)
+    if isinstance(value, str) and NUMBER_TEXT.fullmatch(value):
+        return float(value)
+    return None
 
 
 class Fields:
@@ -34,10 +53,10 @@ class Fields:
             if default is None:
                 raise ConfigError(f'{self._path(key)}: required number is missing')
             return float(default)
-        value = self._data[key]
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f'{self._path(key)}: must be a number, got {value!r}')
-        value = float(value)
+        given = self._data[key]
+        value = as_number(given)
+        if value is None:
+            raise ConfigError(f'{self._path(key)}: must be a number, got {given!r}')
         if not math.isfinite(value):
             raise ConfigError(f'{self._path(key)}: must be finite, got {value!r}')
         if minimum is not None and (value < minimum or (exclusive_minimum and value == minimum)):

@@ -1,13 +1,17 @@
 """Property-based tests: random and extreme input to the line loader and the message
-conversions gives either a valid result or the documented error, never anything else."""
+conversions gives either a valid result or the documented error, never anything else; and the
+other node helpers of ato_common.ros."""
 
+import gc
 import math
+import weakref
 
 from hypothesis import given, settings, strategies as st
 import pytest
 
-from ato_common.ros import (MessageError, command_from_msg, command_to_msg, reference_from_msg,
-                            reference_to_msg, state_from_msg, state_to_msg)
+from ato_common.ros import (MessageError, command_from_msg, command_to_msg,
+                            freeze_startup_objects, reference_from_msg, reference_to_msg,
+                            state_from_msg, state_to_msg)
 from ato_common.scenario import parse_scenario
 from ato_common.types import Command, Reference, ReferencePoint, TrainState
 from ato_common.validation import ConfigError
@@ -99,3 +103,22 @@ def test_reference_conversion_round_trips(points):
     back = reference_from_msg(reference_to_msg(reference))
     assert [(p.position, p.speed, p.acceleration) for p in back.points] == points
     assert back.points[-1].time_s == pytest.approx(len(points))
+
+
+class _Cycle:
+    pass
+
+
+def test_freezing_the_start_up_objects_collects_the_garbage_and_freezes_the_rest():
+    # The nodes call it at the end of their start-up (constructing a node here would need
+    # rclpy.init in the test process, which no unit test does).
+    garbage = _Cycle()
+    garbage.itself = garbage  # only a cyclic collection frees it
+    dead = weakref.ref(garbage)
+    del garbage
+    try:
+        freeze_startup_objects()
+        assert dead() is None                # collected, not frozen for good
+        assert gc.get_freeze_count() > 0     # the rest is out of the collector's sight
+    finally:
+        gc.unfreeze()  # the other tests of this process run with a normal collector

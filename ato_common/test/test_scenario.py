@@ -4,7 +4,7 @@ import pytest
 import yaml
 
 from ato_common.scenario import builtin_scenarios, load_scenario, parse_scenario
-from ato_common.validation import ConfigError
+from ato_common.validation import ConfigError, as_number
 
 
 def base():
@@ -43,6 +43,16 @@ def test_line_lookups_in_si():
 @pytest.mark.parametrize('mutate, message', [
     (lambda d: d['line']['stations'][1].update(position_m='far'),
      r"line.stations\[1\].position_m: must be a number, got 'far'"),
+    (lambda d: d['line']['stations'][1].update(position_m='nan'),
+     r"line.stations\[1\].position_m: must be a number, got 'nan'"),
+    (lambda d: d['line']['stations'][1].update(position_m='-inf'),
+     r"line.stations\[1\].position_m: must be a number, got '-inf'"),
+    (lambda d: d['line']['stations'][1].update(position_m=True),
+     r'line.stations\[1\].position_m: must be a number, got True'),
+    (lambda d: d['line']['stations'][1].update(position_m='9e3 m'),
+     r"line.stations\[1\].position_m: must be a number, got '9e3 m'"),
+    (lambda d: d['line']['stations'][1].update(position_m='1e999'),
+     r'line.stations\[1\].position_m: must be finite, got inf'),
     (lambda d: d['line']['stations'][1].update(position_m=20000),
      r'line.stations\[1\].position_m: must be <= 10000'),
     (lambda d: d['line']['stations'].reverse(), r'positions must increase'),
@@ -81,3 +91,29 @@ def test_files_errors_name_the_file(tmp_path):
     wrong.write_text(yaml.safe_dump(data))
     with pytest.raises(ConfigError, match=f'{wrong}: line.length_m: must be a number'):
         load_scenario(str(wrong))
+
+
+@pytest.mark.parametrize('value, number', [
+    (2, 2.0), (2.5, 2.5), ('2e5', 2e5), ('-1.5E-3', -1.5e-3), ('+3', 3.0), ('.5', 0.5),
+    ('7.', 7.0), ('1.25e+2', 125.0),
+    (True, None), (False, None), ('nan', None), ('inf', None), ('.inf', None),
+    ('Infinity', None), ('', None), (' 2e5', None), ('1_000', None), ('0x10', None),
+    ('e5', None), ('2e', None), ('far', None), (None, None), ([1.0], None)])
+def test_as_number_takes_numbers_and_float_text_only(value, number):
+    assert as_number(value) == number
+
+
+def test_numbers_in_exponent_form_without_a_dot_load_from_yaml(tmp_path):
+    # PyYAML reads YAML 1.1, where 2e5 and -1.5E-3 are text; YAML 1.2 and Python read numbers.
+    data = base()
+    del data['line']['length_m']
+    path = tmp_path / 'exponents.yaml'
+    path.write_text(yaml.safe_dump(data) + 'plant:\n'
+                    '  disturbance: {kind: fast, amplitude_n: 2e5, phase_rad: -1.5E-3}\n')
+    text = path.read_text().replace('line:\n', 'line:\n  length_m: 1e4\n', 1)
+    path.write_text(text)
+    assert yaml.safe_load(text)['line']['length_m'] == '1e4'  # the premise: text, not a number
+    scenario = load_scenario(str(path))
+    assert scenario.line.length_m == 10000.0
+    assert scenario.plant.disturbance.amplitude_n == 2e5
+    assert scenario.plant.disturbance.phase_rad == -1.5e-3

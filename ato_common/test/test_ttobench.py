@@ -75,6 +75,17 @@ def test_a_track_converts_to_si_with_clothoids_and_tunnel_cross_sections(tmp_pat
     assert track.etcs_kt_int == pytest.approx(1.1)
 
 
+def test_numbers_in_exponent_form_without_a_dot_are_numbers(tmp_path):
+    # TTOBench files are JSON, where 7e3 is a number: not the YAML 1.1 case of scenario files
+    # (ato_common.validation.as_number), so the reader keeps refusing numbers given as text.
+    text = json.dumps(TRACK).replace('[[7000.0, 1000.0, 40.0]]', '[[7e3, 1E3, 4e+1]]')
+    assert '[[7e3, 1E3, 4e+1]]' in text
+    path = tmp_path / 'track.json'
+    path.write_text(text)
+    tunnel = load_track(path).line.tunnels[0]
+    assert (tunnel.start_m, tunnel.length_m, tunnel.cross_section_m2) == (7000.0, 1000.0, 40.0)
+
+
 def test_a_train_converts_to_si():
     train = load_train(SAMPLES / 'trains' / 'CH_Stadler_FLIRT_TPF.json')
     p = train.parameters

@@ -22,8 +22,9 @@ from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_common.params import Param, ParameterTable
-from ato_common.ros import (MessageError, command_to_msg, diagnostic_status, qos_profile,
-                            reference_from_msg, run_node, state_from_msg, to_time, topic)
+from ato_common.ros import (MessageError, command_to_msg, diagnostic_status,
+                            freeze_startup_objects, qos_profile, reference_from_msg, run_node,
+                            state_from_msg, to_time, topic)
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import Command, Reference, ReferencePoint, seconds
 from ato_controller_node.host import ControllerHost, LawRejected
@@ -129,6 +130,7 @@ class AtoControllerNode(Node):
         self.get_logger().info(f"law {self.host.law.name} at {self.rate_hz:g} Hz "
                                f"({'lockstep' if self.lockstep else 'real time'}), actuators "
                                f'{list(self.train.actuator_names)}')
+        freeze_startup_objects()
 
     # --- parameters: validate, then apply ---------------------------------------------------
     def _gain_changes(self, changes: dict) -> dict[str, dict]:

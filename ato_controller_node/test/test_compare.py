@@ -4,6 +4,9 @@ and the file make demo reads."""
 from __future__ import annotations
 
 import json
+import multiprocessing
+import os
+import time
 
 import pytest
 
@@ -36,6 +39,16 @@ class HoldingLaw(PidLaw):
         if 100.0 < measurement.time_s < 110.0:
             return LawOutput(float('nan'), {})  # the host holds the last command
         return super().step(measurement, reference)
+
+
+def stand_in_run(job):
+    """run_all's ``run`` for the timeout test (module level: the spawned child imports it): the
+    law's name says what the run does."""
+    if job.law == 'hangs':
+        time.sleep(600.0)
+    if job.law == 'crashes':
+        os._exit(3)  # the process dies without a result, as on a segfault or an OOM kill
+    return dict(compare.job_fields(job), status='ok', reason='', wall_s=0.0)
 
 
 def test_applicability_follows_fits_and_picks_the_plant_model():
@@ -149,3 +162,39 @@ def test_a_law_that_needs_a_failed_measurement_does_not_apply():
         speed=QuantitySensor(failed_from_s=300.0))))
     assert compare.failed_measurement('pid', failed, 'point_mass') == (
         "pid needs the measured speed, which the plant's sensor fails from 300 s")
+
+
+def test_a_run_over_the_time_limit_is_stopped_and_listed_and_the_others_complete(capsys):
+    jobs = [compare.Job('short_line', law, 'point_mass', 10.0)
+            for law in ('hangs', 'quick', 'crashes', 'also_quick')]
+    started = time.monotonic()
+    results = compare.run_all(jobs, processes=2, timeout_s=6.0, run=stand_in_run)
+    assert time.monotonic() - started < 60.0   # not the hanging run's 600 s
+    assert multiprocessing.active_children() == []  # the hanging run's process is gone
+    by_law = {r['law']: r for r in results}
+    assert sorted(by_law) == ['also_quick', 'crashes', 'hangs', 'quick']
+    assert by_law['hangs']['status'] == 'timeout'
+    assert by_law['hangs']['reason'] == 'exceeded the wall-time limit of 6 s (--timeout-s)'
+    assert by_law['hangs']['wall_s'] >= 6.0
+    assert by_law['crashes']['status'] == 'error'
+    assert by_law['crashes']['reason'] == ("the run's process ended (exit code 3) without a "
+                                           'result')
+    assert by_law['quick']['status'] == by_law['also_quick']['status'] == 'ok'
+    assert 'hangs on short_line: timeout' in capsys.readouterr().err  # the progress bar
+    text = compare.markdown(results, [], ['short_line'], 'now', 'make compare')
+    assert ('| hangs | point_mass, 10 Hz | timeout (exceeded the wall-time limit of 6 s '
+            '(--timeout-s)) |') in text
+
+
+def test_one_process_with_a_time_limit_still_runs_each_job_in_a_child_it_can_stop():
+    jobs = [compare.Job('short_line', law, 'point_mass', 10.0) for law in ('hangs', 'quick')]
+    results = compare.run_all(jobs, processes=1, timeout_s=4.0, run=stand_in_run)
+    assert [(r['law'], r['status']) for r in results] == [('hangs', 'timeout'), ('quick', 'ok')]
+
+
+@pytest.mark.parametrize('value', ['-1', 'nan', 'inf', 'soon'])
+def test_a_bad_time_limit_is_refused_naming_the_option(value, capsys):
+    with pytest.raises(SystemExit):
+        compare.main(['--timeout-s', value])
+    assert f"--timeout-s: must be a finite number of seconds >= 0 (0: no limit), got '{value}'" \
+        in capsys.readouterr().err

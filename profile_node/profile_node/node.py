@@ -24,8 +24,8 @@ from std_msgs.msg import Float64
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_common.params import Param, ParameterTable
-from ato_common.ros import (from_duration, from_time, qos_profile, reference_to_msg, run_node,
-                            topic)
+from ato_common.ros import (freeze_startup_objects, from_duration, from_time, qos_profile,
+                            reference_to_msg, run_node, topic)
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import Reference, nanoseconds, seconds
 from profile_node.planner import plan_reference
@@ -85,6 +85,7 @@ class ProfileNode(Node):
                 self.get_logger().warning(
                     f'journey timing point at {point.position_m:.0f} m: the curve is there at '
                     f'{check.planned_s:.1f} s, outside [{point.earliest_s}, {point.latest_s}] s')
+        freeze_startup_objects()
 
     def curve_msg(self) -> JointTrajectory:
         step = self.params['curve_sample_period_s']

@@ -7,6 +7,7 @@ import pytest
 
 from ato_common import units
 from ato_common.scenario import parse_scenario
+from ato_common.validation import ConfigError
 from train_plant_node.simulation import TrainSimulation
 
 PERIOD_NS = 100_000_000
@@ -155,6 +156,39 @@ def test_sensors_bias_quantisation_noise_dropout_and_failed_speed_sensor():
     assert abs(errors.mean()) < 0.02 and errors.std() == pytest.approx(0.05, rel=0.2)
     dropped = np.mean([math.isnan(m.accelerations[0]) for _, _, m in trace])
     assert 0.12 < dropped < 0.28
+
+
+@pytest.mark.parametrize('preset, model, quantity, cars, message', [
+    ('crh2_4car_mao', 'multi_car', 'speed', ['car_2', 'train'],
+     "plant.sensors.speed.failed_cars[1]: car 'train' is not a car of the multi_car model; "
+     'valid: car_1, car_2, car_3, car_4'),
+    ('crh2_4car_mao', 'point_mass', 'position', ['car_2'],
+     "plant.sensors.position.failed_cars[0]: car 'car_2' is not a car of the point_mass model; "
+     'valid: train'),
+])
+def test_a_failed_sensor_car_the_model_does_not_have_is_refused(preset, model, quantity, cars,
+                                                                 message):
+    # The scenario accepts the cars of either model; built for one, the other's would fail
+    # nothing without a word.
+    plant = {'sensors': {quantity: {'failed_from_s': 1, 'failed_cars': cars}}}
+    with pytest.raises(ConfigError) as error:
+        TrainSimulation(scenario(preset, plant), model)
+    assert str(error.value) == message
+
+
+@pytest.mark.parametrize('model, cars, failed', [
+    ('multi_car', ['car_2'], (False, True, False, False)),
+    ('multi_car', [], (True, True, True, True)),
+    ('point_mass', ['train'], (True,)),
+    ('point_mass', [], (True,)),
+])
+def test_a_failed_sensor_fails_the_cars_it_names_on_the_model_that_has_them(model, cars, failed):
+    plant = {'sensors': {'speed': {'failed_from_s': 1, 'failed_cars': cars}}}
+    sim = TrainSimulation(scenario('crh2_4car_mao', plant), model)
+    before, after = run(sim, 2, (12e3,) * len(sim.actuator_names),
+                        lambda s: s.measured().speeds)[::10]
+    assert not any(math.isnan(v) for v in before)
+    assert tuple(math.isnan(v) for v in after) == failed
 
 
 def test_energy_balance_of_the_point_mass():

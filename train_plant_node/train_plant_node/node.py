@@ -21,8 +21,8 @@ from trajectory_msgs.msg import JointTrajectory
 from ato_common.params import Param, ParameterTable
 from ato_common.plant_setup import parse_failure_injection
 from ato_common.ros import (MessageError, actuator_forces_to_msg, command_from_msg,
-                            diagnostic_status, from_time, qos_profile, run_node, state_to_msg,
-                            to_duration, to_time, topic)
+                            diagnostic_status, freeze_startup_objects, from_time, qos_profile,
+                            run_node, state_to_msg, to_duration, to_time, topic)
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import TrainState, nanoseconds, seconds
 from train_plant_node.models import MODELS
@@ -95,6 +95,8 @@ class TrainPlantNode(Node):
                                p['seed']),
                 SafetySettings(p['watchdog_periods'], p['emergency_periods']),
                 max_substep_s=p['max_substep_s'])
+        except ConfigError:
+            raise  # names the scenario's field already (plant.sensors...)
         except ValueError as error:  # e.g. multi_car with a train that has no car description
             raise ConfigError(f"model {p['model']}: {error}") from None
         self.last_valid_command_wall = time.monotonic()
@@ -141,6 +143,7 @@ class TrainPlantNode(Node):
             f"scenario {self.scenario.name} ({self.scenario.origin}), model {p['model']}, "
             f"{'lockstep at ' + format(rate, 'g') + ' Hz' if self.lockstep else 'real time'}, "
             f'actuators {list(self.sim.actuator_names)}')
+        freeze_startup_objects()
 
     # --- time ----------------------------------------------------------------------------------
     def stamp_ns(self) -> int:

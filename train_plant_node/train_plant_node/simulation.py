@@ -116,6 +116,7 @@ class TrainSimulation:
         self.model: PlantModel = make_model(model_name, scenario.train, scenario.line,
                                             **model_options)
         self.sensors = merged_sensors(self.setup.sensors, sensors)
+        self.sensors.check_cars(self.model.car_names, model_name)
         self._rng = np.random.default_rng(self.sensors.seed)
         self.stamp_ns = 0
         self.state = self.model.initial_state(scenario.run.initial_position_m)
