@@ -28,7 +28,6 @@ from ato_common.plant_setup import ActuatorFailure, PlantSetup, QuantitySensor, 
 from ato_common.scenario import Scenario
 from ato_common.types import NS_PER_S, TrainState, nanoseconds
 from train_plant_node.models import PlantModel, make_model
-from train_plant_node.periods import period_kernel
 from train_plant_node.surroundings import Surroundings, surroundings_at
 
 
@@ -411,6 +410,8 @@ class TrainSimulation:
         """How many of the next ``wanted`` periods ``periods.py``'s kernels may run: those in
         which ``advance`` would take its one-step path with nothing switching, and that end
         before the next scheduled time, so that no failure acts at any of them."""
+        # Imported here: it loads every model's module, which a node of one model need not.
+        from train_plant_node.periods import period_kernel
         if not (self._one_step_possible and self._constant_env
                 and period_kernel(self.model) is not None
                 and period_ns / NS_PER_S <= self.model.max_substep_s):
@@ -431,6 +432,7 @@ class TrainSimulation:
     def _run_compiled(self, forces: np.ndarray, period_ns: int, out: list[np.ndarray],
                       interventions: np.ndarray) -> int:
         """Up to ``len(forces)`` periods in ``periods``' kernel; returns how many ran."""
+        from train_plant_node.periods import period_kernel
         if self._packed_supervision is None:
             run = self.supervision
             self._packed_supervision = (np.array(run.stations_m, dtype=float),
