@@ -234,7 +234,7 @@ class Stack:
             self.node.destroy_client(client)
 
     def stop(self, names=None, timeout_s: float = 10.0) -> dict[str, int]:
-        """SIGINT every process still running, wait, SIGKILL what does not end; exit codes.
+        """SIGINT every process still running, wait, abort what does not end; exit codes.
         The recorder goes last, so that it records everything the others sent."""
         names = list(names or self.processes)
         if 'recorder' in names and len(names) > 1:
@@ -252,9 +252,19 @@ class Stack:
             try:
                 codes[name] = self.processes[name].wait(timeout=timeout_s)
             except subprocess.TimeoutExpired:
-                self.processes[name].kill()
-                codes[name] = self.processes[name].wait()
+                codes[name] = self._abort(name)
         return codes
+
+    def _abort(self, name: str) -> int:
+        """End a process that ignored SIGINT: SIGABRT first, so that its faulthandler (run_node
+        enables it) writes where every thread hung into its log, then SIGKILL."""
+        process = self.processes[name]
+        process.send_signal(signal.SIGABRT)
+        try:
+            return process.wait(timeout=2.0)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            return process.wait()
 
     def close(self) -> None:
         try:

@@ -5,6 +5,7 @@ Only the node adapters import this module; the cores use :mod:`ato_common.types`
 
 from __future__ import annotations
 
+import faulthandler
 import gc
 import math
 import os
@@ -198,11 +199,22 @@ def freeze_startup_objects() -> None:
     gc.freeze()
 
 
+# A node asked to stop must end: if tearing down the executor, the node's rcl entities and the
+# context takes longer than this (a rare middleware hang), every thread's Python stack is written
+# to stderr and the process exits with code 1, instead of waiting for its supervisor's SIGKILL.
+TEARDOWN_LIMIT_S = 5.0
+
+
 def run_node(make_node: Callable[[], 'rclpy.node.Node'], args=None) -> int:
     """Entry point body of every node: init, build, spin until shutdown or the node asks to stop
     (``node.finished`` becomes True), clean up. SIGINT and SIGTERM end it cleanly with exit 0; a
-    configuration error is printed and gives exit 2 before anything is published."""
+    configuration error is printed and gives exit 2 before anything is published.
+
+    Teardown order: the node's own outputs first (``node.close_outputs()``, e.g. the recorder's
+    file, with no time limit), then, within ``TEARDOWN_LIMIT_S``, the executor (it lets go of
+    every entity while the context is still valid), the node, the context."""
     from ato_common.validation import ConfigError
+    faulthandler.enable()  # a fatal signal or SIGABRT writes every thread's stack to stderr
     rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     stop = {'requested': False}
 
@@ -222,14 +234,18 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], args=None) -> int:
         while rclpy.ok() and not stop['requested'] and not getattr(node, 'finished', False):
             executor.spin_once(timeout_sec=0.05)
         node.get_logger().info('shutting down' + (' on signal' if stop['requested'] else ''))
-        executor.remove_node(node)
+        close_outputs = getattr(node, 'close_outputs', None)
+        if close_outputs is not None:
+            close_outputs()
+        faulthandler.dump_traceback_later(TEARDOWN_LIMIT_S, exit=True)
+        executor.shutdown(timeout_sec=TEARDOWN_LIMIT_S)
         node.destroy_node()
         return int(getattr(node, 'exit_code', 0))
     finally:
         if rclpy.ok():
             rclpy.shutdown()
-        # From here the process only tears down (a recorder still closes its file). A second
-        # SIGINT, as Ctrl-C in a launch sends one to the group and launch forwards another,
-        # must not kill it half-way with the interpreter's default handler.
+        # From here the process only tears down. A second SIGINT, as Ctrl-C in a launch sends one
+        # to the group and launch forwards another, must not kill it half-way with the
+        # interpreter's default handler.
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)

@@ -20,7 +20,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
 
-from ato_common.ros import run_node
+from ato_common.ros import freeze_startup_objects, run_node
 from recorder.bag import DEFAULT_FLUSH_PERIOD_S, BagError, BagWriter
 from recorder.ros_io import message_class, qos_to_yaml, subscription_qos
 
@@ -34,6 +34,7 @@ class RecorderNode(Node):
         self.received = 0
         self.finished = False  # run_node stops spinning when True
         self.exit_code = 0
+        self.outputs_closed = False
         self.discover()
         # Wall-clock timers: with use_sim_time a ROS-time timer would wait for /clock, which a
         # lockstep plant does not start before the recorder has subscribed.
@@ -42,6 +43,7 @@ class RecorderNode(Node):
         self.create_timer(writer.flush_period_s, self.flush, clock=steady)
         self.get_logger().info(f'recording {"all topics" if self.wanted is None else sorted(self.wanted)}'
                                f' to {writer.path}')
+        freeze_startup_objects()
 
     def discover(self) -> None:
         for topic, types in self.get_topic_names_and_types():
@@ -92,7 +94,13 @@ class RecorderNode(Node):
         self.finished = True
         self.exit_code = 1
 
-    def destroy_node(self) -> None:
+    def close_outputs(self) -> None:
+        """Close the bag (summary, metadata.yaml); run_node calls this before the rclpy teardown,
+        and destroy_node does if nobody did."""
+        if self.outputs_closed:
+            return
+        self.outputs_closed = True
+        self.finished = True  # a message still delivered is not written to a closed file
         try:
             info = self.writer.close()
             self.get_logger().info(f'closed {info.path}: {info.message_count} messages on '
@@ -100,6 +108,9 @@ class RecorderNode(Node):
         except BagError as error:
             self.get_logger().error(str(error))
             self.exit_code = 1
+
+    def destroy_node(self) -> None:
+        self.close_outputs()
         super().destroy_node()
 
 
