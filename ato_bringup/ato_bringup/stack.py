@@ -233,26 +233,36 @@ class Stack:
         finally:
             self.node.destroy_client(client)
 
+    # Fast DDS 2.14 (Jazzy's rmw_fastrtps_cpp) can deadlock while deleting a participant if, at
+    # that moment, discovery reports a remote endpoint going away: seen with gdb, the main thread
+    # waits in rmw's destroy_participant (set_listener) for a discovery callback to end, and that
+    # callback (onWriterDiscovery) waits on a mutex for good.
+    # Peers that tear down together set this up, so the runner stops one process at a time and
+    # lets discovery settle before each (a process that has just ended by itself, e.g. a replay,
+    # is such a peer). Each stop costs this much more.
+    SETTLE_S = 0.3
+
     def stop(self, names=None, timeout_s: float = 10.0) -> dict[str, int]:
-        """SIGINT every process still running, wait, abort what does not end; exit codes.
+        """Stop the processes one at a time: SIGINT, wait, abort what does not end; exit codes.
         The recorder goes last, so that it records everything the others sent."""
         names = list(names or self.processes)
-        if 'recorder' in names and len(names) > 1:
-            codes = self.stop([n for n in names if n != 'recorder'], timeout_s)
-            try:
-                self.spin_for(0.3)
-            finally:  # whatever a callback raises, the recorder must not be left running
-                codes.update(self.stop(['recorder'], timeout_s))
-            return codes
-        for name in names:
-            if self.processes[name].poll() is None:
-                self.processes[name].send_signal(signal.SIGINT)
-        codes = {}
-        for name in names:
-            try:
-                codes[name] = self.processes[name].wait(timeout=timeout_s)
-            except subprocess.TimeoutExpired:
-                codes[name] = self._abort(name)
+        order = [n for n in names if n != 'recorder'] + [n for n in names if n == 'recorder']
+        codes, error = {}, None
+        for name in order:
+            process = self.processes[name]
+            if process.poll() is None:
+                try:
+                    self.spin_for(self.SETTLE_S)
+                except Exception as raised:  # a monitor callback: stop the rest cleanly first
+                    error = error or raised
+                process.send_signal(signal.SIGINT)
+                try:
+                    process.wait(timeout=timeout_s)
+                except subprocess.TimeoutExpired:
+                    self._abort(name)
+            codes[name] = process.returncode
+        if error is not None:
+            raise error
         return codes
 
     def _abort(self, name: str) -> int:
