@@ -146,11 +146,20 @@ def test_replay_with_offset_topic_selection_and_remap(recorded, tmp_path, domain
         assert replay.returncode == 0, replay.stderr
         assert stack.stop()['recorder'] == 0
     info = bag_info(out)
-    states = [from_time(deserialize_message(m.data, JointTrajectory).header.stamp)
-              for m in read_messages(out, ['/replayed/state'])]
+    states = sorted(state_stamp(m) for m in read_messages(out, ['/replayed/state']))
     assert set(info.topics) == {'/replayed/state', '/clock'}  # the recorded /clock goes along
-    assert min(states) >= 150_000_000_000 and max(states) == 200_000_000_000
+    # The offset counts in log time (when the recorder received a message), as rosbag2's does:
+    # a state stamped 149.9 s may have been logged after /clock reached 150 s.
+    offset_ns = bag_info(bag).start_ns + 150_000_000_000
+    expected = sorted(state_stamp(m) for m in read_messages(bag, ['/train/state'])
+                      if m.log_time_ns >= offset_ns)
+    assert states == expected
+    assert min(states) >= 149_900_000_000 and max(states) == 200_000_000_000
     assert len(states) == info.topics['/replayed/state'].message_count >= 500
+
+
+def state_stamp(message) -> int:
+    return from_time(deserialize_message(message.data, JointTrajectory).header.stamp)
 
 
 def test_replay_of_a_broken_file_says_what_is_wrong(tmp_path, domain_id):

@@ -205,6 +205,16 @@ def freeze_startup_objects() -> None:
 TEARDOWN_LIMIT_S = 5.0
 
 
+def tear_down(executor, node) -> None:
+    """Shut the executor down (it lets go of every entity while the context is still valid),
+    then destroy the node, within ``TEARDOWN_LIMIT_S``: past it, faulthandler writes every
+    thread's stack to stderr and the process exits with code 1. The caller shuts rclpy down."""
+    faulthandler.enable()
+    faulthandler.dump_traceback_later(TEARDOWN_LIMIT_S, exit=True)
+    executor.shutdown(timeout_sec=TEARDOWN_LIMIT_S)
+    node.destroy_node()
+
+
 def run_node(make_node: Callable[[], 'rclpy.node.Node'], args=None) -> int:
     """Entry point body of every node: init, build, spin until shutdown or the node asks to stop
     (``node.finished`` becomes True), clean up. SIGINT and SIGTERM end it cleanly with exit 0; a
@@ -237,9 +247,7 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], args=None) -> int:
         close_outputs = getattr(node, 'close_outputs', None)
         if close_outputs is not None:
             close_outputs()
-        faulthandler.dump_traceback_later(TEARDOWN_LIMIT_S, exit=True)
-        executor.shutdown(timeout_sec=TEARDOWN_LIMIT_S)
-        node.destroy_node()
+        tear_down(executor, node)
         return int(getattr(node, 'exit_code', 0))
     finally:
         if rclpy.ok():

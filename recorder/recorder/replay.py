@@ -21,7 +21,7 @@ from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 
-from ato_common.ros import make_executor, to_time
+from ato_common.ros import make_executor, tear_down, to_time
 from recorder.bag import BagError, bag_info, read_messages
 from recorder.ros_io import message_class, qos_from_yaml
 
@@ -128,7 +128,7 @@ def main(args=None) -> int:
     except KeyboardInterrupt:
         return 0
     finally:
-        node.destroy_node()
+        tear_down(executor, node)
         if rclpy.ok():
             rclpy.shutdown()
 
