@@ -28,7 +28,7 @@ def test_profile_follows_the_clock_and_a_late_subscriber_gets_the_whole_curve(tm
     plan = plan_reference(load_scenario('short_line'))
     config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path)
     with Stack(config) as stack:
-        references, distances, permitted = [], [], []
+        distances, permitted = [], []
         subscribe(stack, 'distance_to_go', Float64, distances)
         subscribe(stack, 'permitted_speed', Float64, permitted)
         stack.start_process('profile', {'scenario': 'short_line', 'lockstep': True,

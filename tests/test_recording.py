@@ -45,8 +45,7 @@ def test_recording_holds_every_message_the_run_published(recorded):
         assert info.topics[topic].message_count == published, topic
     assert info.topics['/ato/reference'].message_count == outcome.counts['reference']
     assert info.topics['/ato/command'].message_count == outcome.counts['command']
-    stamps = sorted({from_time(deserialize_message(m.data, JointTrajectory).header.stamp)
-                     for m in read_messages(bag, ['/train/state'])})
+    stamps = sorted({state_stamp(m) for m in read_messages(bag, ['/train/state'])})
     assert stamps == [k for k, _ in outcome.samples]  # every step
     assert info.topics['/ato/reference/curve'].message_count == 1
     assert info.end_ns >= 200_000_000_000  # log time is simulated time
@@ -122,8 +121,7 @@ def test_sigkill_loses_at_most_the_last_second(tmp_path, domain_id):
         stack.processes['recorder'].wait()
         stack.stop()
     recover(tmp_path / 'bag')
-    recorded = [from_time(deserialize_message(m.data, JointTrajectory).header.stamp)
-                for m in read_messages(tmp_path / 'bag', ['/train/state'])]
+    recorded = [state_stamp(m) for m in read_messages(tmp_path / 'bag', ['/train/state'])]
     assert recorded, 'nothing recovered'
     assert killed_at_ns - recorded[-1] < 1_000_000_000
     # everything the monitor saw from the first recorded state until a second before the kill

@@ -265,16 +265,16 @@ class Stack:
             raise error
         return codes
 
-    def _abort(self, name: str) -> int:
+    def _abort(self, name: str) -> None:
         """End a process that ignored SIGINT: SIGABRT first, so that its faulthandler (run_node
         enables it) writes where every thread hung into its log, then SIGKILL."""
         process = self.processes[name]
         process.send_signal(signal.SIGABRT)
         try:
-            return process.wait(timeout=2.0)
+            process.wait(timeout=2.0)
         except subprocess.TimeoutExpired:
             process.kill()
-            return process.wait()
+            process.wait()
 
     def close(self) -> None:
         try:

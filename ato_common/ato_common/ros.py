@@ -209,7 +209,6 @@ def tear_down(executor, node) -> None:
     """Shut the executor down (it lets go of every entity while the context is still valid),
     then destroy the node, within ``TEARDOWN_LIMIT_S``: past it, faulthandler writes every
     thread's stack to stderr and the process exits with code 1. The caller shuts rclpy down."""
-    faulthandler.enable()
     faulthandler.dump_traceback_later(TEARDOWN_LIMIT_S, exit=True)
     executor.shutdown(timeout_sec=TEARDOWN_LIMIT_S)
     node.destroy_node()
