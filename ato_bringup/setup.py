@@ -18,7 +18,11 @@ setup(
     zip_safe=True,
     maintainer='ATO emulator maintainers',
     maintainer_email='ato-emulator@example.org',
-    description='Bring-up of the ATO emulator: launch file and the scenario runner that starts the stack, drives it to the end of a scenario and prints the run summary.',
+    description=(
+        'Bring-up of the ATO emulator: launch file, the scenario runner that starts the stack, '
+        'drives it to the end of a scenario and prints the run summary, the offline closed loop '
+        'and the comparison of the laws.'
+    ),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

@@ -15,7 +15,10 @@ setup(
     zip_safe=True,
     maintainer='ATO emulator maintainers',
     maintainer_email='ato-emulator@example.org',
-    description='Shared conventions of the ATO emulator: topic names, QoS, SI units and paper-unit conversions, message conversion, train presets, line descriptions and scenarios.',
+    description=(
+        'Shared conventions of the ATO emulator: topic names, QoS, SI units and paper-unit '
+        'conversions, message conversion, train presets, line descriptions and scenarios.'
+    ),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

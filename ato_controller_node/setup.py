@@ -14,7 +14,10 @@ setup(
     zip_safe=True,
     maintainer='ATO emulator maintainers',
     maintainer_email='ato-emulator@example.org',
-    description='Automatic train operation controller: runs a selectable control law (PID with feedforward, Luo and Xu adaptive backstepping) at a fixed rate.',
+    description=(
+        'Automatic train operation controller: runs the control law selected by a parameter from '
+        'its registry of laws at a fixed rate.'
+    ),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

@@ -17,9 +17,9 @@ import gc
 import math
 import os
 import platform
+import tempfile
 import time
 from pathlib import Path
-import tempfile
 
 import numpy as np
 
@@ -27,11 +27,11 @@ from ato_bringup.compare import plan_jobs
 from ato_bringup.offline import run_offline
 from ato_bringup.runner import run_lockstep
 from ato_bringup.stack import StackConfig
-from recorder.bag import bag_info
 from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
 from ato_common.trains import train_preset
 from ato_common.types import NS_PER_S, nanoseconds
 from ato_controller_node.laws import LAWS
+from recorder.bag import bag_info
 from train_plant_node.accuracy import accuracy_scenario, worst_speed_error
 from train_plant_node.simulation import TrainSimulation
 
@@ -147,8 +147,8 @@ def main() -> int:
           f'{recorded * steady / (steps / 10):.0f} messages/s at the steady rate')
     print_law_step_times(args.scenario)
     print('\nplant simulation alone (CPU time of one core, 10 Hz control periods, 600 s, median of '
-          '5 runs): period by period (apply_command + advance + truth, as the node drives it) | all commands at '
-          'once (run_commands)')
+          '5 runs): period by period (apply_command + advance + truth, as the node drives it) '
+          '| all commands at once (run_commands)')
     for model, train, what in (('point_mass', None, 'RK4, CRH3'),
                                ('multi_car', 'crh2_4car_mao',
                                 'CRH2 4-car unit, exact coupler dynamics, ETDRK4')):

@@ -14,7 +14,10 @@ setup(
     zip_safe=True,
     maintainer='ATO emulator maintainers',
     maintainer_email='ato-emulator@example.org',
-    description='Distance-to-go target curve: builds a smooth, jerk-limited, time-parameterised reference from a line description and streams it.',
+    description=(
+        'Distance-to-go target curve: builds a smooth, jerk-limited, time-parameterised reference'
+        ' from a line description and streams it.'
+    ),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

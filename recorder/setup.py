@@ -17,7 +17,12 @@ setup(
     zip_safe=True,
     maintainer='ATO emulator maintainers',
     maintainer_email='ato-emulator@example.org',
-    description='Record runs to MCAP (rosbag2 conventions), replay, recover, report.',
+    description=(
+        "Records the ATO emulator's topics to MCAP in the rosbag2 conventions (raw CDR, full "
+        'ros2msg schemas, offered QoS, metadata.yaml), replays recordings with their timing and '
+        "/clock, recovers killed recordings, and reports a run's metrics and plots from its "
+        'recording.'
+    ),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

@@ -4,8 +4,8 @@ with discovery limited to this machine, so parallel runs never hear each other."
 
 import fcntl
 import os
-from pathlib import Path
 import tempfile
+from pathlib import Path
 
 import pytest
 

@@ -5,10 +5,10 @@ import math
 import signal
 
 import pytest
+from plant_driver import ControllerStandIn, plant_status
 
 from ato_bringup.stack import Stack, StackConfig
 from ato_common.ros import qos_profile, to_time, topic
-from plant_driver import ControllerStandIn, plant_status
 
 
 def test_lockstep_watchdog_brakes_on_invalid_commands_and_recovers(tmp_path, domain_id):
@@ -115,6 +115,7 @@ def test_controller_never_commands_nan_on_a_failed_sensor(tmp_path, domain_id):
     """A test node plays the plant: the measured speed turns NaN (a failed sensor) and back."""
     from rosgraph_msgs.msg import Clock
     from trajectory_msgs.msg import JointTrajectory
+
     from ato_common.ros import state_to_msg
     from ato_common.types import TrainState
 

@@ -3,15 +3,15 @@
 import math
 import os
 import re
-from pathlib import Path
 import subprocess
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
-from ament_index_python.packages import get_package_prefix, get_package_share_directory
 import pytest
+from ament_index_python.packages import get_package_prefix, get_package_share_directory
+from plant_driver import ControllerStandIn, plant_status
 
 from ato_bringup.stack import EXECUTABLES, Stack, StackConfig, executable_path
-from plant_driver import ControllerStandIn, plant_status
 
 PACKAGES = ['ato_common', 'train_plant_node', 'profile_node', 'ato_controller_node',
             'ato_bringup']

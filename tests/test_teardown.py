@@ -1,10 +1,10 @@
 """A node that cannot finish tearing down must still end, and say where it hung."""
 
 import os
-from pathlib import Path
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 from ato_bringup.stack import Stack, StackConfig
 

@@ -14,7 +14,11 @@ setup(
     zip_safe=True,
     maintainer='ATO emulator maintainers',
     maintainer_email='ato-emulator@example.org',
-    description='Train plant simulator: longitudinal train dynamics with Davis resistance and line forces, actuator limits, truth and measured state, lockstep simulated time.',
+    description=(
+        'Train plant simulator: longitudinal train dynamics with Davis resistance and line '
+        'forces, actuator limits, failures, sensors, ATP supervision, truth and measured state, '
+        'lockstep simulated time.'
+    ),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

@@ -38,17 +38,17 @@ with status ``ok`` whose stop error is at most STOP_ERROR_LIMIT_M, the lowest RM
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass
-from datetime import datetime, timezone
 import json
 import math
 import multiprocessing
 import multiprocessing.connection
 import os
-from pathlib import Path
 import sys
 import time
 import traceback
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
 from typing import Callable
 
 import numpy as np

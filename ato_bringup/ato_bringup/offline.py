@@ -5,9 +5,9 @@ command is held while the plant advances one period."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 import math
 import time
+from dataclasses import dataclass, field
 
 import numpy as np
 

@@ -11,17 +11,17 @@ the scenario's train falls back to pid, with the reason printed.
 from __future__ import annotations
 
 import argparse
-from datetime import datetime
 import os
-from pathlib import Path
 import sys
+from datetime import datetime
+from pathlib import Path
 
-from ato_common.metrics import format_summary
-from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
-from ato_common.validation import ConfigError
 from ato_bringup.compare import DEFAULT_DEMO_LAW, DEFAULT_OUT, knowledge_of, ranked_demo_law
 from ato_bringup.runner import RunFailed, run_lockstep
 from ato_bringup.stack import StackConfig
+from ato_common.metrics import format_summary
+from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
+from ato_common.validation import ConfigError
 from ato_controller_node.laws import LAWS
 from recorder.bag import BagError
 from recorder.report import load_run, plot

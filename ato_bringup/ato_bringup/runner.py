@@ -2,18 +2,18 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 import sys
 import time
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
+from ato_bringup.offline import run_end_time_s, stop_samples
+from ato_bringup.stack import Sample, Stack, StackConfig
 from ato_common.metrics import RunMetrics, compute_metrics
 from ato_common.scenario import Scenario, load_scenario
 from ato_common.types import NS_PER_S
-from ato_bringup.offline import run_end_time_s, stop_samples
-from ato_bringup.stack import Sample, Stack, StackConfig
 from profile_node.planner import plan_reference
 
 

@@ -29,9 +29,9 @@ the MRSP and the permitted curves of every target: the speed an ATO target must 
 
 from __future__ import annotations
 
+import math
 from bisect import bisect_right
 from dataclasses import dataclass
-import math
 from typing import Callable, Sequence
 
 import numpy as np
@@ -204,7 +204,7 @@ class SpeedSupervision:
         kind = 'end_of_authority' if final else 'stop'
         self.targets: list[Target] = []
         previous = None
-        for s, e, v in self.mrsp.segments(line.length_m):
+        for s, _end, v in self.mrsp.segments(line.length_m):
             if previous is not None and v < previous and start_m < s < stopping_point_m:
                 self.targets.append(Target('speed_decrease', s, v))
             previous = v

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from bisect import bisect_right
 from dataclasses import dataclass
+
 from ato_common import units
 from ato_common.validation import ConfigError, Fields
-
 
 CURVE_RESISTANCE_N_PER_KN_M = 600.0        # w_c = 600 / R  [N/kN], R in m
 TUNNEL_RESISTANCE_N_PER_KN_PER_M = 0.00013  # w_t = 0.00013 L_t  [N/kN], L_t in m
@@ -108,10 +108,12 @@ def parse_line(data, where: str = 'line') -> Line:
     stations = []
     for item in f.items('stations', required=True):
         position = item.number('position_m', minimum=0.0, maximum=length)
-        stations.append(Station(item.text('name'), position, item.number('dwell_s', 0.0, minimum=0.0)))
+        dwell_s = item.number('dwell_s', 0.0, minimum=0.0)
+        stations.append(Station(item.text('name'), position, dwell_s))
         item.reject_unknown()
     if len(stations) < 2:
-        raise ConfigError(f'{where}.stations: at least two stations (origin and destination) are needed')
+        raise ConfigError(f'{where}.stations: at least two stations (origin and destination) '
+                          'are needed')
     for a, b in zip(stations, stations[1:]):
         if b.position_m <= a.position_m:
             raise ConfigError(f'{where}.stations: positions must increase ({a.name} at '
@@ -120,7 +122,8 @@ def parse_line(data, where: str = 'line') -> Line:
     limit_starts, limits = [], []
     for item in f.items('speed_limits', required=True):
         limit_starts.append(item.number('start_m', minimum=0.0, maximum=length))
-        limits.append(units.kmh_to_mps(item.number('speed_kmh', minimum=0.0, exclusive_minimum=True)))
+        speed_kmh = item.number('speed_kmh', minimum=0.0, exclusive_minimum=True)
+        limits.append(units.kmh_to_mps(speed_kmh))
         item.reject_unknown()
     if not limits:
         raise ConfigError(f'{where}.speed_limits: at least one speed limit is needed')

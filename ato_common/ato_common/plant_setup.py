@@ -6,12 +6,12 @@ disturbance, ideal actuators (within the traction characteristic), perfect senso
 are converted here, through :mod:`ato_common.units`. Schema (all keys optional)::
 
     plant:
-      resistance_variation:        # Luo & Xu eq (34): coefficient(t) = nominal (1 + A sin(w t + phi))
+      resistance_variation:  # Luo & Xu eq (34): coefficient(t) = nominal (1 + A sin(w t + phi))
         a: {amplitude: 0.3, omega_rad_per_s: 0.1, phase_rad: 0.0}
         b: {amplitude: 0.2, omega_rad_per_s: 0.1}
         c: {amplitude: 0.1, omega_rad_per_s: 0.1}
         line: {amplitude: 0.05, omega_rad_per_s: 0.02}   # Liu & Li l(t) = M g (1 + ...)
-      modes:                       # Mao et al. 2017 Section 4.1; from_s (by time) or from_m (region)
+      modes:                 # Mao et al. 2017 Section 4.1; from_s (by time) or from_m (region)
         - {name: open air, from_s: 0, davis_kn_kmh: {a: 2.25, b: -1.9e-3, c: 3.2e-4}}
         - {name: tunnel, from_s: 400, davis_kn_kmh: {a: 2.25, b: -1.9e-3, c: 9.2e-4}}
         - {name: slope and curve, from_s: 800, grade_sine: 0.015, curvature: 0.34, ...}
@@ -29,10 +29,10 @@ are converted here, through :mod:`ato_common.units`. Schema (all keys optional):
 
 from __future__ import annotations
 
+import math
 from bisect import bisect_right
 from dataclasses import dataclass, field
 from functools import cached_property
-import math
 from typing import Sequence
 
 import numpy as np
@@ -475,7 +475,8 @@ def parse_plant_setup(data, train: TrainParameters, where: str = 'plant') -> Pla
     v = f.section('resistance_variation')
     variation = None
     if f.has('resistance_variation'):
-        variation = ResistanceVariation(*(_optional_sinusoid(v, k) for k in ('a', 'b', 'c', 'line')))
+        variation = ResistanceVariation(
+            *(_optional_sinusoid(v, k) for k in ('a', 'b', 'c', 'line')))
         v.reject_unknown()
     modes, switch = _modes(f, train)
     a = f.section('actuators')

@@ -15,7 +15,6 @@ from typing import Callable, Sequence
 
 import rclpy
 import rclpy.signals
-
 from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy

@@ -19,13 +19,15 @@ from pathlib import Path
 
 import yaml
 
-from ato_common import units
-from ato_common.braking_curves import (SupervisionSettings, constant_deceleration,
-                                       tabulated_deceleration)
+from ato_common import ttobench, units
+from ato_common.braking_curves import (
+    SupervisionSettings,
+    constant_deceleration,
+    tabulated_deceleration,
+)
 from ato_common.line import Line, PiecewiseConstant, parse_line
 from ato_common.plant_setup import PlantSetup, parse_plant_setup
 from ato_common.trains import TRAIN_PRESETS, TrainParameters, train_preset
-from ato_common import ttobench
 from ato_common.validation import ConfigError, Fields
 
 DEFAULT_SCENARIO = 'short_line'

@@ -7,8 +7,8 @@ from the papers' units happen here, through :mod:`ato_common.units`, and nowhere
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 import math
+from dataclasses import dataclass, field
 from typing import Mapping
 
 from ato_common import units

@@ -31,11 +31,11 @@ Mapping (simplifications are stated where they are made):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 import json
 import math
-from pathlib import Path
 import re
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from ato_common import units

@@ -7,10 +7,18 @@ import numpy as np
 import pytest
 
 from ato_common import units
-from ato_common.braking_curves import (CURVE_NAMES, DV_EBI_KMH, RunSupervision, SpeedSupervision,
-                                       SupervisionSettings, ceiling_margin, constant_deceleration,
-                                       deceleration_curve, most_restrictive_speed_profile,
-                                       tabulated_deceleration)
+from ato_common.braking_curves import (
+    CURVE_NAMES,
+    DV_EBI_KMH,
+    RunSupervision,
+    SpeedSupervision,
+    SupervisionSettings,
+    ceiling_margin,
+    constant_deceleration,
+    deceleration_curve,
+    most_restrictive_speed_profile,
+    tabulated_deceleration,
+)
 from ato_common.line import Line, PiecewiseConstant, Station
 from ato_common.scenario import load_scenario
 

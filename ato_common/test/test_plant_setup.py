@@ -4,8 +4,7 @@ import math
 
 import pytest
 
-from ato_common.plant_setup import (CURVATURE_ACCEL_PER_D, Disturbance, PlantSetup,
-                                    parse_plant_setup)
+from ato_common.plant_setup import CURVATURE_ACCEL_PER_D, Disturbance, PlantSetup, parse_plant_setup
 from ato_common.scenario import parse_scenario
 from ato_common.trains import train_preset
 from ato_common.validation import ConfigError
@@ -158,7 +157,8 @@ def test_run_time_failure_injection_defaults_to_now_and_can_repair():
 
 
 def test_any_plant_section_gives_a_setup_or_a_config_error():
-    from hypothesis import given, settings, strategies as st
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
     leaves = st.none() | st.booleans() | st.integers(-5, 5) | st.floats() | st.text(max_size=5)
     values = st.recursive(leaves, lambda inner: st.lists(inner, max_size=3) | st.dictionaries(
         st.sampled_from(['a', 'kind', 'from_s', 'actuator', 'failed_cars', 'speed', 'modes',

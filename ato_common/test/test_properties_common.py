@@ -6,12 +6,20 @@ import gc
 import math
 import weakref
 
-from hypothesis import given, settings, strategies as st
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from ato_common.ros import (MessageError, command_from_msg, command_to_msg,
-                            freeze_startup_objects, reference_from_msg, reference_to_msg,
-                            state_from_msg, state_to_msg)
+from ato_common.ros import (
+    MessageError,
+    command_from_msg,
+    command_to_msg,
+    freeze_startup_objects,
+    reference_from_msg,
+    reference_to_msg,
+    state_from_msg,
+    state_to_msg,
+)
 from ato_common.scenario import parse_scenario
 from ato_common.types import Command, Reference, ReferencePoint, TrainState
 from ato_common.validation import ConfigError

@@ -184,8 +184,9 @@ def test_a_scenario_naming_a_missing_or_broken_file_says_which(tmp_path):
 
 
 def test_every_sample_track_loads_and_yields_a_curve_within_its_limits_and_stops(tmp_path):
-    from profile_node.planner import plan_reference
     import numpy as np
+
+    from profile_node.planner import plan_reference
     assert len(TRACKS) >= 14 and len(TRAINS) >= 3
     for i, track in enumerate(TRACKS):
         train = TRAINS[i % len(TRAINS)]   # every track, every train at least once

@@ -3,7 +3,7 @@ import math
 import pytest
 
 from ato_common import units
-from ato_common.trains import DavisResistance, TRAIN_PRESETS, steady_speed, train_preset
+from ato_common.trains import TRAIN_PRESETS, DavisResistance, steady_speed, train_preset
 
 
 def test_speed_and_mass_conversions():

@@ -9,13 +9,18 @@ carried as an offset that decays with ``bumpless_time_constant_s``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 import math
+from dataclasses import dataclass
 from typing import Any, Mapping
 
 from ato_common.types import ReferencePoint
 from ato_controller_node.laws import LAWS, law_class
-from ato_controller_node.laws.base import ControlLaw, Measurement, TrainKnowledge, validated_settings
+from ato_controller_node.laws.base import (
+    ControlLaw,
+    Measurement,
+    TrainKnowledge,
+    validated_settings,
+)
 
 #: the estimate under which a law that observes the speed reports it (m/s); used for the
 #: traction limit when the speed is not measured

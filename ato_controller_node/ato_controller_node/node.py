@@ -22,16 +22,29 @@ from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_common.params import Param, ParameterTable
-from ato_common.ros import (MessageError, command_to_msg, diagnostic_status,
-                            freeze_startup_objects, qos_profile, reference_from_msg, run_node,
-                            state_from_msg, to_time, topic)
+from ato_common.ros import (
+    MessageError,
+    command_to_msg,
+    diagnostic_status,
+    freeze_startup_objects,
+    qos_profile,
+    reference_from_msg,
+    run_node,
+    state_from_msg,
+    to_time,
+    topic,
+)
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import Command, Reference, ReferencePoint, seconds
+from ato_common.validation import ConfigError
 from ato_controller_node.host import ControllerHost, LawRejected
 from ato_controller_node.laws import LAWS
-from ato_common.validation import ConfigError
-from ato_controller_node.laws.base import (Measurement, TrainKnowledge, setting_fields,
-                                           validated_settings)
+from ato_controller_node.laws.base import (
+    Measurement,
+    TrainKnowledge,
+    setting_fields,
+    validated_settings,
+)
 
 NODE_PARAMS = (
     Param('scenario', DEFAULT_SCENARIO, 'built-in scenario name or path to a scenario YAML file '

@@ -154,6 +154,7 @@ def test_progress_bar_in_a_log_writes_one_line_per_finished_run():
 
 def test_a_law_that_needs_a_failed_measurement_does_not_apply():
     from dataclasses import replace
+
     from ato_common.plant_setup import QuantitySensor, SensorSetup
     from ato_common.scenario import load_scenario
     scenario = load_scenario('short_line')

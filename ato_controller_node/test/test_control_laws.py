@@ -48,7 +48,8 @@ def test_luo_xu_fix_changes_the_law_and_printed_switch_runs_it(train):
     m = Measurement(0.0, 10.0, 20.0)
     r = ReferencePoint(0.0, 0.0, 20.0, 0.0)
     fixed = LuoXuLaw(train, 0.1)
-    printed = LuoXuLaw(train, 0.1, validated_settings(LuoXuLaw.Settings, {'paper_as_printed': True}))
+    settings = validated_settings(LuoXuLaw.Settings, {'paper_as_printed': True})
+    printed = LuoXuLaw(train, 0.1, settings)
     # z1 = 10 m: the corrected varphi has (c1^2 - 1) z1, the printed one c1^2 z1
     diff = printed.step(m, r).force_n - fixed.step(m, r).force_n
     assert diff == pytest.approx(train.nominal_mass_kg * 10.0)
@@ -98,7 +99,8 @@ def test_switching_mid_run_keeps_tracking(scenario):
 
 def test_host_rejects_unknown_law_and_keeps_the_running_one(train):
     host = ControllerHost(train, 0.1, 'pid')
-    with pytest.raises(LawRejected, match="unknown controller 'bogus'; valid: (.*, )?luo_xu, (.*, )?pid"):
+    valid = "unknown controller 'bogus'; valid: (.*, )?luo_xu, (.*, )?pid"
+    with pytest.raises(LawRejected, match=valid):
         host.select('bogus')
     assert host.law.name == 'pid'
 

@@ -1,8 +1,8 @@
 """The host's side of the law interface: per-actuator output and limits, required inputs, and
 the refusal of a law that does not fit the train or the running plant."""
 
-from dataclasses import dataclass
 import math
+from dataclasses import dataclass
 
 import pytest
 

@@ -3,8 +3,9 @@ saturation handling, and the control-period check."""
 
 import math
 
-from hypothesis import given, settings, strategies as st
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ato_common.trains import train_preset
 from ato_common.types import ReferencePoint

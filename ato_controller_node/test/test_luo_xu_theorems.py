@@ -12,7 +12,7 @@ from ato_common.plant_setup import parse_plant_setup
 from ato_common.scenario import load_scenario
 from ato_common.types import ReferencePoint
 from ato_controller_node.laws.base import Measurement, TrainKnowledge, validated_settings
-from ato_controller_node.laws.luo_xu import LuoXuLaw, LuoXuProjectionLaw, TABLE2_SPANS
+from ato_controller_node.laws.luo_xu import TABLE2_SPANS, LuoXuLaw, LuoXuProjectionLaw
 
 
 @pytest.fixture(scope='module')

@@ -8,8 +8,8 @@ preset's traction limits)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
 import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest

@@ -3,17 +3,23 @@ switch, the sign/boundary-layer terms, saturation handling and the control-perio
 
 import math
 
-from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ato_common.line import parse_line
 from ato_common.trains import train_preset
 from ato_common.types import ReferencePoint
 from ato_controller_node.host import ControllerHost
 from ato_controller_node.laws.base import Measurement, TrainKnowledge, validated_settings
-from ato_controller_node.laws.mao_multibody import (MaoAdaptiveLaw, MaoNominalLaw, MaoState,
-                                                    phi_regressors, true_parameters)
+from ato_controller_node.laws.mao_multibody import (
+    MaoAdaptiveLaw,
+    MaoNominalLaw,
+    MaoState,
+    phi_regressors,
+    true_parameters,
+)
 from train_plant_node.models.multi_car import MultiCarModel
 
 DT = 1e-4

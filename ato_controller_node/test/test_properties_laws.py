@@ -1,10 +1,11 @@
 """Property-based: every law's step, through the host, on random and extreme measurements and
 references gives a finite command within the actuator limits, and bounded estimates."""
 
-from dataclasses import replace
 import math
+from dataclasses import replace
 
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ato_common.scenario import load_scenario
 from ato_common.types import ReferencePoint
@@ -41,7 +42,8 @@ def test_commands_are_finite_and_within_limits(law, samples):
         assert all(math.isfinite(f) for f in result.forces_n)
         speed = v if math.isfinite(v) else 0.0
         low, high = TRAIN.traction.limits_at(speed)
-        assert low - 1e-6 <= result.total_force_n <= max(high, TRAIN.traction.max_traction_force_n) + 1e-6
+        high = max(high, TRAIN.traction.max_traction_force_n)
+        assert low - 1e-6 <= result.total_force_n <= high + 1e-6
         for value in result.estimates.values():
             assert math.isfinite(value)
     if law == 'luo_xu':

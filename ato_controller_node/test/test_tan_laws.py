@@ -11,9 +11,15 @@ from ato_common.scenario import load_scenario
 from ato_common.types import ReferencePoint
 from ato_controller_node.host import ControllerHost
 from ato_controller_node.laws.base import Measurement, TrainKnowledge, validated_settings
-from ato_controller_node.laws.tan import (IdentificationBank, SecondLevelAdaptiveLaw,
-                                          SecondLevelFixedLaw, SwitchingMultipleModelLaw,
-                                          WeightedMultipleModelLaw, corner_simplex, model_box)
+from ato_controller_node.laws.tan import (
+    IdentificationBank,
+    SecondLevelAdaptiveLaw,
+    SecondLevelFixedLaw,
+    SwitchingMultipleModelLaw,
+    WeightedMultipleModelLaw,
+    corner_simplex,
+    model_box,
+)
 
 DT = 0.1
 

@@ -7,8 +7,8 @@ built-in scenario."""
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 import sys
+from pathlib import Path
 
 import numpy as np
 

@@ -24,8 +24,15 @@ from std_msgs.msg import Float64
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_common.params import Param, ParameterTable
-from ato_common.ros import (freeze_startup_objects, from_duration, from_time, qos_profile,
-                            reference_to_msg, run_node, topic)
+from ato_common.ros import (
+    freeze_startup_objects,
+    from_duration,
+    from_time,
+    qos_profile,
+    reference_to_msg,
+    run_node,
+    topic,
+)
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import Reference, nanoseconds, seconds
 from profile_node.planner import plan_reference

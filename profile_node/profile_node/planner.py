@@ -26,8 +26,8 @@ supervision times), the braking into that target is planned further ahead and th
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 import math
+from dataclasses import dataclass
 
 import numpy as np
 

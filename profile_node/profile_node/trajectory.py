@@ -7,9 +7,9 @@ v is exactly the derivative of x and a of v.
 
 from __future__ import annotations
 
+import math
 from bisect import bisect_right
 from dataclasses import dataclass
-import math
 
 from ato_common.types import ReferencePoint
 

@@ -10,21 +10,21 @@ a valid bag.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 import logging
 import os
-from pathlib import Path
 import struct
 import time
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import BinaryIO, Iterator
 
+import yaml
+import zstandard
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
-import yaml
-import zstandard
 
 from recorder.definitions import DefinitionNotFound, full_definition
 

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from datetime import datetime, timezone
 from pathlib import Path
-import sys
 
 from recorder.bag import BagError, bag_info, recover
 

@@ -7,8 +7,8 @@ depends on, depth first without repetition, each preceded by a line of 80 '=' an
 
 from __future__ import annotations
 
-from pathlib import Path
 import re
+from pathlib import Path
 
 from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
 

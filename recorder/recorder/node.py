@@ -12,9 +12,9 @@ SIGINT and SIGTERM close the file properly; a SIGKILL loses at most the last flu
 from __future__ import annotations
 
 import argparse
+import sys
 from datetime import datetime
 from pathlib import Path
-import sys
 
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -41,8 +41,8 @@ class RecorderNode(Node):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(discovery_period_s, self.discover, clock=steady)
         self.create_timer(writer.flush_period_s, self.flush, clock=steady)
-        self.get_logger().info(f'recording {"all topics" if self.wanted is None else sorted(self.wanted)}'
-                               f' to {writer.path}')
+        wanted = 'all topics' if self.wanted is None else sorted(self.wanted)
+        self.get_logger().info(f'recording {wanted} to {writer.path}')
         freeze_startup_objects()
 
     def discover(self) -> None:

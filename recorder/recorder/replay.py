@@ -6,8 +6,9 @@
 Messages go out as the recorded bytes, each topic with the QoS its publishers offered (a latched
 topic is replayed latched). ``/clock`` is replayed as recorded, so nodes with use_sim_time follow
 the recording; a recording without ``/clock`` gets one synthesised from the log times
-(``--no-clock`` turns both off). /clock is replayed whatever ``--topics`` selects. Topics are renamed with the standard ROS remapping
-(``--ros-args -r from:=to``), which applies to the replay node's publishers.
+(``--no-clock`` turns both off). /clock is replayed whatever ``--topics`` selects. Topics are
+renamed with the standard ROS remapping (``--ros-args -r from:=to``), which applies to the
+replay node's publishers.
 """
 
 from __future__ import annotations

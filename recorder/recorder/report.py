@@ -10,12 +10,12 @@ leaves each stop, traction energy from the applied force.
 from __future__ import annotations
 
 import argparse
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-import sys
 
-from mcap_ros2.decoder import DecoderFactory
 import numpy as np
+from mcap_ros2.decoder import DecoderFactory
 
 from ato_common.metrics import RunMetrics, StopSample, compute_metrics, format_summary
 from recorder.bag import BagError, read_messages

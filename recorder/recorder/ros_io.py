@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import importlib
 
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 import yaml
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from recorder.definitions import split_type
 

@@ -3,18 +3,18 @@ break the file, recover it."""
 
 import shutil
 
+import pytest
+import yaml
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
-import pytest
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.serialization import serialize_message
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
-import yaml
 
 from ato_common.ros import state_to_msg
 from ato_common.types import TrainState
-from recorder.bag import (BagError, BagWriter, bag_file, bag_info, read_messages, recover)
+from recorder.bag import BagError, BagWriter, bag_file, bag_info, read_messages, recover
 from recorder.cli import info_main, recover_main
 from recorder.definitions import full_definition
 from recorder.ros_io import qos_from_yaml, qos_to_yaml

@@ -243,8 +243,8 @@ def test_the_kernels_read_the_varying_resistance_and_disturbance_as_the_scenario
     # The compiled kernels evaluate Luo & Xu eq (34) and Liu & Li eq (9) from a parameter array
     # (surroundings.env_factors): they must agree with ato_common's definitions.
     from ato_common.plant_setup import Disturbance, ResistanceVariation, Sinusoid
-    from train_plant_node.surroundings import Surroundings, nominal_mode
     from ato_common.trains import train_preset
+    from train_plant_node.surroundings import Surroundings, nominal_mode
     variation = ResistanceVariation(a=Sinusoid(0.2, 0.3, 0.1), c=Sinusoid(0.1, 0.05),
                                     line=Sinusoid(0.05, 0.7, -1.0))
     disturbance = Disturbance(kind=kind, amplitude_n=3e4, omega_rad_per_s=0.4, phase_rad=0.5,

@@ -3,8 +3,14 @@
 import pytest
 
 from ato_common.scenario import parse_scenario
-from train_plant_node.simulation import (EMERGENCY_BRAKE, NORMAL, SERVICE_BRAKE, CommandRejected,
-                                         SafetySettings, TrainSimulation)
+from train_plant_node.simulation import (
+    EMERGENCY_BRAKE,
+    NORMAL,
+    SERVICE_BRAKE,
+    CommandRejected,
+    SafetySettings,
+    TrainSimulation,
+)
 
 PERIOD_NS = 100_000_000
 

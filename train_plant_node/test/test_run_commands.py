@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from ato_common.scenario import load_scenario, parse_scenario
 from ato_common.braking_curves import RunSupervision
+from ato_common.scenario import load_scenario, parse_scenario
 from train_plant_node.periods import exact_sum, limit_at
 from train_plant_node.simulation import CommandRejected, TrainSimulation
 

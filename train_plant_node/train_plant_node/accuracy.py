@@ -72,7 +72,7 @@ def worst_speed_error(scenario: Scenario, model: str, seconds: float, command_pe
         reference = np.concatenate([[state[0]], state[:n - 1] - state[1:n], state[n:]])
     periods = int(round(command_period_s * 1e9 / control_period_ns))
     worst = 0.0
-    for k in range(int(round(seconds / command_period_s))):
+    for _ in range(int(round(seconds / command_period_s))):
         t0 = sim.time_s
         forces = sim.apply_command(command(t0, len(sim.actuator_names)))
         for _ in range(periods):

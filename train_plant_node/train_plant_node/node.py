@@ -18,18 +18,35 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
+from ato_common import units
 from ato_common.params import Param, ParameterTable
 from ato_common.plant_setup import parse_failure_injection
-from ato_common.ros import (MessageError, actuator_forces_to_msg, command_from_msg,
-                            diagnostic_status, freeze_startup_objects, from_time, qos_profile,
-                            run_node, state_to_msg, to_duration, to_time, topic)
+from ato_common.ros import (
+    MessageError,
+    actuator_forces_to_msg,
+    command_from_msg,
+    diagnostic_status,
+    freeze_startup_objects,
+    from_time,
+    qos_profile,
+    run_node,
+    state_to_msg,
+    to_duration,
+    to_time,
+    topic,
+)
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import TrainState, nanoseconds, seconds
-from train_plant_node.models import MODELS
-from ato_common import units
 from ato_common.validation import ConfigError
-from train_plant_node.simulation import (NORMAL, CommandRejected, SafetySettings,
-                                         SensorSettings, TrainSimulation, control_period_ns)
+from train_plant_node.models import MODELS
+from train_plant_node.simulation import (
+    NORMAL,
+    CommandRejected,
+    SafetySettings,
+    SensorSettings,
+    TrainSimulation,
+    control_period_ns,
+)
 
 PARAMS = (
     Param('scenario', DEFAULT_SCENARIO, 'built-in scenario name or path to a scenario YAML file'),

@@ -18,8 +18,12 @@ from __future__ import annotations
 import numpy as np
 
 from train_plant_node.jit import kernel
-from train_plant_node.models.multi_car import (CAR_ACTUATOR, MultiCarModel, outputs_kernel,
-                                               substep_kernel)
+from train_plant_node.models.multi_car import (
+    CAR_ACTUATOR,
+    MultiCarModel,
+    outputs_kernel,
+    substep_kernel,
+)
 from train_plant_node.models.point_mass import PointMassModel, acceleration_kernel, step_kernel
 
 

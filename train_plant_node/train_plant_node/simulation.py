@@ -16,9 +16,9 @@ is sampled at the middle of each integration step.
 
 from __future__ import annotations
 
+import math
 from bisect import bisect_right
 from dataclasses import dataclass, replace
-import math
 from typing import Sequence
 
 import numpy as np

@@ -9,8 +9,8 @@ disturbance is piecewise constant: the models hold its value in the middle of th
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 import math
+from dataclasses import dataclass
 
 import numpy as np
 

@@ -8,12 +8,17 @@ from ato_controller_node.laws.luo_xu import LuoXuLaw, LuoXuProjectionLaw
 from ato_controller_node.laws.mao_2017 import Mao2017Law
 from ato_controller_node.laws.mao_multibody import MaoAdaptiveLaw, MaoNominalLaw
 from ato_controller_node.laws.pid import PidLaw
-from ato_controller_node.laws.tan import (SecondLevelAdaptiveLaw, SecondLevelFixedLaw,
-                                          SwitchingMultipleModelLaw, WeightedMultipleModelLaw)
+from ato_controller_node.laws.tan import (
+    SecondLevelAdaptiveLaw,
+    SecondLevelFixedLaw,
+    SwitchingMultipleModelLaw,
+    WeightedMultipleModelLaw,
+)
 
 LAWS: dict[str, type[ControlLaw]] = {law.name: law for law in (
     PidLaw, LuoXuLaw, LuoXuProjectionLaw, Mao2017Law, MaoNominalLaw, MaoAdaptiveLaw, LiuLiLaw,
-    SecondLevelFixedLaw, SecondLevelAdaptiveLaw, SwitchingMultipleModelLaw, WeightedMultipleModelLaw)}
+    SecondLevelFixedLaw, SecondLevelAdaptiveLaw, SwitchingMultipleModelLaw,
+    WeightedMultipleModelLaw)}
 
 
 def law_class(name: str) -> type[ControlLaw]:

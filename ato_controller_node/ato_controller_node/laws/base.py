@@ -13,13 +13,18 @@ number of cars whose measurements it uses (``cars``) and the number of actuators
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field, fields, replace
-import math
 from typing import Any, ClassVar, Mapping
 
-from ato_common.trains import (CarParameters, Coupler, DavisResistance, TractionCharacteristic,
-                               TrainParameters)
+from ato_common.trains import (
+    CarParameters,
+    Coupler,
+    DavisResistance,
+    TractionCharacteristic,
+    TrainParameters,
+)
 from ato_common.types import ReferencePoint, TrainState
 
 
@@ -181,7 +186,7 @@ class ControlLaw(ABC):
         """The total force wanted now (N); what was actually commanded comes back through
         ``after_saturation`` in the same period."""
 
-    def after_saturation(self, wanted_n: float, commanded_n: float,
+    def after_saturation(self, wanted_n: float, commanded_n: float,  # noqa: B027 (optional hook)
                          commanded_forces_n: tuple[float, ...] = (),
                          applied_n: float | None = None) -> None:
         """Told what was actually commanded (after limits), once per step, after ``step``:

@@ -48,12 +48,13 @@ Sampled implementation (a deviation the paper, simulated in continuous time, doe
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from ato_controller_node.laws.base import ControlLaw, LawOutput, setting
+
 
 def leaky_step(x, rate: float, drive, leak: float, dt: float):
     """x after dt of x' = rate (drive - leak x) with the drive held: the exact solution, stable

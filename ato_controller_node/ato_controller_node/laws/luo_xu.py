@@ -51,8 +51,8 @@ Deviations of Theorem 2:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 import math
+from dataclasses import dataclass
 
 from ato_common import units
 from ato_controller_node.laws.base import ControlLaw, LawOutput, setting
@@ -69,7 +69,8 @@ class LuoXuSettings:
     c2: float = setting(0.1, minimum=1e-4, maximum=10.0, units='1/s',
                         description='backstepping gain of z2 (paper: 0.1)')
     gamma_mass: float = setting(1e5, minimum=0.0, maximum=1e9, units='kg s^2/m^2',
-                                description='adaptation gain gamma of the mass estimate (paper: 1e5)')
+                                description='adaptation gain gamma of the mass estimate '
+                                            '(paper: 1e5)')
     gamma_c0: float = setting(1e-3, minimum=0.0, maximum=1.0, units='1/s^2',
                               description='adaptation gain Gamma_11 of c0 (retuned for SI)')
     gamma_cv: float = setting(3e-7, minimum=0.0, maximum=1.0, units='1/m^2',

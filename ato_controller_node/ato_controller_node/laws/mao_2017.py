@@ -47,8 +47,8 @@ Deviations, all for a sampled, saturating implementation (also in README.md):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 import math
+from dataclasses import dataclass
 
 from ato_common.units import STANDARD_GRAVITY
 from ato_controller_node.laws.base import ControlLaw, LawOutput, setting

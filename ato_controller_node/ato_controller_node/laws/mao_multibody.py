@@ -47,12 +47,17 @@ Deviations for a sampled, saturating implementation (documented in README.md):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 import math
+from dataclasses import dataclass
 
 from ato_common.types import ReferencePoint
-from ato_controller_node.laws.base import (ControlLaw, LawOutput, Measurement, TrainKnowledge,
-                                          setting)
+from ato_controller_node.laws.base import (
+    ControlLaw,
+    LawOutput,
+    Measurement,
+    TrainKnowledge,
+    setting,
+)
 
 CARS = 4
 

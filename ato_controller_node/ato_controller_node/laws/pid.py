@@ -25,8 +25,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ato_controller_node.laws.base import (ControlLaw, LawOutput, Measurement, setting)
 from ato_common.types import ReferencePoint
+from ato_controller_node.laws.base import ControlLaw, LawOutput, Measurement, setting
 
 
 @dataclass(frozen=True)

@@ -61,10 +61,10 @@ non-positive is not taken); even then the division is guarded by a floor of 1e-3
 
 from __future__ import annotations
 
-from abc import abstractmethod
-from dataclasses import dataclass
 import math
 import sys
+from abc import abstractmethod
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import expm, solve_continuous_lyapunov

@@ -24,8 +24,8 @@ class PlantModel(Protocol):
     def step(self, state: np.ndarray, duration_s: float, forces: Sequence[float]) -> np.ndarray:
         """State after ``duration_s`` with the actuator forces held constant."""
 
-    def outputs(self, state: np.ndarray, forces: Sequence[float]
-                ) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
+    def outputs(self, state: np.ndarray, forces: Sequence[float]) -> tuple[
+            tuple[float, ...], tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
         """(positions, speeds, accelerations, applied forces) per car."""
 
 
@@ -49,5 +49,6 @@ def make_model(name: str, train: TrainParameters, line: Line, **options) -> Plan
     try:
         factory = MODELS[name]
     except KeyError:
-        raise KeyError(f"unknown plant model '{name}'; valid: {', '.join(sorted(MODELS))}") from None
+        valid = ', '.join(sorted(MODELS))
+        raise KeyError(f"unknown plant model '{name}'; valid: {valid}") from None
     return factory(train, line, **options)

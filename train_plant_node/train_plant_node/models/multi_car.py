@@ -41,11 +41,24 @@ from ato_common.line import Line
 from ato_common.plant_setup import Mode
 from ato_common.trains import TrainParameters
 from train_plant_node.jit import kernel
-from train_plant_node.models.line_segments import (SLOPE, START, LineSegments, boundary_between,
-                                                   crossing_time, segment_accel, segment_index)
-from train_plant_node.surroundings import (DISTURBANCE_VALUE, ENV_SIZE, HAS_OVERRIDE,
-                                           OVERRIDE_SINE, Surroundings, env_factors,
-                                           nominal_mode)
+from train_plant_node.models.line_segments import (
+    SLOPE,
+    START,
+    LineSegments,
+    boundary_between,
+    crossing_time,
+    segment_accel,
+    segment_index,
+)
+from train_plant_node.surroundings import (
+    DISTURBANCE_VALUE,
+    ENV_SIZE,
+    HAS_OVERRIDE,
+    OVERRIDE_SINE,
+    Surroundings,
+    env_factors,
+    nominal_mode,
+)
 
 STANDSTILL_SPEED_MPS = 0.01
 

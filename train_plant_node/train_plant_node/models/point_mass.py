@@ -28,15 +28,26 @@ from typing import Sequence
 
 import numpy as np
 
+from ato_common import units
 from ato_common.line import Line
 from ato_common.trains import TrainParameters
-from ato_common import units
 from train_plant_node.jit import kernel
-from train_plant_node.models.line_segments import (LineSegments, boundary_between, crossing_time,
-                                                   segment_accel_at, segment_index)
-from train_plant_node.surroundings import (DISTURBANCE_VALUE, ENV_SIZE, HAS_OVERRIDE,
-                                           OVERRIDE_SINE, Surroundings, env_factors,
-                                           nominal_mode)
+from train_plant_node.models.line_segments import (
+    LineSegments,
+    boundary_between,
+    crossing_time,
+    segment_accel_at,
+    segment_index,
+)
+from train_plant_node.surroundings import (
+    DISTURBANCE_VALUE,
+    ENV_SIZE,
+    HAS_OVERRIDE,
+    OVERRIDE_SINE,
+    Surroundings,
+    env_factors,
+    nominal_mode,
+)
 
 # The kernels' parameter array: the mode's mass (kg), Davis a (N), b (N s/m), c (N s^2/m^2), its
 # extra grade and curve term (m/s^2), gravity, then the surroundings (surroundings.py).
