@@ -7,7 +7,7 @@ SCENARIO ?=
 CONTROLLER ?=
 PYTEST_ARGS ?=
 
-.PHONY: help setup build demo compare test test-unit test-integration bench curves clean
+.PHONY: help setup build demo compare test test-unit test-integration lint docs docs-serve bench curves clean
 
 help:
 	@echo "make setup   create .venv with pinned packages and build ros_ws (idempotent)"
@@ -16,7 +16,10 @@ help:
 	@echo "             (SCENARIO=name-or-file CONTROLLER=law to override)"
 	@echo "make compare every applicable law on every built-in scenario, offline, in parallel:"
 	@echo "             runs/compare/compare.md (tables, ranking) and plots (SCENARIO=name: one only)"
-	@echo "make test    run every test (unit tests of the cores and integration tests over rclpy)"
+	@echo "make test    lint, build the docs strictly, run every test (unit tests of the cores and"
+	@echo "             integration tests over rclpy)"
+	@echo "make lint    ruff over the repository"
+	@echo "make docs    build the documentation site into site/ (warnings are errors)"
 	@echo "make bench   lockstep real-time factor through the ROS graph and controller step times"
 	@echo "make curves  plot every built-in scenario's target curve and braking curves to runs/curves/"
 	@echo "             (SCENARIO=name-or-file for one)"
@@ -33,8 +36,17 @@ demo: setup
 compare: setup
 	@$(ENV) python -m ato_bringup.compare $(if $(SCENARIO),--scenario $(SCENARIO))
 
-test: setup
+test: setup lint docs
 	@$(ENV) python -m pytest $(PYTEST_ARGS)
+
+lint: setup
+	@$(ENV) ruff check .
+
+docs: setup
+	@$(ENV) mkdocs build --strict --quiet --site-dir site
+
+docs-serve: setup
+	@$(ENV) mkdocs serve
 
 test-unit: setup
 	@$(ENV) python -m pytest -m "not integration" $(PYTEST_ARGS)
@@ -49,4 +61,4 @@ curves: setup
 	@$(ENV) python -m profile_node.curves $(SCENARIO) -o runs/curves
 
 clean:
-	rm -rf ros_ws/build ros_ws/install ros_ws/log .pytest_cache
+	rm -rf ros_ws/build ros_ws/install ros_ws/log .pytest_cache site

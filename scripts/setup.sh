@@ -37,24 +37,37 @@ else
 fi
 
 # --- 2. colcon workspace -------------------------------------------------------------------
+# --symlink-install: the Python packages are linked, not copied, so an edit to a source file is
+# what runs next (`make demo`, `python -m pytest`, `ros2 run`) without a rebuild. Only what
+# colcon itself installs needs one: package metadata, entry points, data files, and new files
+# among them, so the stamp covers exactly those (and the list of every file's name).
 packages=(ato_common train_plant_node profile_node ato_controller_node ato_bringup recorder)
-src_hash="$(find "${packages[@]}" -type f -not -path '*/__pycache__/*' -not -path '*/test/*' -print0 \
-  | sort -z | xargs -0 sha256sum | sha256sum | cut -c1-16) $venv"
+build_inputs() {
+  find "${packages[@]}" -type f -not -path '*/__pycache__/*' -not -path '*/test/*' -print | sort
+  find "${packages[@]}" -maxdepth 1 -type f \( -name setup.py -o -name setup.cfg -o -name package.xml \) \
+    -print0 | sort -z | xargs -0 sha256sum
+  find "${packages[@]}" -mindepth 2 -type f -not -name '*.py' -not -path '*/__pycache__/*' \
+    -not -path '*/test/*' -path '*/resource/*' -print0 | sort -z | xargs -0 -r sha256sum
+}
+src_hash="symlink $(build_inputs | sha256sum | cut -c1-16) $venv"
 stamp="ros_ws/install/.ato-sources"
 if [ ! -f ros_ws/install/setup.bash ] || [ "$(cat "$stamp" 2>/dev/null)" != "$src_hash" ]; then
-  log "building ros_ws with colcon"
+  log "building ros_ws with colcon (--symlink-install)"
+  # A copy install left by an earlier set-up cannot be turned into a symlink one in place.
+  case "$(cat "$stamp" 2>/dev/null)" in symlink*) ;; *) rm -rf ros_ws/build ros_ws/install ;; esac
   (
     set +u
     # shellcheck source=/dev/null
     . scripts/env.sh
     cd ros_ws
-    colcon --log-base log build --event-handlers console_cohesion- summary+ status- \
+    colcon --log-base log build --symlink-install \
+      --event-handlers console_cohesion- summary+ status- \
       --cmake-args -DBUILD_TESTING=OFF > /dev/null 2> build.err || { cat build.err >&2; exit 1; }
     rm -f build.err
-    # The plant's numba kernels: compiled once here (cached next to the installed sources)
-    # instead of in the first node start or test process.
+    # The plant's numba kernels: compiled once here (cached next to the sources, and compiled
+    # again on first use after an edit) instead of in the first node start or test process.
     set +u; . install/setup.bash
-    python -m train_plant_node.jit
+    python -m train_plant_node.warmup
   )
   echo "$src_hash" > "$stamp"
 else

@@ -23,23 +23,3 @@ def kernel(function):
     if numba is None:
         return function
     return numba.njit(cache=True)(function)
-
-
-def compile_kernels() -> None:
-    """Compile every plant kernel into numba's on-disk cache (scripts/setup.sh runs this after
-    a build, so that no node start or test process pays the compilation, tens of seconds)."""
-    import dataclasses
-
-    from ato_common.scenario import load_scenario
-    from ato_common.trains import train_preset
-    from train_plant_node.simulation import TrainSimulation
-
-    scenario = load_scenario('short_line')
-    for model, train in (('point_mass', scenario.train), ('multi_car',
-                                                         train_preset('crh2_4car_mao'))):
-        sim = TrainSimulation(dataclasses.replace(scenario, train=train), model)
-        sim.run_commands([[0.0] * len(sim.actuator_names)] * 2, 100_000_000)  # periods.py
-
-
-if __name__ == '__main__':
-    compile_kernels()
