@@ -34,7 +34,8 @@ demo: setup
 	python -m ato_bringup.run_scenario $(if $(SCENARIO),--scenario $(SCENARIO)) $(if $(CONTROLLER),--controller $(CONTROLLER))
 
 compare: setup
-	@$(ENV) python -m ato_bringup.compare $(if $(SCENARIO),--scenario $(SCENARIO))
+	@$(ENV) python -m ato_bringup.compare \
+	  $(if $(SCENARIO),--scenario $(SCENARIO),--results-page docs/results/comparison.md)
 
 test: setup lint docs
 	@$(ENV) python -m pytest $(PYTEST_ARGS)
@@ -55,7 +56,8 @@ test-integration: setup
 	@$(ENV) python -m pytest -m integration $(PYTEST_ARGS)
 
 bench: setup
-	@$(ENV) python bench/bench.py $(if $(SCENARIO),--scenario $(SCENARIO))
+	@$(ENV) python bench/bench.py \
+	  $(if $(SCENARIO),--scenario $(SCENARIO),--results-page docs/results/benchmarks.md)
 
 curves: setup
 	@$(ENV) python -m profile_node.curves $(SCENARIO) -o runs/curves

@@ -16,7 +16,6 @@ import dataclasses
 import gc
 import math
 import os
-import platform
 import tempfile
 import time
 from pathlib import Path
@@ -25,6 +24,7 @@ import numpy as np
 
 from ato_bringup.compare import plan_jobs
 from ato_bringup.offline import run_offline
+from ato_bringup.provenance import write_results_page
 from ato_bringup.runner import run_lockstep
 from ato_bringup.stack import StackConfig
 from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
@@ -53,18 +53,19 @@ def graph_rtf(scenario: str, executor: str, domain_id: int, record: bool = False
 LAW_BENCH_STEPS = 20_000
 
 
-def print_law_step_times(preferred_scenario: str) -> None:
+def law_step_times(preferred_scenario: str) -> list[str]:
     """Step time (law plus host) of every registered law, offline, on the preferred scenario
     if the law applies to it, else on the first built-in scenario it applies to
-    (ato_bringup.compare decides applicability and the plant model)."""
+    (ato_bringup.compare decides applicability and the plant model): markdown table rows."""
     jobs, _ = plan_jobs([preferred_scenario] + [s for s in builtin_scenarios()
                                                  if s != preferred_scenario])
-    print('\ncontroller step time (offline, the law and the host: saturation, bumpless; '
-          'target p99 < 1 ms)')
+    rows = ['| law | scenario, plant, rate | steps | p50 (us) | p99 (us) | max (us) |',
+            '|---|---|---|---|---|---|']
+    print('\n'.join(rows), flush=True)
     for law in sorted(LAWS):
         job = next((j for j in jobs if j.law == law), None)
         if job is None:
-            print(f'  {law:26s} no built-in scenario it applies to')
+            rows.append(f'| `{law}` | no built-in scenario it applies to | - | - | - | - |')
             continue
         # A law sampled faster than its scenario (compare picks the rate) runs a window of
         # LAW_BENCH_STEPS steps: its step time, not the whole run, is measured here.
@@ -75,9 +76,10 @@ def print_law_step_times(preferred_scenario: str) -> None:
         durations = run_offline(scenario, law, model=job.model, controller_rate_hz=job.rate_hz,
                                 end_time_s=window_s).step_times_s
         p50, p99 = np.percentile(durations, [50, 99]) * 1e6
-        print(f'  {law:26s} p50 {p50:7.1f} us   p99 {p99:7.1f} us   max '
-              f'{durations.max() * 1e6:7.1f} us   ({durations.size} steps, {job.scenario}, '
-              f'{job.model}, {job.rate_hz:g} Hz)')
+        rows.append(f'| `{law}` | {job.scenario}, {job.model}, {job.rate_hz:g} Hz | '
+                    f'{durations.size} | {p50:.0f} | {p99:.0f} | {durations.max() * 1e6:.0f} |')
+        print(rows[-1], flush=True)
+    return rows
 
 
 def plant_speed(scenario_name: str, model: str = 'point_mass', train: str | None = None,
@@ -127,37 +129,69 @@ def plant_accuracy(model: str, preset: str, total_n: float, seconds: float = 600
     return worst_speed_error(accuracy_scenario(preset), model, seconds, 1.0, command)[0]
 
 
+class Page:
+    """What the bench prints, kept as markdown for the results page."""
+
+    def __init__(self):
+        self.lines: list[str] = []
+
+    def add(self, *lines: str) -> None:
+        for line in lines:
+            print(line, flush=True)
+            self.lines.append(line)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--scenario', default=DEFAULT_SCENARIO)
     parser.add_argument('--domain-id', type=int, default=int(os.environ.get('ROS_DOMAIN_ID', 0)
                                                              or 91))
+    parser.add_argument('--results-page', type=Path, default=None,
+                        help='also write the figures, with date, machine and commit, to this '
+                        'results page of the docs (make bench: docs/results/benchmarks.md)')
     args = parser.parse_args()
-    print(f'machine: {platform.machine()}, {os.cpu_count()} cores, Python '
-          f'{platform.python_version()}; scenario {args.scenario}')
-    print('\nlockstep through the ROS graph (real-time factor = simulated / wall time)')
+    page = Page()
+    page.add(f'Scenario `{args.scenario}`.', '',
+             '## Lockstep through the ROS graph', '',
+             'Three node processes plus the run monitor of `run_scenario`; real-time factor = '
+             'simulated time / wall time, overall (start-up included) and steady (10 % to 90 % '
+             'of the run).', '',
+             '| executor | steps | overall | steady | per 0.1 s step | recorded |',
+             '|---|---|---|---|---|---|')
     for executor in ('events', 'single'):
         overall, steady, steps, _ = graph_rtf(args.scenario, executor, args.domain_id)
         name = 'EventsExecutor' if executor == 'events' else 'SingleThreadedExecutor'
-        print(f'  {name:24s} {steps} steps: overall {overall:6.1f}x (start-up included), '
-              f'steady {steady:6.1f}x ({1e3 / (10 * steady):.2f} ms per 0.1 s step)')
+        page.add(f'| {name} | {steps} | {overall:.1f}x | {steady:.1f}x | '
+                 f'{1e3 / (10 * steady):.2f} ms | - |')
     overall, steady, steps, recorded = graph_rtf(args.scenario, 'events', args.domain_id, True)
-    print(f'  {"with the recorder":24s} {steps} steps: overall {overall:6.1f}x, steady '
-          f'{steady:6.1f}x; {recorded} messages recorded, '
-          f'{recorded * steady / (steps / 10):.0f} messages/s at the steady rate')
-    print_law_step_times(args.scenario)
-    print('\nplant simulation alone (CPU time of one core, 10 Hz control periods, 600 s, median of '
-          '5 runs): period by period (apply_command + advance + truth, as the node drives it) '
-          '| all commands at once (run_commands)')
+    page.add(f'| EventsExecutor, with the recorder | {steps} | {overall:.1f}x | {steady:.1f}x | '
+             f'{1e3 / (10 * steady):.2f} ms | {recorded} messages, '
+             f'{recorded * steady / (steps / 10):.0f} per second at the steady rate |')
+    page.add('', '## Controller step time', '',
+             'Offline, the law and its host (saturation, bumpless transfer); target p99 < 1 ms. '
+             f'A law sampled faster than its scenario is timed over {LAW_BENCH_STEPS} steps at '
+             'its rate.', '')
+    page.lines += law_step_times(args.scenario)
+    page.add('', '## Plant simulation alone', '',
+             'CPU time of one core, 10 Hz control periods, 600 s from standstill, median of 5 '
+             'runs; period by period (`apply_command`, `advance`, `truth`, as the node drives '
+             'it) and all commands at once (`run_commands`).', '',
+             '| model | period by period | all commands at once |', '|---|---|---|')
     for model, train, what in (('point_mass', None, 'RK4, CRH3'),
                                ('multi_car', 'crh2_4car_mao',
                                 'CRH2 4-car unit, exact coupler dynamics, ETDRK4')):
-        print(f'  {model:10s}  {plant_speed(args.scenario, model, train):9.0f}x | '
-              f'{plant_speed(args.scenario, model, train, batched=True):9.0f}x real time ({what})')
-    print('\nplant accuracy: largest speed error against DOP853 (rtol 1e-12), 600 s, commands '
-          'changing every second, across grade/curve/tunnel boundaries')
-    print(f'  point_mass  {plant_accuracy("point_mass", "crh3_luo_xu", 60e3):.2e} m/s')
-    print(f'  multi_car   {plant_accuracy("multi_car", "crh2_4car_mao", 12e3):.2e} m/s')
+        page.add(f'| `{model}` ({what}) | {plant_speed(args.scenario, model, train):.0f}x | '
+                 f'{plant_speed(args.scenario, model, train, batched=True):.0f}x |')
+    page.add('', '## Plant accuracy', '',
+             'Largest speed error against DOP853 (rtol 1e-12), 600 s, commands changing every '
+             'second, across grade, curve and tunnel boundaries.', '',
+             '| model | largest speed error |', '|---|---|',
+             f'| `point_mass` | {plant_accuracy("point_mass", "crh3_luo_xu", 60e3):.2e} m/s |',
+             f'| `multi_car` | {plant_accuracy("multi_car", "crh2_4car_mao", 12e3):.2e} m/s |')
+    if args.results_page is not None:
+        written = write_results_page(args.results_page, 'Benchmarks', 'make bench',
+                                     '\n'.join(page.lines))
+        print(f'\nwrote {written}')
     return 0
 
 

@@ -54,6 +54,7 @@ from typing import Callable
 import numpy as np
 
 from ato_bringup.offline import run_end_time_s
+from ato_bringup.provenance import write_results_page
 from ato_common.scenario import builtin_scenarios, load_scenario
 from ato_controller_node.laws import LAWS
 from profile_node.planner import plan_reference
@@ -360,7 +361,9 @@ def _number(result: dict, key: str, fmt: str) -> str:
 
 
 def markdown(results: list[dict], skipped: list[dict], scenarios: list[str], stamp: str,
-             command: str) -> str:
+             command: str, plots: bool = True) -> str:
+    """The comparison as markdown: the tables, and links to the plots beside it (``plots``;
+    the results page of the docs has none, the plots stay in the output folder)."""
     load = ', '.join(f'{x:.1f}' for x in os.getloadavg())
     lines = ['# Comparison of the control laws', '',
              f'`{command}`, {stamp}, offline closed loop (ato_bringup.offline), '
@@ -396,9 +399,11 @@ def markdown(results: list[dict], skipped: list[dict], scenarios: list[str], sta
             if s['scenario'] == name:
                 lines.append(f'| {s["law"]} | - | not applicable ({s["reason"]}) '
                              '| - | - | - | - | - | - | - |')
-        plots = ', '.join(f'[{kind}]({name}_{kind}.png)'
-                          for kind in ('tracking', 'errors', 'commands', 'estimates'))
-        lines += ['', f'Plots: {plots}', '']
+        lines.append('')
+        if plots:
+            links = ', '.join(f'[{kind}]({name}_{kind}.png)'
+                              for kind in ('tracking', 'errors', 'commands', 'estimates'))
+            lines += [f'Plots: {links}', '']
     return '\n'.join(lines)
 
 
@@ -506,6 +511,9 @@ def main(argv=None) -> int:
                         'and listed with status timeout, the others go on (default '
                         f'{DEFAULT_TIMEOUT_S:g}; 0: no limit, and with --jobs 1 the runs then '
                         'take turns in this process)')
+    parser.add_argument('--results-page', type=Path, default=None,
+                        help='also write the tables, with date, machine and commit, to this '
+                        'results page of the docs (make compare: docs/results/comparison.md)')
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
     scenarios = args.scenario or builtin_scenarios()
@@ -517,6 +525,12 @@ def main(argv=None) -> int:
     stamp = datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
     command = ' '.join(['python -m ato_bringup.compare', *argv]) if argv else 'make compare'
     (args.out / 'compare.md').write_text(markdown(results, skipped, scenarios, stamp, command))
+    if args.results_page is not None:
+        body = markdown(results, skipped, scenarios, stamp, command, plots=False)
+        body = body.split('\n', 2)[2]  # the page has its own title and provenance line
+        write_results_page(args.results_page, 'Comparison of the control laws', command,
+                           f'{body}\n\nThe plots of each scenario are written beside '
+                           f'`{args.out}/compare.md` when the command runs.')
     best = {name: best_law([r for r in results if r['scenario'] == name]) for name in scenarios}
     summary = [{k: v for k, v in r.items() if k not in ('curves', 'detail')} for r in results]
     (args.out / 'compare.json').write_text(json.dumps(
