@@ -2,7 +2,8 @@
 
     ros2 launch ato_bringup ato.launch.py controller:=luo_xu scenario:=short_line
 
-Arguments: controller, scenario (built-in name or YAML path), lockstep (true: the plant owns
+Arguments: controller (a law of ``ato_controller_node.laws.LAWS``; launch refuses any other
+name before it starts a node), scenario (built-in name or YAML path), lockstep (true: the plant owns
 /clock and the other nodes use it), rate_hz (control rate; 0: the scenario's), end_time_s (the
 plant ends the run there and the launch shuts down; 0: run until Ctrl-C).
 """
@@ -14,6 +15,8 @@ from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
+
+from ato_controller_node.laws import LAWS
 
 
 def generate_launch_description():
@@ -37,8 +40,9 @@ def generate_launch_description():
                             'lockstep': lockstep, 'rate_hz': rate_hz,
                             'use_sim_time': lockstep}])
     return LaunchDescription([
-        DeclareLaunchArgument('controller', default_value='pid',
-                              description='control law: pid or luo_xu'),
+        DeclareLaunchArgument('controller', default_value='pid', choices=sorted(LAWS),
+                              description='control law, one of the registry: '
+                              + ', '.join(sorted(LAWS))),
         DeclareLaunchArgument('scenario', default_value='short_line',
                               description='built-in scenario name or path to a scenario YAML'),
         DeclareLaunchArgument('lockstep', default_value='true',

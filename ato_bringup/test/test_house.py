@@ -1,0 +1,62 @@
+"""`make test` lints the repository and builds the documentation strictly; both must fail on a
+broken input, not only pass on a good one. These tests break a copy and watch them fail."""
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _run(*command, cwd) -> subprocess.CompletedProcess:
+    return subprocess.run(command, cwd=cwd, capture_output=True, text=True, timeout=300,
+                          check=False)
+
+
+def test_the_linter_fails_on_an_unused_import_and_on_a_long_line(tmp_path):
+    shutil.copy(ROOT / 'ruff.toml', tmp_path / 'ruff.toml')
+    (tmp_path / 'good.py').write_text('import math\n\nprint(math.pi)\n')
+    assert _run(sys.executable, '-m', 'ruff', 'check', '.', cwd=tmp_path).returncode == 0
+    (tmp_path / 'bad.py').write_text('import os\n\nx = "' + 'a' * 100 + '"\n')
+    done = _run(sys.executable, '-m', 'ruff', 'check', '.', cwd=tmp_path)
+    assert done.returncode == 1
+    assert 'F401' in done.stdout and 'E501' in done.stdout
+
+
+def _site_copy(tmp_path) -> Path:
+    site = tmp_path / 'site-source'
+    shutil.copytree(ROOT / 'docs', site / 'docs')
+    shutil.copy(ROOT / 'mkdocs.yml', site / 'mkdocs.yml')
+    (site / 'scripts').mkdir()
+    shutil.copy(ROOT / 'scripts/gen_reference_docs.py', site / 'scripts')
+    return site
+
+
+def _build(site) -> subprocess.CompletedProcess:
+    return _run(sys.executable, '-m', 'mkdocs', 'build', '--strict', '--quiet', '--site-dir',
+                str(site / 'out'), cwd=site)
+
+
+def test_the_docs_build_fails_on_a_broken_link_and_on_a_page_left_out(tmp_path):
+    site = _site_copy(tmp_path)
+    index = site / 'docs/index.md'
+    index.write_text(index.read_text() + '\nSee [the missing page](guide/no_such_page.md).\n')
+    done = _build(site)
+    assert done.returncode != 0
+    assert 'no_such_page.md' in done.stdout + done.stderr
+
+    site = _site_copy(tmp_path / 'second')
+    (site / 'docs/orphan.md').write_text('# A page no navigation names\n')
+    done = _build(site)
+    assert done.returncode != 0
+    assert 'orphan.md' in done.stdout + done.stderr
+
+
+def test_the_docs_build_fails_on_a_missing_anchor(tmp_path):
+    site = _site_copy(tmp_path)
+    index = site / 'docs/index.md'
+    index.write_text(index.read_text() + '\nSee [a law](reference/laws.md#no_such_law).\n')
+    done = _build(site)
+    assert done.returncode != 0
+    assert 'no_such_law' in done.stdout + done.stderr
