@@ -132,6 +132,7 @@ class LiuLiSettings:
 
 class LiuLiLaw(ControlLaw):
     name = 'liu_li'
+    paper = 'liu_li'
     summary = ('Liu & Li 2020 [REC]: RBF-NN adaptive speed observer from position and '
                'sliding-mode RBF controller with adaptive robust bounds (output feedback)')
     Settings = LiuLiSettings

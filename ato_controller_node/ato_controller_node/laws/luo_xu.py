@@ -87,6 +87,7 @@ class LuoXuSettings:
 
 class LuoXuLaw(ControlLaw):
     name = 'luo_xu'
+    paper = 'luo_xu'
     summary = 'Luo & Xu Theorem 1: direct adaptive backstepping estimating m and (c0, cv, ca)'
     Settings = LuoXuSettings
 
@@ -161,6 +162,7 @@ class LuoXuProjectionSettings(LuoXuSettings):
 
 class LuoXuProjectionLaw(LuoXuLaw):
     name = 'luo_xu_projection'
+    paper = 'luo_xu'
     summary = ('Luo & Xu Theorem 2: adaptive backstepping with the projection law (24) onto the '
                'Table 2 prior set S')
     Settings = LuoXuProjectionSettings

@@ -117,6 +117,7 @@ class _Mode:
 
 class Mao2017Law(ControlLaw):
     name = 'mao_2017'
+    paper = 'mao_2017'
     summary = ('Mao et al. 2017: adaptive actuator-failure compensation on the piecewise-constant '
                'model, one signal to all 4 motors')
     Settings = Mao2017Settings

@@ -189,6 +189,7 @@ class MaoNominalLaw(_MaoBase):
     """(17), (18) with (51), (55): exact feedback linearisation with the known parameters."""
 
     name = 'mao_multibody_nominal'
+    paper = 'mao_multibody'
     summary = ('Mao, Tao, Jiang & Yan nominal feedback linearisation (17)-(18) of the 4-car '
                'train: speeds of cars 1 and 3 via forces on cars 2 and 3')
     Settings = MaoNominalSettings
@@ -259,6 +260,7 @@ class MaoAdaptiveLaw(_MaoBase):
     """(60), (71) with (51), (55), (65) and the adaptive laws (64), (74)."""
 
     name = 'mao_multibody_adaptive'
+    paper = 'mao_multibody'
     summary = ('Mao, Tao, Jiang & Yan adaptive feedback linearisation (60), (71), laws (64), '
                '(74): speeds of cars 1 and 3 via forces on cars 2 and 3')
     Settings = MaoAdaptiveSettings

@@ -320,6 +320,7 @@ class _MultipleModelLaw(ControlLaw):
 
 class SecondLevelFixedLaw(_MultipleModelLaw):
     name = 'tan_second_level'
+    paper = 'tan_jiang_chen'
     summary = ('Tan, Jiang & Chen: second-level adaptation over five fixed identification '
                'models (17), convex-combination law (23) with projection (25), control (24)')
     Settings = SecondLevelSettings
@@ -398,6 +399,7 @@ class SecondLevelFixedLaw(_MultipleModelLaw):
 
 class SecondLevelAdaptiveLaw(SecondLevelFixedLaw):
     name = 'tan_second_level_adaptive'
+    paper = 'tan_jiang_chen'
     summary = ('Second-level adaptation with adaptive identification models (Narendra & Han), '
                'the comparison method (2) of Tan et al. Section 4.3')
     Settings = AdaptiveModelSettings
@@ -448,6 +450,7 @@ class _IndexedLaw(_MultipleModelLaw):
 
 class SwitchingMultipleModelLaw(_IndexedLaw):
     name = 'tan_switching_mm'
+    paper = 'tan_jiang_chen'
     summary = ('Switching multiple-model adaptive control (Narendra & Balakrishnan) over the '
                'five fixed models, comparison method (3) of Tan et al.')
     Settings = SwitchingSettings
@@ -472,6 +475,7 @@ class SwitchingMultipleModelLaw(_IndexedLaw):
 
 class WeightedMultipleModelLaw(_IndexedLaw):
     name = 'tan_weighted_mm'
+    paper = 'tan_jiang_chen'
     summary = ('Classical weighted multiple-model adaptive control over the five fixed models, '
                'comparison method (4) of Tan et al.')
     Settings = WeightedSettings
