@@ -22,14 +22,15 @@ with rho_knu = 1/k_nu and rho_i = 1/(m_i k_nu) = mass_i / k_nu, and the adaptive
     rho_i^'    = -gamma_m z2 chi_i (zeta_i - eta - r2 z2)                          (36)
 
 [FIX] (35): with the "+" sign the rho_knu error terms cancel in V2' (the controller term is
--rho_knu^ xi^^T varpi; shared/papers/README.md, paper 003). ``paper_as_printed`` runs the printed
+-rho_knu^ xi^^T varpi; docs/papers/mao_2017.md). ``paper_as_printed`` runs the printed
 "-" sign, which feeds the failure-compensation error back with the wrong sign.
 
-Units: SI throughout (reading (A) of the notes: the paper's Davis numbers are whole-train kN with
-V in km/h, converted in the train preset and the scenario's plant section). a_i in m/s^2, b_i in
-1/s, c_i in 1/m, vartheta_i the sine of the grade, D_i such that 0.004 D_i is in m/s^2, rho_i in
-kg, xi in N. The paper gives no gains; the defaults are "unit-scaled": each gamma is about
-(size of the parameter) / (z2 of 0.1 m/s x its regressor x a 10 to 100 s adaptation time).
+Units: SI throughout (reading (A) of docs/papers/mao_2017.md: the paper's Davis numbers are
+whole-train kN with V in km/h, converted in the train preset and the scenario's plant section).
+a_i in m/s^2, b_i in 1/s, c_i in 1/m, vartheta_i the sine of the grade, D_i such that 0.004 D_i
+is in m/s^2, rho_i in kg, xi in N. The paper gives no gains; the defaults are "unit-scaled":
+each gamma is about (size of the parameter) / (z2 of 0.1 m/s x its regressor x a 10 to 100 s
+adaptation time).
 
 The modes (mass, Davis, grade, curve per mode) come from the scenario's plant section through
 ``TrainKnowledge.modes``; the estimates start at ``initial_estimate_ratio`` (paper: 95 %) of

@@ -6,7 +6,7 @@ positions are the cars' own, so x3 = z1 - z2 - car length). Outputs y1 = x2 (spe
 relative degree 2 through F2) and y2 = x6 (speed of car 3, relative degree 1 through F3).
 Per-kg coefficients d_pq = d_p/M_q, k_pq = k_p/M_q, m_p = 1/M_p, a_p, b_p, c1.
 
-Input-output form (15)-(16), in the notes' corrected form [FIX]:
+Input-output form (15)-(16), corrected as in docs/papers/mao_multibody.md [FIX]:
     y1'' = Phi1(x) + F2/theta11,   y2' = Phi2(x) + F3/theta21
     Phi1 = th12 x2 - th13 x2' - 2 th14 x2 x2' + th15 x3 - th16 x4 - th17 x5 + th18 x6 - th19
     Phi2 = th22 x4 + th23 x5 - th24 x6 - th25 x7 + th26 x8 - th27
@@ -27,7 +27,7 @@ Adaptive (unknown parameters, estimates Theta1_hat, Theta2_hat):
     Theta2_hat' = -Gamma2 W2 e6                             (74)
     W2 = [nu3 - Phi2_hat, -x4, -x5, x6, x7, -x8, +1]
 
-[FIX] (shared/papers/README.md, paper 001), each undone by ``paper_as_printed``:
+[FIX] (docs/papers/mao_multibody.md), each undone by ``paper_as_printed``:
 - the constants a2, a3 enter (15)-(16) with the physical sign "-" (the paper prints "+d11 a2",
   "+a3", i.e. (17), (18), (60), (71) add +th19, +th27 and the regressors end in -1);
 - (69) prints th27 = a4; it is a3, the constant of car 3's equation;

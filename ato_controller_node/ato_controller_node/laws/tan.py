@@ -11,7 +11,7 @@ bm = 1) and it is not a setting.
 Identification models (17), k = 1..5, one parameter vector theta_k = (theta_Gk, theta_Zk) each:
     xhat_k' = Am xhat_k + (A - Am) x + B [G_k u + Z_k],   e_k = xhat_k - x               (17), (18)
 
-The five models (not given in the paper; shared/papers/README.md recommends them) are the corner
+The five models (not given in the paper; docs/papers/tan_jiang_chen.md) are the corner
 simplex of a box [theta_min, theta_max] of R^4: theta_5 = theta_min and
 theta_k = theta_min + 4 (theta_max,k - theta_min,k) e_k, so every point of the box is a convex
 combination of them (Lemma 2). The box: mass within [mass_low_ratio, mass_high_ratio] x nominal
@@ -155,7 +155,7 @@ def model_box(train, s: TanSettings) -> tuple[np.ndarray, np.ndarray]:
 
 def corner_simplex(theta_min: np.ndarray, theta_max: np.ndarray) -> np.ndarray:
     """Five parameter vectors (rows) whose convex hull contains the box: theta_5 = theta_min,
-    theta_k = theta_min + 4 (theta_max - theta_min)_k e_k (shared/papers/README.md, paper 004)."""
+    theta_k = theta_min + 4 (theta_max - theta_min)_k e_k (docs/papers/tan_jiang_chen.md)."""
     thetas = np.tile(theta_min, (MODELS, 1))
     for k in range(MODELS - 1):
         thetas[k, k] += (MODELS - 1) * (theta_max[k] - theta_min[k])
