@@ -101,8 +101,9 @@ class LiuLiSettings:
     sigma2: float = setting(1e-3, minimum=0.0, maximum=10.0, units='m/(N s)',
                             description='NN2 sigma-modification leakage [REC]')
     gamma1: float = setting(0.0, minimum=0.0, maximum=1e3, units='1/s^3',
-                            description='observer robust-bound learning rate (notes: 0 to 1e-3; '
-                                        'larger values kill the Case-1 trend) [REC]')
+                            description='observer robust-bound learning rate '
+                                        '(docs/papers/liu_li.md: 0 to 1e-3; larger values kill '
+                                        'the Case-1 trend) [REC]')
     eps1: float = setting(1.0, minimum=1e-6, maximum=1e3, units='m',
                           description='observer tanh width [REC]')
     kappa1: float = setting(0.1, minimum=0.0, maximum=10.0, units='s^2',
@@ -127,7 +128,8 @@ class LiuLiSettings:
                                                'observer is unstable near 2)')
     error_from_estimate: bool = setting(False, minimum=0, maximum=1, units='-',
                                         description='e1 = s_hat - s_d instead of s - s_d (the '
-                                                    'notes\' alternative reading of (22)) [REC]')
+                                                    'alternative reading of (22) in '
+                                                    'docs/papers/liu_li.md) [REC]')
 
 
 class LiuLiLaw(ControlLaw):

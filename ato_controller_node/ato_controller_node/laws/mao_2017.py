@@ -62,9 +62,10 @@ CURVE_COEFFICIENT = 0.004
 class Mao2017Settings:
     r1: float = setting(0.5, minimum=1e-3, maximum=10.0, units='1/s',
                         description='backstepping gain of the position error z1 (paper: not '
-                                    'given; notes: 0.5)')
+                                    'given; docs/papers/mao_2017.md: 0.5)')
     r2: float = setting(1.0, minimum=1e-3, maximum=10.0, units='1/s',
-                        description='backstepping gain of z2 (paper: not given; notes: 1)')
+                        description='backstepping gain of z2 (paper: not given; '
+                                    'docs/papers/mao_2017.md: 1)')
     gamma_xi: float = setting(2e5, minimum=0.0, maximum=1e9, units='N/m',
                               description='adaptation gain of the failure magnitudes xi (28)')
     gamma_a: float = setting(1e-3, minimum=0.0, maximum=1.0, units='1/s^2',

@@ -129,10 +129,10 @@ def nu_signals(s: MaoState, r: ReferencePoint, settings) -> tuple[float, ...]:
 
 
 _ALPHAS = {
-    'alpha1': ('1/s', 'alpha1 of (51) (not reported; notes recommend 1; > 0.5 for p12 = 2, '
-                      'p22 = 4)'),
-    'alpha2': ('1/s^2', 'alpha2 of (51) (not reported; notes recommend 1)'),
-    'alpha3': ('1/s', 'alpha3 of (55) (not reported; notes recommend 1)'),
+    'alpha1': ('1/s', 'alpha1 of (51) (not reported; docs/papers/mao_multibody.md: 1; > 0.5 '
+                      'for p12 = 2, p22 = 4)'),
+    'alpha2': ('1/s^2', 'alpha2 of (51) (not reported; docs/papers/mao_multibody.md: 1)'),
+    'alpha3': ('1/s', 'alpha3 of (55) (not reported; docs/papers/mao_multibody.md: 1)'),
 }
 
 
