@@ -106,7 +106,7 @@ RANDOM_BLOCK = 1024
 
 @dataclass(frozen=True)
 class Disturbance:
-    """External force d(t) in M v' = u - f_w + d (Liu & Li eq 9, +d as in shared/papers).
+    """External force d(t) in M v' = u - f_w + d (Liu & Li eq 9; +d: docs/papers/liu_li.md).
 
     none: 0; fast: A sin(w t + phi); slow: -A (1 + sin(w t + phi)) / 2 (mostly resisting; the
     forms recommended for Liu & Li Case 3); random: uniform in [-A, A], a new value every

@@ -110,7 +110,7 @@ def _crh3_luo_xu() -> TrainParameters:
         name='crh3_luo_xu',
         description='CRH3 (Velaro CN) 8-car EMU, 510 t, as simulated by Luo & Xu',
         mass_kg=mass,
-        # Table 1 (true values), units N/t with V in km/h (see shared/papers/README.md).
+        # Table 1 (true values), units N/t with V in km/h (see docs/papers/luo_xu.md).
         davis=DavisResistance.from_per_tonne(mass, 7.75, 0.06327, 0.00128),
         # Table 2 (nominal prior), cv corrected from the printed 0.6318 to 0.06318.
         davis_nominal=DavisResistance.from_per_tonne(mass, 7.85, 0.06318, 0.00127),
@@ -192,7 +192,7 @@ def _crh2_4car_mao() -> TrainParameters:
         couplers=couplers, car_length_m=25.0,
         sources={
             'masses, resistance, couplers': 'Mao, Tao, Jiang & Yan, Table II (units corrected '
-                                            'as in shared/papers/README.md)',
+                                            'as in docs/papers/mao_multibody.md)',
             'max_traction_power_w': 'half of the 4.8 MW of an 8-car CRH2A (two such units)',
             'max_traction_force_n, braking': 'suite assumption: 0.6, 0.9 and 1.2 m/s^2',
         })
@@ -227,8 +227,8 @@ def _crh5_4car_mao() -> TrainParameters:
 
 def _crh380al_liu_li() -> TrainParameters:
     mass = units.tonnes_to_kg(890.0)
-    # Liu & Li's resistance formula (60)-(61) was lost in extraction; shared/papers/README.md
-    # recommends the CRH380A(L) unit resistance of Tan et al.: a0 = 4984 N, a1 = 115.34 N s/m,
+    # Liu & Li's resistance formula (60)-(61) was lost in extraction; docs/papers/liu_li.md
+    # takes the CRH380A(L) unit resistance of Tan et al.: a0 = 4984 N, a1 = 115.34 N s/m,
     # a2 = 13.957 N s^2/m^2 for 890 t.
     davis = DavisResistance.from_per_tonne(mass, 5.6, 0.036, 0.00121)
     return TrainParameters(
@@ -244,11 +244,11 @@ def _crh380al_liu_li() -> TrainParameters:
         sources={
             'mass': 'Liu & Li, Section 5 (M = 890 t; g = 9.8 m/s^2 in the paper, the suite uses '
                     'standard gravity)',
-            'davis': 'Liu & Li formula lost; shared/papers/README.md recommendation: '
+            'davis': 'Liu & Li formula lost; docs/papers/liu_li.md takes '
                      '5.6 + 0.036 V + 0.00121 V^2 N/t (Tan et al. Table 1) scaled to 890 t',
             'max_traction_power_w': 'CRH380AL traction power 20.44 MW (manufacturer figure)',
-            'max_traction_force_n': 'the +/-500 kN actuator limit suggested in '
-                                    'shared/papers/README.md (Liu & Li give none)',
+            'max_traction_force_n': 'a +/-500 kN actuator limit (docs/papers/liu_li.md; '
+                                    'Liu & Li give none)',
             'service and emergency braking': 'suite assumption: 0.9 and 1.2 m/s^2',
             'length_m': 'CRH380AL 16-car length, about 399 m',
         })
@@ -257,7 +257,7 @@ def _crh380al_liu_li() -> TrainParameters:
 def _mao_2017_500t() -> TrainParameters:
     mass = units.tonnes_to_kg(500.0)
     # Mode (i) (open air) of Mao, Tao, Jiang, Yan & Zhong 2017, Section 4.1, read as whole-train
-    # coefficients in kN with V in km/h (reading (A) of shared/papers/README.md):
+    # coefficients in kN with V in km/h (reading (A) of docs/papers/mao_2017.md):
     # a = 2.25 kN, b = -1.9e-3 kN/(km/h), c = 3.2e-4 kN/(km/h)^2 -> 2250 N, -6.84 N s/m,
     # 4.147 N s^2/m^2. The negative b is the paper's.
     davis = DavisResistance.from_kn_kmh(2.25, -1.9e-3, 3.2e-4)
@@ -275,7 +275,7 @@ def _mao_2017_500t() -> TrainParameters:
         sources={
             'mass, 4 motors': 'Mao et al. 2017, Section 4 (M = 500 t, n = 4)',
             'davis': 'Mao et al. 2017 mode (i): a = 2.25, b = -1.9e-3, c = 3.2e-4, read as kN '
-                     'with V in km/h (reading (A) of shared/papers/README.md)',
+                     'with V in km/h (reading (A) of docs/papers/mao_2017.md)',
             'max_traction_force_n, max_traction_power_w':
                 'the paper borrows "a CRH type train" (Dong et al. 2010); a 500 t CRH with four '
                 'motor cars is a CRH3C (4M4T): 300 kN starting effort, 8.8 MW, one quarter per '

@@ -11,7 +11,7 @@ from ato_common.validation import ConfigError
 
 MAO = train_preset('mao_2017_500t')
 
-# Mao, Tao, Jiang, Yan & Zhong 2017 Section 4.1, reading (A) of shared/papers/README.md.
+# Mao, Tao, Jiang, Yan & Zhong 2017 Section 4.1, reading (A) of docs/papers/mao_2017.md.
 MAO_PLANT = {
     'modes': [
         {'name': 'accelerating, open air', 'from_s': 0,

@@ -44,7 +44,7 @@ def test_crh3_preset_carries_luo_xu_tables_in_si():
     assert train.davis.per_kg(train.mass_kg)[2] == pytest.approx(1.6589e-5, rel=1e-4)
     # the corrected nominal cv of Table 2 (0.06318, printed 0.6318)
     assert train.davis_nominal.per_kg(train.mass_kg)[1] == pytest.approx(2.2745e-4, rel=1e-4)
-    # resistance at 300 km/h is about 72 kN (shared/papers/README.md)
+    # resistance at 300 km/h is about 72 kN (docs/papers/luo_xu.md)
     assert train.davis.force(units.kmh_to_mps(300)) == pytest.approx(72.5e3, rel=0.02)
     assert train.sources
 
@@ -115,7 +115,7 @@ def test_crh2_preset_carries_mao_table_2():
 def test_crh380al_preset_is_liu_li_890_t_with_the_recommended_resistance():
     train = train_preset('crh380al_liu_li')
     assert train.mass_kg == 890e3
-    # shared/papers/README.md: a0 = 4984 N, a1 = 115.34 N s/m, a2 = 13.957 N s^2/m^2
+    # docs/papers/liu_li.md: a0 = 4984 N, a1 = 115.34 N s/m, a2 = 13.957 N s^2/m^2
     assert train.davis.a_n == pytest.approx(4984.0)
     assert train.davis.b_n_s_per_m == pytest.approx(115.34, rel=1e-4)
     assert train.davis.c_n_s2_per_m2 == pytest.approx(13.957, rel=1e-4)
@@ -131,7 +131,7 @@ def test_mao_2017_preset_has_four_motors_and_mode_1_resistance():
     assert train.davis.a_n == pytest.approx(2250.0)
     assert train.davis.b_n_s_per_m == pytest.approx(-6.84)
     assert train.davis.c_n_s2_per_m2 == pytest.approx(4.147, rel=1e-3)
-    # about 30 kN at 300 km/h in open air (shared/papers/README.md)
+    # about 30 kN at 300 km/h in open air (docs/papers/mao_2017.md)
     assert train.davis.force(units.kmh_to_mps(300.0)) == pytest.approx(30.5e3, rel=0.02)
 
 

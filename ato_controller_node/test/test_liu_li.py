@@ -13,7 +13,7 @@ from ato_controller_node.host import ControllerHost
 from ato_controller_node.laws.base import Measurement, TrainKnowledge, validated_settings
 from ato_controller_node.laws.liu_li import LiuLiLaw
 
-DA = 0.125          # m/s^2: CRH380A(L) specific resistance near 300 km/h (notes, section 7)
+DA = 0.125          # m/s^2: CRH380A(L) specific resistance near 300 km/h (docs/papers/liu_li.md)
 CRUISE = 80.0       # m/s
 
 
@@ -43,8 +43,9 @@ def _observe_cruise(law, seconds):
 
 
 def test_unlearned_observer_settles_where_table_3_value_5_puts_it(train):
-    # Notes section 7: without learning, s_t -> -Da/k2 and v_t -> -(k1/k2) Da; with Value 5
-    # (k1 = 0.88, k2 = 0.22) that is 0.57 m and 0.50 m/s, the paper's V5 RMS 0.626 m, 0.513 m/s.
+    # docs/papers/liu_li.md (evidence): without learning, s_t -> -Da/k2 and v_t -> -(k1/k2) Da;
+    # with Value 5 (k1 = 0.88, k2 = 0.22) that is 0.57 m and 0.50 m/s, the paper's V5 RMS 0.626 m,
+    # 0.513 m/s.
     law = _law(train, 0.02, k1=0.88, k2=0.22, Gamma1=0.0)
     s_t, v_t = _observe_cruise(law, 60.0)
     assert s_t == pytest.approx(-DA / 0.22, rel=0.02)

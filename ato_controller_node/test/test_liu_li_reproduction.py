@@ -3,7 +3,7 @@ speed sensor failed from the start (measured speed NaN; the law uses the positio
 observer and tracking errors reach the order of Table 3 (Value 10) / Table 4, and the traction
 energy is of the order reported.
 
-Plant: the notes' recommended time-varying resistance (a_i(t) = a_i (1 + 0.1 sin(0.01 t +
+Plant: the time-varying resistance of docs/papers/liu_li.md (a_i(t) = a_i (1 + 0.1 sin(0.01 t +
 phi_i)), l(t) = M g (1 + 0.05 sin(0.02 t))) and the fast disturbance d = 0.01 M sin(t), the
 default of Cases 1-2 (Table 3's Value 10 equals Table 4's "fast" column).
 
@@ -29,11 +29,11 @@ from train_plant_node.simulation import TrainSimulation
 
 RATE_HZ = 200.0
 CUT_S = 500.0
-# Table 3, Value 10 (= Table 4 "fast", rows 2-4 read as x1e-4, shared/papers/README.md)
+# Table 3, Value 10 (= Table 4 "fast", rows 2-4 read as x1e-4, docs/papers/liu_li.md)
 PAPER = {'s - s_hat': 5.3111e-5, 'v - v_hat': 0.0378, 's - s_d': 0.0075, 'v - v_d': 0.0366}
 PAPER_ENERGY_KWH_PER_KM = 1.6696e4 / 561.37   # Table 3 V10, read as 1e4 kWh over 561.37 km
 TRIP_S = 6400.0
-DISTURBANCES = {    # Case 3, the notes' recommended forms [REC]
+DISTURBANCES = {    # Case 3, the forms of docs/papers/liu_li.md [REC]
     'none': {'kind': 'none'},
     'fast': {'kind': 'fast', 'amplitude_n': 8900.0, 'omega_rad_per_s': 1.0},
     # -A (1 + sin(w t)) / 2 with w = 2 pi / trip; A set so that the energy roughly doubles
@@ -84,7 +84,7 @@ def table_3_metrics(run):
 
 
 def energy_kwh(run):
-    """Traction energy integral max(u v, 0) dt (the notes' reading of the paper's metric)."""
+    """Traction energy integral max(u v, 0) dt (docs/papers/liu_li.md's reading of the metric)."""
     dt = run.times_s[1] - run.times_s[0]
     return float(np.sum(np.maximum(run.forces * run.speeds, 0.0)) * dt / 3.6e6)
 

@@ -75,7 +75,7 @@ CRUISE_MPS = 60.0
 
 
 def reference_at(t: float) -> ReferencePoint:
-    """Smooth distance-to-go profile as the notes recommend: raised-cosine acceleration to
+    """Smooth distance-to-go profile as in docs/papers/mao_2017.md: raised-cosine acceleration to
     60 m/s over 0-400 s, cruise, raised-cosine braking to a stop over 1400-2000 s."""
     v, accel_s, brake_start, brake_s = CRUISE_MPS, 400.0, 1400.0, 600.0
     x_accel = v * accel_s / 2.0

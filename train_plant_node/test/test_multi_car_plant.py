@@ -34,7 +34,7 @@ def test_free_two_car_coupler_oscillates_at_the_analytic_frequency():
     k, m1, m2 = 7e8, 45e3, 50e3
     model = MultiCarModel(two_cars(k, 0.0, m1, m2), flat_line().line)
     omega = math.sqrt(k * (1.0 / m1 + 1.0 / m2))
-    assert 16.0 < omega / (2 * math.pi) < 39.0  # the coupler modes of the notes
+    assert 16.0 < omega / (2 * math.pi) < 39.0  # coupler modes: docs/papers/mao_multibody.md
     state = model.initial_state(1000.0, 0.0)
     state[0] += 0.002  # a 2 mm extension, released
     period = 2 * math.pi / omega

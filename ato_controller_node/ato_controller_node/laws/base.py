@@ -146,6 +146,8 @@ class ControlLaw(ABC):
     requires: ClassVar[tuple[str, ...]] = ('position', 'speed')
     #: number of cars whose measurements the law uses; None: the lead car only
     cars: ClassVar[int | None] = None
+    #: the stem of the law's paper note, docs/papers/<paper>.md; None for a law with no paper
+    paper: ClassVar[str | None] = None
 
     def __init__(self, train: TrainKnowledge, dt: float, settings=None):
         self.train = train

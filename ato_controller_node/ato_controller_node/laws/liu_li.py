@@ -2,7 +2,7 @@
 controller with adaptive robust bounds (22)-(35); output feedback from the position only.
 
 [REC] RECONSTRUCTION. The paper's displayed equations were lost in extraction; every equation
-below is the reconstruction of shared/papers/README.md (paper 002, sections 2-4), built from the
+below is the reconstruction of docs/papers/liu_li.md (plant, observer, controller), built from the
 surviving prose, the equation numbering and numerical checks against Tables 2-4. Equation
 numbers refer to that reconstruction. Lumped specific resistance f = (f_r + f_a - d)/M.
 
@@ -20,11 +20,11 @@ Controller:
     D2 = rho2_hat tanh(r/eps2)                                              (34)
     rho2_hat' = gamma2 (r tanh(r/eps2) - kappa2 (rho2_hat - rho2_0))         (35)
 
-Choices of the reconstruction (notes section 4 and 8, [REC]):
-- NN1 input Z1 = v_hat / speed_scale, 11 centres evenly on [-1, 1] (the notes' 1-D option: the
-  on-board law does not know the line's additional resistance a_add(s) of their 3-D option;
-  the notes normalise to "about [-1, 1]": packed on [0, 1] the nodes overlap so much that the
-  weight loop of Values 7 and 9 is unstable, k1 k2 < Gamma1 sum S1^2);
+Choices of the reconstruction (docs/papers/liu_li.md, design parameters and ambiguities, [REC]):
+- NN1 input Z1 = v_hat / speed_scale, 11 centres evenly on [-1, 1] (the 1-D option: the
+  on-board law does not know the line's additional resistance a_add(s) of the 3-D option; the
+  reconstruction normalises to "about [-1, 1]": packed on [0, 1] the nodes overlap so much that
+  the weight loop of Values 7 and 9 is unstable, k1 k2 < Gamma1 sum S1^2);
   NN2 input Z2 = (v_hat / speed_scale, v_d' / accel_scale), 6 x 5 centres on [0, 1] x [-1, 1];
 - a-priori values W1_0, W2_0, rho1_0, rho2_0 = 0; initial weights 0; s_hat, v_hat start from
   the measured position and the measured speed (else the reference speed);
@@ -91,7 +91,7 @@ class LiuLiSettings:
                          description='filtered-error slope lambda (Table 2 row 4, Value 10)')
     K: float = setting(3.115e6, minimum=0.0, maximum=1e9, units='N s/m',
                        description='filtered-error gain K (Table 2 row 5, Value 10)')
-    # The eight designed parameters the paper fixes but lost: the notes' recommendations [REC]
+    # The eight designed parameters the paper fixes but lost: docs/papers/liu_li.md [REC]
     b1: float = setting(0.15, minimum=1e-3, maximum=10.0, units='-',
                         description='NN1 RBF width (normalised input) [REC]')
     b2: float = setting(0.35, minimum=1e-3, maximum=10.0, units='-',
@@ -101,8 +101,9 @@ class LiuLiSettings:
     sigma2: float = setting(1e-3, minimum=0.0, maximum=10.0, units='m/(N s)',
                             description='NN2 sigma-modification leakage [REC]')
     gamma1: float = setting(0.0, minimum=0.0, maximum=1e3, units='1/s^3',
-                            description='observer robust-bound learning rate (notes: 0 to 1e-3; '
-                                        'larger values kill the Case-1 trend) [REC]')
+                            description='observer robust-bound learning rate '
+                                        '(docs/papers/liu_li.md: 0 to 1e-3; larger values kill '
+                                        'the Case-1 trend) [REC]')
     eps1: float = setting(1.0, minimum=1e-6, maximum=1e3, units='m',
                           description='observer tanh width [REC]')
     kappa1: float = setting(0.1, minimum=0.0, maximum=10.0, units='s^2',
@@ -127,11 +128,13 @@ class LiuLiSettings:
                                                'observer is unstable near 2)')
     error_from_estimate: bool = setting(False, minimum=0, maximum=1, units='-',
                                         description='e1 = s_hat - s_d instead of s - s_d (the '
-                                                    'notes\' alternative reading of (22)) [REC]')
+                                                    'alternative reading of (22) in '
+                                                    'docs/papers/liu_li.md) [REC]')
 
 
 class LiuLiLaw(ControlLaw):
     name = 'liu_li'
+    paper = 'liu_li'
     summary = ('Liu & Li 2020 [REC]: RBF-NN adaptive speed observer from position and '
                'sliding-mode RBF controller with adaptive robust bounds (output feedback)')
     Settings = LiuLiSettings

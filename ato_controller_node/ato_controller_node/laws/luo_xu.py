@@ -11,7 +11,7 @@ phi = (1, x2, x2^2). Both the mass m and theta are unknown and estimated.
 
 [FIX] The paper's varphi omits the "-1" in the z1 term; then V2' keeps a +z1 z2 cross term and
 is negative definite only if 4 c1 c2 > 1, which its own c1 = c2 = 0.1 violate. With the fix
-V2' = -c1 z1^2 - c2 z2^2 (shared/papers/README.md, paper 000). ``paper_as_printed`` runs the
+V2' = -c1 z1^2 - c2 z2^2 (docs/papers/luo_xu.md). ``paper_as_printed`` runs the
 printed law.
 
 Deviations, all for a sampled, saturating implementation:
@@ -21,7 +21,7 @@ Deviations, all for a sampled, saturating implementation:
 - m_hat is projected onto [mass_min_ratio, mass_max_ratio] x nominal mass (the paper does not,
   but a non-positive mass estimate would reverse the control direction).
 - Gamma and gamma are given in SI (theta per kg, m in kg); the paper's Gamma = diag(1e4, 1, 0.01)
-  is tied to its unit choice, so the defaults are retuned as the notes recommend
+  is tied to its unit choice, so the defaults are retuned as docs/papers/luo_xu.md shows
   (Gamma_ii ~ theta_i / (phi_i z2 T_adapt)); gamma keeps the paper's 1e5.
 
 Theorem 2 (Section 4) replaces the theta law by the projection (24) onto the prior set S of
@@ -87,6 +87,7 @@ class LuoXuSettings:
 
 class LuoXuLaw(ControlLaw):
     name = 'luo_xu'
+    paper = 'luo_xu'
     summary = 'Luo & Xu Theorem 1: direct adaptive backstepping estimating m and (c0, cv, ca)'
     Settings = LuoXuSettings
 
@@ -161,6 +162,7 @@ class LuoXuProjectionSettings(LuoXuSettings):
 
 class LuoXuProjectionLaw(LuoXuLaw):
     name = 'luo_xu_projection'
+    paper = 'luo_xu'
     summary = ('Luo & Xu Theorem 2: adaptive backstepping with the projection law (24) onto the '
                'Table 2 prior set S')
     Settings = LuoXuProjectionSettings

@@ -22,14 +22,15 @@ with rho_knu = 1/k_nu and rho_i = 1/(m_i k_nu) = mass_i / k_nu, and the adaptive
     rho_i^'    = -gamma_m z2 chi_i (zeta_i - eta - r2 z2)                          (36)
 
 [FIX] (35): with the "+" sign the rho_knu error terms cancel in V2' (the controller term is
--rho_knu^ xi^^T varpi; shared/papers/README.md, paper 003). ``paper_as_printed`` runs the printed
+-rho_knu^ xi^^T varpi; docs/papers/mao_2017.md). ``paper_as_printed`` runs the printed
 "-" sign, which feeds the failure-compensation error back with the wrong sign.
 
-Units: SI throughout (reading (A) of the notes: the paper's Davis numbers are whole-train kN with
-V in km/h, converted in the train preset and the scenario's plant section). a_i in m/s^2, b_i in
-1/s, c_i in 1/m, vartheta_i the sine of the grade, D_i such that 0.004 D_i is in m/s^2, rho_i in
-kg, xi in N. The paper gives no gains; the defaults are "unit-scaled": each gamma is about
-(size of the parameter) / (z2 of 0.1 m/s x its regressor x a 10 to 100 s adaptation time).
+Units: SI throughout (reading (A) of docs/papers/mao_2017.md: the paper's Davis numbers are
+whole-train kN with V in km/h, converted in the train preset and the scenario's plant section).
+a_i in m/s^2, b_i in 1/s, c_i in 1/m, vartheta_i the sine of the grade, D_i such that 0.004 D_i
+is in m/s^2, rho_i in kg, xi in N. The paper gives no gains; the defaults are "unit-scaled":
+each gamma is about (size of the parameter) / (z2 of 0.1 m/s x its regressor x a 10 to 100 s
+adaptation time).
 
 The modes (mass, Davis, grade, curve per mode) come from the scenario's plant section through
 ``TrainKnowledge.modes``; the estimates start at ``initial_estimate_ratio`` (paper: 95 %) of
@@ -61,9 +62,10 @@ CURVE_COEFFICIENT = 0.004
 class Mao2017Settings:
     r1: float = setting(0.5, minimum=1e-3, maximum=10.0, units='1/s',
                         description='backstepping gain of the position error z1 (paper: not '
-                                    'given; notes: 0.5)')
+                                    'given; docs/papers/mao_2017.md: 0.5)')
     r2: float = setting(1.0, minimum=1e-3, maximum=10.0, units='1/s',
-                        description='backstepping gain of z2 (paper: not given; notes: 1)')
+                        description='backstepping gain of z2 (paper: not given; '
+                                    'docs/papers/mao_2017.md: 1)')
     gamma_xi: float = setting(2e5, minimum=0.0, maximum=1e9, units='N/m',
                               description='adaptation gain of the failure magnitudes xi (28)')
     gamma_a: float = setting(1e-3, minimum=0.0, maximum=1.0, units='1/s^2',
@@ -117,6 +119,7 @@ class _Mode:
 
 class Mao2017Law(ControlLaw):
     name = 'mao_2017'
+    paper = 'mao_2017'
     summary = ('Mao et al. 2017: adaptive actuator-failure compensation on the piecewise-constant '
                'model, one signal to all 4 motors')
     Settings = Mao2017Settings

@@ -6,7 +6,7 @@ positions are the cars' own, so x3 = z1 - z2 - car length). Outputs y1 = x2 (spe
 relative degree 2 through F2) and y2 = x6 (speed of car 3, relative degree 1 through F3).
 Per-kg coefficients d_pq = d_p/M_q, k_pq = k_p/M_q, m_p = 1/M_p, a_p, b_p, c1.
 
-Input-output form (15)-(16), in the notes' corrected form [FIX]:
+Input-output form (15)-(16), corrected as in docs/papers/mao_multibody.md [FIX]:
     y1'' = Phi1(x) + F2/theta11,   y2' = Phi2(x) + F3/theta21
     Phi1 = th12 x2 - th13 x2' - 2 th14 x2 x2' + th15 x3 - th16 x4 - th17 x5 + th18 x6 - th19
     Phi2 = th22 x4 + th23 x5 - th24 x6 - th25 x7 + th26 x8 - th27
@@ -27,7 +27,7 @@ Adaptive (unknown parameters, estimates Theta1_hat, Theta2_hat):
     Theta2_hat' = -Gamma2 W2 e6                             (74)
     W2 = [nu3 - Phi2_hat, -x4, -x5, x6, x7, -x8, +1]
 
-[FIX] (shared/papers/README.md, paper 001), each undone by ``paper_as_printed``:
+[FIX] (docs/papers/mao_multibody.md), each undone by ``paper_as_printed``:
 - the constants a2, a3 enter (15)-(16) with the physical sign "-" (the paper prints "+d11 a2",
   "+a3", i.e. (17), (18), (60), (71) add +th19, +th27 and the regressors end in -1);
 - (69) prints th27 = a4; it is a3, the constant of car 3's equation;
@@ -129,10 +129,10 @@ def nu_signals(s: MaoState, r: ReferencePoint, settings) -> tuple[float, ...]:
 
 
 _ALPHAS = {
-    'alpha1': ('1/s', 'alpha1 of (51) (not reported; notes recommend 1; > 0.5 for p12 = 2, '
-                      'p22 = 4)'),
-    'alpha2': ('1/s^2', 'alpha2 of (51) (not reported; notes recommend 1)'),
-    'alpha3': ('1/s', 'alpha3 of (55) (not reported; notes recommend 1)'),
+    'alpha1': ('1/s', 'alpha1 of (51) (not reported; docs/papers/mao_multibody.md: 1; > 0.5 '
+                      'for p12 = 2, p22 = 4)'),
+    'alpha2': ('1/s^2', 'alpha2 of (51) (not reported; docs/papers/mao_multibody.md: 1)'),
+    'alpha3': ('1/s', 'alpha3 of (55) (not reported; docs/papers/mao_multibody.md: 1)'),
 }
 
 
@@ -189,6 +189,7 @@ class MaoNominalLaw(_MaoBase):
     """(17), (18) with (51), (55): exact feedback linearisation with the known parameters."""
 
     name = 'mao_multibody_nominal'
+    paper = 'mao_multibody'
     summary = ('Mao, Tao, Jiang & Yan nominal feedback linearisation (17)-(18) of the 4-car '
                'train: speeds of cars 1 and 3 via forces on cars 2 and 3')
     Settings = MaoNominalSettings
@@ -259,6 +260,7 @@ class MaoAdaptiveLaw(_MaoBase):
     """(60), (71) with (51), (55), (65) and the adaptive laws (64), (74)."""
 
     name = 'mao_multibody_adaptive'
+    paper = 'mao_multibody'
     summary = ('Mao, Tao, Jiang & Yan adaptive feedback linearisation (60), (71), laws (64), '
                '(74): speeds of cars 1 and 3 via forces on cars 2 and 3')
     Settings = MaoAdaptiveSettings

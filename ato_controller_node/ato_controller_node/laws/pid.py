@@ -43,6 +43,7 @@ class PidSettings:
 
 class PidLaw(ControlLaw):
     name = 'pid'
+    paper = None
     summary = 'PID on position/speed error with nominal-model feedforward (industrial baseline)'
     Settings = PidSettings
 

@@ -11,7 +11,7 @@ bm = 1) and it is not a setting.
 Identification models (17), k = 1..5, one parameter vector theta_k = (theta_Gk, theta_Zk) each:
     xhat_k' = Am xhat_k + (A - Am) x + B [G_k u + Z_k],   e_k = xhat_k - x               (17), (18)
 
-The five models (not given in the paper; shared/papers/README.md recommends them) are the corner
+The five models (not given in the paper; docs/papers/tan_jiang_chen.md) are the corner
 simplex of a box [theta_min, theta_max] of R^4: theta_5 = theta_min and
 theta_k = theta_min + 4 (theta_max,k - theta_min,k) e_k, so every point of the box is a convex
 combination of them (Lemma 2). The box: mass within [mass_low_ratio, mass_high_ratio] x nominal
@@ -155,7 +155,7 @@ def model_box(train, s: TanSettings) -> tuple[np.ndarray, np.ndarray]:
 
 def corner_simplex(theta_min: np.ndarray, theta_max: np.ndarray) -> np.ndarray:
     """Five parameter vectors (rows) whose convex hull contains the box: theta_5 = theta_min,
-    theta_k = theta_min + 4 (theta_max - theta_min)_k e_k (shared/papers/README.md, paper 004)."""
+    theta_k = theta_min + 4 (theta_max - theta_min)_k e_k (docs/papers/tan_jiang_chen.md)."""
     thetas = np.tile(theta_min, (MODELS, 1))
     for k in range(MODELS - 1):
         thetas[k, k] += (MODELS - 1) * (theta_max[k] - theta_min[k])
@@ -320,6 +320,7 @@ class _MultipleModelLaw(ControlLaw):
 
 class SecondLevelFixedLaw(_MultipleModelLaw):
     name = 'tan_second_level'
+    paper = 'tan_jiang_chen'
     summary = ('Tan, Jiang & Chen: second-level adaptation over five fixed identification '
                'models (17), convex-combination law (23) with projection (25), control (24)')
     Settings = SecondLevelSettings
@@ -398,6 +399,7 @@ class SecondLevelFixedLaw(_MultipleModelLaw):
 
 class SecondLevelAdaptiveLaw(SecondLevelFixedLaw):
     name = 'tan_second_level_adaptive'
+    paper = 'tan_jiang_chen'
     summary = ('Second-level adaptation with adaptive identification models (Narendra & Han), '
                'the comparison method (2) of Tan et al. Section 4.3')
     Settings = AdaptiveModelSettings
@@ -448,6 +450,7 @@ class _IndexedLaw(_MultipleModelLaw):
 
 class SwitchingMultipleModelLaw(_IndexedLaw):
     name = 'tan_switching_mm'
+    paper = 'tan_jiang_chen'
     summary = ('Switching multiple-model adaptive control (Narendra & Balakrishnan) over the '
                'five fixed models, comparison method (3) of Tan et al.')
     Settings = SwitchingSettings
@@ -472,6 +475,7 @@ class SwitchingMultipleModelLaw(_IndexedLaw):
 
 class WeightedMultipleModelLaw(_IndexedLaw):
     name = 'tan_weighted_mm'
+    paper = 'tan_jiang_chen'
     summary = ('Classical weighted multiple-model adaptive control over the five fixed models, '
                'comparison method (4) of Tan et al.')
     Settings = WeightedSettings
