@@ -24,7 +24,7 @@ import numpy as np
 
 from ato_bringup.compare import plan_jobs
 from ato_bringup.offline import run_offline
-from ato_bringup.provenance import write_results_page
+from ato_bringup.provenance import results_page_provenance, write_results_page
 from ato_bringup.runner import run_lockstep
 from ato_bringup.stack import StackConfig
 from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
@@ -150,6 +150,8 @@ def main() -> int:
                         help='also write the figures, with date, machine and commit, to this '
                         'results page of the docs (make bench: docs/results/benchmarks.md)')
     args = parser.parse_args()
+    measured = (results_page_provenance(args.results_page)
+                if args.results_page is not None else None)
     page = Page()
     page.add(f'Scenario `{args.scenario}`.', '',
              '## Lockstep through the ROS graph', '',
@@ -190,7 +192,7 @@ def main() -> int:
              f'| `multi_car` | {plant_accuracy("multi_car", "crh2_4car_mao", 12e3):.2e} m/s |')
     if args.results_page is not None:
         written = write_results_page(args.results_page, 'Benchmarks', 'make bench',
-                                     '\n'.join(page.lines))
+                                     '\n'.join(page.lines), measured)
         print(f'\nwrote {written}')
     return 0
 

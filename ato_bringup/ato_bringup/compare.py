@@ -54,11 +54,13 @@ from typing import Callable
 import numpy as np
 
 from ato_bringup.offline import run_end_time_s
-from ato_bringup.provenance import write_results_page
+from ato_bringup.provenance import results_page_provenance, write_results_page
 from ato_common.scenario import builtin_scenarios, load_scenario
 from ato_controller_node.laws import LAWS
 from profile_node.planner import plan_reference
 
+#: the results page of the docs that `make compare` rewrites
+DEFAULT_RESULTS_PAGE = Path('docs/results/comparison.md')
 DEFAULT_OUT = Path('runs') / 'compare'
 #: a run whose speed error ever exceeds this has diverged (km/h)
 DIVERGED_SPEED_ERROR_KMH = 50.0
@@ -517,20 +519,24 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
     scenarios = args.scenario or builtin_scenarios()
+    measured = (results_page_provenance(args.results_page)
+                if args.results_page is not None else None)
     jobs, skipped = plan_jobs(scenarios, args.law)
     print(f'{len(jobs)} runs ({len(skipped)} law/scenario pairs not applicable) on '
           f'{args.jobs} processes', file=sys.stderr)
     results = run_all(jobs, args.jobs, args.timeout_s or None)
     args.out.mkdir(parents=True, exist_ok=True)
     stamp = datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
-    command = ' '.join(['python -m ato_bringup.compare', *argv]) if argv else 'make compare'
+    default_page = ['--results-page', str(DEFAULT_RESULTS_PAGE)]
+    command = ('make compare' if argv in ([], default_page)
+               else ' '.join(['python -m ato_bringup.compare', *argv]))
     (args.out / 'compare.md').write_text(markdown(results, skipped, scenarios, stamp, command))
     if args.results_page is not None:
         body = markdown(results, skipped, scenarios, stamp, command, plots=False)
         body = body.split('\n', 2)[2]  # the page has its own title and provenance line
         write_results_page(args.results_page, 'Comparison of the control laws', command,
                            f'{body}\n\nThe plots of each scenario are written beside '
-                           f'`{args.out}/compare.md` when the command runs.')
+                           f'`{args.out}/compare.md` when the command runs.', measured)
     best = {name: best_law([r for r in results if r['scenario'] == name]) for name in scenarios}
     summary = [{k: v for k, v in r.items() if k not in ('curves', 'detail')} for r in results]
     (args.out / 'compare.json').write_text(json.dumps(

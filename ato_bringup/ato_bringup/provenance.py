@@ -76,14 +76,24 @@ def provenance(ignore: tuple[str, ...] = ()) -> Provenance:
                       machine_description(), commit_description(ignore))
 
 
-def write_results_page(path: Path, title: str, command: str, body: str) -> Path:
-    """Write a results page: title, the provenance line, then the body (markdown)."""
-    path = Path(path)
+def results_page_provenance(path: Path) -> Provenance:
+    """The provenance of a results page about to be measured: take it when the measurement
+    starts (the commit and the state of the tree it ran from); the page itself does not count
+    as an uncommitted change."""
     try:
-        relative = (str(path.resolve().relative_to(REPOSITORY)),)
+        relative = (str(Path(path).resolve().relative_to(REPOSITORY)),)
     except ValueError:
         relative = ()
-    text = f'# {title}\n\n{provenance(relative).markdown(command)}\n\n{body.strip()}\n'
+    return provenance(relative)
+
+
+def write_results_page(path: Path, title: str, command: str, body: str,
+                       measured: Provenance | None = None) -> Path:
+    """Write a results page: title, the provenance line (``measured``, taken when the
+    measurement started; now if None), then the body (markdown)."""
+    path = Path(path)
+    measured = measured or results_page_provenance(path)
+    text = f'# {title}\n\n{measured.markdown(command)}\n\n{body.strip()}\n'
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text)
     return path

@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 from typing import Callable
 
+from ato_bringup.provenance import REPOSITORY
 from ato_common import units
 from ato_common.conventions import TOPICS
 from ato_common.params import Param
@@ -99,6 +100,15 @@ def _first_paragraph(text: str | None) -> str:
     return ' '.join(inspect.cleandoc(text or '').split('\n\n')[0].split())
 
 
+def _paper_title(stem: str) -> str:
+    """The title of the paper note ``docs/papers/<stem>.md`` (its first heading)."""
+    note = REPOSITORY / 'docs' / 'papers' / f'{stem}.md'
+    for line in note.read_text().splitlines():
+        if line.startswith('# '):
+            return line[2:].strip()
+    raise ValueError(f'{note} has no title')
+
+
 def laws_page() -> str:
     lines = ['# Control laws', '', GENERATED, '',
              'The `controller` parameter of `ato_controller_node` (and `--controller` of '
@@ -110,7 +120,8 @@ def laws_page() -> str:
     for name in law_names():
         law = LAWS[name]
         paper = getattr(law, 'paper', None)
-        paper_link = f'[{paper}](../papers/{paper}.md)' if paper else 'none (industrial baseline)'
+        paper_link = (f'[{_paper_title(paper)}](../papers/{paper}.md)' if paper
+                      else 'none (industrial baseline)')
         drives = ('one total force, shared by the host' if law.actuators is None
                   else f'{law.actuators} actuators')
         used = ', '.join(law.requires) + (f' ({law.cars} cars)' if law.cars else '')
