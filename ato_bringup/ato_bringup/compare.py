@@ -55,6 +55,7 @@ import numpy as np
 
 from ato_bringup.offline import run_end_time_s
 from ato_bringup.provenance import results_page_provenance, write_results_page
+from ato_common.knowledge import knowledge_of
 from ato_common.scenario import builtin_scenarios, load_scenario
 from ato_controller_node.laws import LAWS
 from profile_node.planner import plan_reference
@@ -96,12 +97,6 @@ class Job:
 
 def plant_model_for(scenario) -> str:
     return 'multi_car' if scenario.train.cars else 'point_mass'
-
-
-def knowledge_of(scenario):
-    """What the on-board software knows of the scenario's train (and its plant's known modes)."""
-    from ato_controller_node.laws.base import TrainKnowledge
-    return TrainKnowledge.of(scenario.train, scenario.plant.modes)
 
 
 def failed_measurement(law: str, scenario, model: str) -> str:

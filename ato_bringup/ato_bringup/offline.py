@@ -1,7 +1,10 @@
 """The closed loop on the same cores as the nodes, without ROS: fast, for unit tests, law
 reproduction and benchmarks. Same order of operations as the lockstep graph: at each control
 instant the plant's measurement and the reference at that time go to the controller, whose
-command is held while the plant advances one period."""
+command is held while the plant advances one period.
+
+The plant simulates the whole scenario (the truth); the controller knows only
+``knowledge_of(scenario)`` (ato_common.knowledge): the nominal train and the known modes."""
 
 from __future__ import annotations
 
@@ -11,11 +14,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ato_common.knowledge import knowledge_of
 from ato_common.metrics import RunMetrics, StopSample, compute_metrics
 from ato_common.scenario import Scenario
 from ato_common.types import nanoseconds, seconds
 from ato_controller_node.host import ControllerHost
-from ato_controller_node.laws.base import Measurement, TrainKnowledge
 from profile_node.planner import Plan, plan_reference
 from train_plant_node.simulation import SensorSettings, TrainSimulation
 
@@ -72,13 +75,11 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
     plan = plan_reference(scenario)
     period_ns = nanoseconds(1.0 / (controller_rate_hz or scenario.run.controller_rate_hz))
     sim = TrainSimulation(scenario, model, sensors=sensors, **model_options)
-    host = ControllerHost(TrainKnowledge.of(scenario.train, scenario.plant.modes),
-                          seconds(period_ns), controller, settings)
+    host = ControllerHost(knowledge_of(scenario), seconds(period_ns), controller, settings)
     end = end_time_s if end_time_s is not None else run_end_time_s(scenario, plan)
     steps = int(end * 1e9 // period_ns)
     pending = sorted((switches or {}).items())
     rows, car_positions, car_speeds, actuator_forces, step_times = [], [], [], [], []
-    mode = 0
     laws, estimates, faults = [], [], []
     for _ in range(steps + 1):
         t = sim.time_s
@@ -87,9 +88,9 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
         truth = sim.truth()
         measured = sim.measured(truth)
         reference = plan.trajectory.at(t)
-        mode = scenario.plant.known_mode(t, measured.positions[0], mode)
+        measurement = host.measurement(t, measured)  # with the known mode, from the knowledge
         started = time.perf_counter()
-        result = host.step(Measurement.from_state(t, measured, mode), reference)
+        result = host.step(measurement, reference)
         step_times.append(time.perf_counter() - started)
         sim.apply_command(result.forces_n)
         rows.append((t, truth.positions[0], truth.speeds[0], math.fsum(sim.applied),

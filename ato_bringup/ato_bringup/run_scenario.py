@@ -16,9 +16,10 @@ import sys
 from datetime import datetime
 from pathlib import Path
 
-from ato_bringup.compare import DEFAULT_DEMO_LAW, DEFAULT_OUT, knowledge_of, ranked_demo_law
+from ato_bringup.compare import DEFAULT_DEMO_LAW, DEFAULT_OUT, ranked_demo_law
 from ato_bringup.runner import RunFailed, run_lockstep
 from ato_bringup.stack import StackConfig
+from ato_common.knowledge import knowledge_of
 from ato_common.metrics import format_summary
 from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
 from ato_common.validation import ConfigError

@@ -30,7 +30,6 @@ are converted here, through :mod:`ato_common.units`. Schema (all keys optional):
 from __future__ import annotations
 
 import math
-from bisect import bisect_right
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Sequence
@@ -38,6 +37,7 @@ from typing import Sequence
 import numpy as np
 
 from ato_common import units
+from ato_common.mode_schedule import ModeSchedule
 from ato_common.trains import DavisResistance, TrainParameters
 from ato_common.validation import ConfigError, Fields
 
@@ -248,9 +248,6 @@ class SensorSetup:
                         f"of the {model_name} model; valid: {', '.join(car_names)}")
 
 
-MODE_SWITCHES = ('time', 'position')
-
-
 @dataclass(frozen=True)
 class PlantSetup:
     resistance_variation: ResistanceVariation | None = None
@@ -262,27 +259,23 @@ class PlantSetup:
     failures: tuple[ActuatorFailure, ...] = ()
     sensors: SensorSetup = SensorSetup()
 
+    @cached_property
+    def mode_schedule(self) -> ModeSchedule:
+        """Which mode applies when (or where): the lookup the on-board knowledge shares
+        (:meth:`ato_common.knowledge.TrainKnowledge.known_mode`). Built once: the plant looks
+        the mode up every substep."""
+        return ModeSchedule(self.mode_switch, tuple(m.start for m in self.modes))
+
     def mode_index(self, time_s: float, position_m: float) -> int:
         """Index of the active mode (Mao et al. 2017's known indicators chi_i); 0 without modes.
         Region modes need a finite position: a NaN one (not measured) raises ValueError."""
-        if len(self.modes) < 2:
-            return 0
-        key = time_s if self.mode_switch == 'time' else position_m
-        if not math.isfinite(key):
-            raise ValueError(f'mode_index: the {self.mode_switch} must be finite to find the '
-                             f'mode, got {key}')
-        return max(bisect_right(self._mode_starts, key) - 1, 0)
-
-    @cached_property
-    def _mode_starts(self) -> tuple[float, ...]:
-        return tuple(m.start for m in self.modes)  # once: mode_index runs every substep
+        return self.mode_schedule.index(time_s, position_m)
 
     def known_mode(self, time_s: float, measured_position_m: float, previous: int) -> int:
         """The mode on-board software takes as active from its measurements: ``mode_index``,
-        or ``previous`` while modes switch by position and the position is not measured."""
-        if self.mode_switch != 'time' and not math.isfinite(measured_position_m):
-            return previous
-        return self.mode_index(time_s, measured_position_m)
+        or ``previous`` while modes switch by position and the position is not measured (the
+        controller side asks its knowledge, which shares this lookup)."""
+        return self.mode_schedule.known(time_s, measured_position_m, previous)
 
     def abrupt_change(self, time_s: float) -> AbruptChange | None:
         for change in self.abrupt_changes:

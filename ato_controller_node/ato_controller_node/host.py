@@ -5,6 +5,10 @@ fits the train and the running plant, and the split over actuators.
 Bumpless transfer: on a switch the new law is reset from the current state and told the last
 command; whatever step remains between the last command and the new law's first output is
 carried as an offset that decays with ``bumpless_time_constant_s``.
+
+The host knows the train only through its :class:`~ato_common.knowledge.TrainKnowledge`
+(nominal values, known modes); :meth:`ControllerHost.measurement` takes the known operating mode
+from it, never from the plant.
 """
 
 from __future__ import annotations
@@ -13,14 +17,10 @@ import math
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from ato_common.types import ReferencePoint
+from ato_common.knowledge import TrainKnowledge
+from ato_common.types import ReferencePoint, TrainState
 from ato_controller_node.laws import LAWS, law_class
-from ato_controller_node.laws.base import (
-    ControlLaw,
-    Measurement,
-    TrainKnowledge,
-    validated_settings,
-)
+from ato_controller_node.laws.base import ControlLaw, Measurement, validated_settings
 
 #: the estimate under which a law that observes the speed reports it (m/s); used for the
 #: traction limit when the speed is not measured
@@ -61,6 +61,14 @@ class ControllerHost:
         self._offset_n = 0.0
         self._has_commanded = False
         self.faults = 0
+        self.mode = 0  # the known operating mode, kept while it cannot be determined
+
+    def measurement(self, time_s: float, state: TrainState) -> Measurement:
+        """The law's measurement of a measured ``state`` at run time ``time_s``, with the
+        operating mode the on-board software takes as active: the knowledge's schedule at the
+        lead car's measured position (Mao et al. 2017's known indicators chi_i; line data)."""
+        self.mode = self.train.known_mode(time_s, state.positions[0], self.mode)
+        return Measurement.from_state(time_s, state, self.mode)
 
     def _make(self, name: str) -> ControlLaw:
         try:

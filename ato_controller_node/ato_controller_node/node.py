@@ -21,6 +21,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
+from ato_common.knowledge import knowledge_of
 from ato_common.params import Param, ParameterTable
 from ato_common.ros import (
     MessageError,
@@ -39,12 +40,7 @@ from ato_common.types import Command, Reference, ReferencePoint, seconds
 from ato_common.validation import ConfigError
 from ato_controller_node.host import ControllerHost, LawRejected
 from ato_controller_node.laws import LAWS
-from ato_controller_node.laws.base import (
-    Measurement,
-    TrainKnowledge,
-    setting_fields,
-    validated_settings,
-)
+from ato_controller_node.laws.base import setting_fields, validated_settings
 
 NODE_PARAMS = (
     Param('scenario', DEFAULT_SCENARIO, 'built-in scenario name or path to a scenario YAML file '
@@ -101,15 +97,15 @@ class AtoControllerNode(Node):
         super().__init__('ato_controller_node')
         self.params = ParameterTable(self, NODE_PARAMS + tuple(gain_params()))
         p = self.params
-        self.scenario = load_scenario(p['scenario'])
-        self.rate_hz = p['rate_hz'] or self.scenario.run.controller_rate_hz
+        scenario = load_scenario(p['scenario'])  # not kept: its plant section is the truth
+        self.rate_hz = p['rate_hz'] or scenario.run.controller_rate_hz
         self.dt = 1.0 / self.rate_hz
         self.lockstep = p['lockstep']
-        self.train = TrainKnowledge.of(self.scenario.train, self.scenario.plant.modes)
+        self.knowledge = knowledge_of(scenario)  # all the controller knows of the train
         settings = {law: {f.name: p[f'{law}.{f.name}'] for f in setting_fields(cls.Settings)}
                     for law, cls in LAWS.items()}
         try:
-            self.host = ControllerHost(self.train, self.dt, p['controller'], settings,
+            self.host = ControllerHost(self.knowledge, self.dt, p['controller'], settings,
                                        p['bumpless_time_constant_s'])
         except (LawRejected, ValueError) as error:
             raise ConfigError(str(error)) from None
@@ -126,7 +122,6 @@ class AtoControllerNode(Node):
         self.period_warning_given = False
         self.input_fault = ''
         self.last_fault_logged = ''
-        self.mode = 0  # the known operating mode, kept while it cannot be determined
         self.state_received_wall = 0.0
         self.stale_reported_wall = 0.0
 
@@ -142,7 +137,7 @@ class AtoControllerNode(Node):
             self.create_timer(self.dt, self.on_timer)
         self.get_logger().info(f"law {self.host.law.name} at {self.rate_hz:g} Hz "
                                f"({'lockstep' if self.lockstep else 'real time'}), actuators "
-                               f'{list(self.train.actuator_names)}')
+                               f'{list(self.knowledge.actuator_names)}')
         freeze_startup_objects()
 
     # --- parameters: validate, then apply ---------------------------------------------------
@@ -251,15 +246,13 @@ class AtoControllerNode(Node):
     def step(self, stamp_ns: int, state, reference, time_s: float) -> None:
         started = time.perf_counter()
         # The operating mode is known on board (line data), as the indicators chi_i of
-        # Mao et al. 2017 assume; taken at the lead car's measured position.
-        self.mode = self.scenario.plant.known_mode(time_s, state.positions[0], self.mode)
-        measurement = Measurement.from_state(time_s, state, self.mode)
-        result = self.host.step(measurement, reference.now)
+        # Mao et al. 2017 assume: the knowledge's schedule at the lead car's measured position.
+        result = self.host.step(self.host.measurement(time_s, state), reference.now)
         if result.fault and result.fault != self.last_fault_logged:
             self.get_logger().error(result.fault)
         self.last_fault_logged = result.fault
         self.step_times_s.append(time.perf_counter() - started)
-        msg = command_to_msg(Command(stamp_ns, self.train.actuator_names, result.forces_n,
+        msg = command_to_msg(Command(stamp_ns, self.knowledge.actuator_names, result.forces_n,
                                      result.law))
         self.command_pub.publish(msg)
         self.last_command_msg = msg

@@ -9,6 +9,10 @@ its adaptation or integrator does not wind up.
 A law declares what it needs of the running plant: the measured quantities (``requires``), the
 number of cars whose measurements it uses (``cars``) and the number of actuators it drives
 (``actuators``); the host refuses a law that does not fit, with the reason.
+
+What a law is told about the train is a :class:`~ato_common.knowledge.TrainKnowledge` (nominal
+values and the known modes, never the plant's truth), built from a scenario only by
+:func:`ato_common.knowledge.knowledge_of`; it is re-exported here.
 """
 
 from __future__ import annotations
@@ -18,42 +22,8 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass, field, fields, replace
 from typing import Any, ClassVar, Mapping
 
-from ato_common.trains import (
-    CarParameters,
-    Coupler,
-    DavisResistance,
-    TractionCharacteristic,
-    TrainParameters,
-)
+from ato_common.knowledge import TrainKnowledge  # re-exported: what a law is told
 from ato_common.types import ReferencePoint, TrainState
-
-
-@dataclass(frozen=True)
-class TrainKnowledge:
-    """What the on-board software knows of its train: nominal values, not the truth."""
-
-    nominal_mass_kg: float
-    nominal_davis: DavisResistance
-    traction: TractionCharacteristic
-    actuator_names: tuple[str, ...]
-    cars: tuple[CarParameters, ...] = ()    # nominal per-car data of a multi-car train
-    couplers: tuple[Coupler, ...] = ()
-    car_length_m: float = 25.0  # rest spacing of consecutive cars (coupler extension = 0)
-    #: known modes of a piecewise-constant plant (the scenario's ``plant.modes``: records with
-    #: mass_kg, davis, grade_sine, curve_accel_mps2), indexed by ``Measurement.mode``
-    modes: tuple[Any, ...] = ()
-
-    @classmethod
-    def of(cls, train: TrainParameters, modes: tuple[Any, ...] = ()) -> 'TrainKnowledge':
-        return cls(train.mass_kg, train.davis_nominal, train.traction, train.actuator_names,
-                   train.cars, train.couplers, train.car_length_m, tuple(modes))
-
-    def actuator_limits_at(self, speed: float) -> tuple[float, float]:
-        """(lowest, highest) force of one actuator: an equal share of the train's limits."""
-        lowest, highest = self.traction.limits_at(speed)
-        n = len(self.actuator_names)
-        return lowest / n, highest / n
-
 
 #: the measured quantities a law may require (see ``ControlLaw.requires``)
 MEASURED_QUANTITIES = ('position', 'speed', 'acceleration', 'car_positions', 'car_speeds')

@@ -50,14 +50,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from ato_common.knowledge import TrainKnowledge
 from ato_common.types import ReferencePoint
-from ato_controller_node.laws.base import (
-    ControlLaw,
-    LawOutput,
-    Measurement,
-    TrainKnowledge,
-    setting,
-)
+from ato_controller_node.laws.base import ControlLaw, LawOutput, Measurement, setting
 
 CARS = 4
 

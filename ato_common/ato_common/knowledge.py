@@ -1,0 +1,132 @@
+"""The line between what the plant simulates (the truth) and what the controller may know.
+
+The plant (``train_plant_node``) simulates the truth from the whole scenario: the train's
+simulated running resistance, the ``plant:`` section (resistance variation, modes, abrupt
+changes, disturbance, actuator lag and rate limits, failures, sensor noise and faults) and the
+failures injected at run time. The on-board software (``ato_controller_node``: the node, its host
+and every law) knows only a :class:`TrainKnowledge`: the nominal train and, for the laws that
+assume them known, the operating modes and their schedule. :func:`knowledge_of` is the only
+bridge from a scenario to that knowledge; the controller side never reads ``scenario.plant``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import TYPE_CHECKING, Iterable
+
+from ato_common.mode_schedule import MODE_SWITCHES, ModeSchedule
+from ato_common.trains import (
+    CarParameters,
+    Coupler,
+    DavisResistance,
+    TractionCharacteristic,
+    TrainParameters,
+)
+
+if TYPE_CHECKING:
+    from ato_common.scenario import Scenario
+
+
+@dataclass(frozen=True)
+class KnownMode:
+    """One operating mode of a piecewise-constant plant as the on-board software knows it
+    (Mao et al. 2017 eqs 10-12: mass, whole-train Davis resistance in N, extra grade as the sine
+    of the angle, curve term 0.004 D in m/s^2), active from ``start`` (s or m, by the
+    knowledge's ``mode_switch``; None: not scheduled, the caller gives the mode index)."""
+
+    mass_kg: float
+    davis: DavisResistance
+    grade_sine: float = 0.0
+    curve_accel_mps2: float = 0.0
+    name: str = ''
+    start: float | None = None
+
+    @classmethod
+    def of(cls, mode, index: int = 0) -> KnownMode:
+        """A copy of a mode record (a scenario's ``plant.modes`` entry, or any record with
+        mass_kg, davis, grade_sine, curve_accel_mps2 and optionally name and start): the
+        knowledge holds no object of the plant's."""
+        return cls(mode.mass_kg, mode.davis, mode.grade_sine, mode.curve_accel_mps2,
+                   getattr(mode, 'name', f'mode {index + 1}'), getattr(mode, 'start', None))
+
+
+@dataclass(frozen=True)
+class TrainKnowledge:
+    """What the on-board software knows of its train: nominal values, not the truth.
+
+    The nominal train: mass, Davis resistance (the on-board prior ``davis_nominal``, not the
+    simulated ``davis``), traction characteristic, actuator names, and for a multi-car train the
+    nominal per-car data, couplers and car length. For the laws that assume them known (Mao et
+    al. 2017's mode indicators chi_i): the operating modes and the schedule that says which one
+    applies, by time or by region (:meth:`known_mode`). No failure, disturbance, resistance
+    variation, sensor fault or noise, actuator lag: those are the plant's truth.
+    """
+
+    nominal_mass_kg: float
+    nominal_davis: DavisResistance
+    traction: TractionCharacteristic
+    actuator_names: tuple[str, ...]
+    cars: tuple[CarParameters, ...] = ()    # nominal per-car data of a multi-car train
+    couplers: tuple[Coupler, ...] = ()
+    car_length_m: float = 25.0  # rest spacing of consecutive cars (coupler extension = 0)
+    #: known modes of a piecewise-constant plant, indexed by ``Measurement.mode``
+    modes: tuple[KnownMode, ...] = ()
+    #: the modes start at a time ('time') or a position ('position'); see ModeSchedule
+    mode_switch: str = 'time'
+
+    def __post_init__(self) -> None:
+        if self.mode_switch not in MODE_SWITCHES:
+            raise ValueError(f"mode switch '{self.mode_switch}' is not valid; valid: "
+                             f"{', '.join(MODE_SWITCHES)}")
+
+    @classmethod
+    def of(cls, train: TrainParameters, modes: Iterable = (),
+           mode_switch: str = 'time') -> TrainKnowledge:
+        """The knowledge of a nominal ``train`` and, optionally, its known ``modes`` (mode
+        records, copied: see :meth:`KnownMode.of`) switching by ``mode_switch``. From a
+        scenario, use :func:`knowledge_of`."""
+        return cls(train.mass_kg, train.davis_nominal, train.traction, train.actuator_names,
+                   train.cars, train.couplers, train.car_length_m,
+                   tuple(KnownMode.of(m, i) for i, m in enumerate(modes)), mode_switch)
+
+    @cached_property
+    def mode_schedule(self) -> ModeSchedule:
+        """The schedule of the known modes: the same lookup as the plant's. ValueError if the
+        modes have no start (records given without one: the caller gives the mode index)."""
+        starts = tuple(m.start for m in self.modes)
+        if None in starts:
+            raise ValueError('the known modes have no start: no schedule to look the mode up')
+        return ModeSchedule(self.mode_switch, starts)
+
+    def known_mode(self, time_s: float, measured_position_m: float, previous: int) -> int:
+        """The mode the on-board software takes as active from its measurements (run time and
+        the lead car's measured position): the scheduled mode, or ``previous`` while modes
+        switch by position and the position is not measured; 0 without modes."""
+        return self.mode_schedule.known(time_s, measured_position_m, previous)
+
+    def actuator_limits_at(self, speed: float) -> tuple[float, float]:
+        """(lowest, highest) force of one actuator: an equal share of the train's limits."""
+        lowest, highest = self.traction.limits_at(speed)
+        n = len(self.actuator_names)
+        return lowest / n, highest / n
+
+
+def knowledge_of(scenario: Scenario) -> TrainKnowledge:
+    """What the on-board software knows of a scenario: the only bridge from a scenario to the
+    controller's knowledge (the controller node, the offline loop, compare and run_scenario all
+    build it here).
+
+    Takes the nominal train (``scenario.train``: mass, ``davis_nominal``, traction
+    characteristic, actuator names, per-car data, couplers, car length) and, copied out of
+    ``scenario.plant``, the known operating modes (``plant.modes``) with their schedule
+    (``plant.mode_switch``: by time or by region), which Mao et al. 2017 assume known on board.
+
+    Leaves out the truth that only the plant simulates: the train's simulated running
+    resistance (``train.davis``), ``plant.resistance_variation``, ``plant.abrupt_changes``,
+    ``plant.disturbance``, ``plant.actuators`` (lag, rate limit), ``plant.failures`` and the
+    failures injected at run time, ``plant.sensors`` (noise, bias, quantisation, dropouts,
+    failures); and the line, the planning limits and the run settings, which reach the
+    controller as the reference and its parameters, not as knowledge of the train.
+    """
+    return TrainKnowledge.of(scenario.train, scenario.plant.modes, scenario.plant.mode_switch)
