@@ -44,7 +44,7 @@ lint: setup
 	@$(ENV) ruff check .
 
 docs: setup
-	@$(ENV) mkdocs build --strict --quiet --site-dir site
+	@$(ENV) mkdocs build --strict --site-dir site 2>&1 | { grep -v '^INFO' || true; }
 
 docs-serve: setup
 	@$(ENV) mkdocs serve

@@ -34,7 +34,7 @@ def _site_copy(tmp_path) -> Path:
 
 
 def _build(site) -> subprocess.CompletedProcess:
-    return _run(sys.executable, '-m', 'mkdocs', 'build', '--strict', '--quiet', '--site-dir',
+    return _run(sys.executable, '-m', 'mkdocs', 'build', '--strict', '--site-dir',
                 str(site / 'out'), cwd=site)
 
 
