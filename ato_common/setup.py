@@ -23,7 +23,7 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-
+            'scenario_from_ttobench = ato_common.scenario_from_ttobench:main',
         ],
     },
 )
