@@ -24,6 +24,7 @@ from trajectory_msgs.msg import JointTrajectory
 from ato_common.params import Param, ParameterTable
 from ato_common.ros import (
     MessageError,
+    RunNodeHooks,
     command_to_msg,
     diagnostic_status,
     freeze_startup_objects,
@@ -96,7 +97,7 @@ def gain_params() -> list[Param]:
     return params
 
 
-class AtoControllerNode(Node):
+class AtoControllerNode(RunNodeHooks, Node):
     def __init__(self):
         super().__init__('ato_controller_node')
         self.params = ParameterTable(self, NODE_PARAMS + tuple(gain_params()))
