@@ -1,5 +1,6 @@
 """run_node runs only nodes that declare the hooks it calls (RunNodeHooks), and reads them."""
 
+import faulthandler
 import signal
 
 import pytest
@@ -9,10 +10,13 @@ from ato_common.ros import RunNodeHooks, run_node
 
 
 @pytest.fixture(autouse=True)
-def restore_signal_handlers():
-    """run_node installs its own SIGINT/SIGTERM handlers and ignores both once it tears down."""
+def restore_the_process():
+    """run_node installs its own SIGINT/SIGTERM handlers and ignores both once it tears down,
+    and its teardown arms faulthandler to end the process after TEARDOWN_LIMIT_S (a node's
+    process exits right after): both are undone here, or pytest itself would be ended."""
     saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     yield
+    faulthandler.cancel_dump_traceback_later()
     for s, handler in saved.items():
         signal.signal(s, handler)
 

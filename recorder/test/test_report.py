@@ -46,7 +46,8 @@ def record(folder, runs: dict[str, float]):
     return folder
 
 
-@pytest.mark.parametrize('namespace', ['', '/train1', '/fleet/train1'])
+@pytest.mark.parametrize('namespace', ['', '/train1', '/fleet/train1'],
+                         ids=['root', 'train1', 'nested'])
 def test_the_one_namespace_of_the_recording_is_found(tmp_path, namespace):
     bag = record(tmp_path / 'run', {namespace: 0.25})
     assert resolve_topics(bag)['state'] == f'{namespace}/train/state'
