@@ -262,10 +262,7 @@ def run_node(make_node: Callable[[], RunNodeHooks], args=None) -> int:
         except ConfigError as error:
             print(f'error: {error}', file=sys.stderr)
             return 2
-        if not isinstance(node, RunNodeHooks):
-            destroy = getattr(node, 'destroy_node', None)
-            if destroy is not None:
-                destroy()
+        if not isinstance(node, RunNodeHooks):  # rclpy.shutdown below lets go of it
             raise TypeError(f'{type(node).__module__}.{type(node).__qualname__} does not declare '
                             'the hooks run_node calls (finished, exit_code, close_outputs): '
                             'inherit ato_common.ros.RunNodeHooks')
