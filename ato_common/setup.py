@@ -20,10 +20,10 @@ setup(
         'conversions, message conversion, train presets, line descriptions and scenarios.'
     ),
     license='Apache-2.0',
-    tests_require=['pytest'],
+    tests_require=['pytest', 'hypothesis', 'numpy', 'PyYAML'],
     entry_points={
         'console_scripts': [
-
+            'scenario_from_ttobench = ato_common.scenario_from_ttobench:main',
         ],
     },
 )

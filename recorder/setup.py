@@ -24,7 +24,7 @@ setup(
         'recording.'
     ),
     license='Apache-2.0',
-    tests_require=['pytest'],
+    tests_require=['pytest', 'PyYAML', 'mcap', 'mcap-ros2-support', 'rosbags'],
     entry_points={
         'console_scripts': [
             'recorder = recorder.node:main',

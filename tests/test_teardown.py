@@ -15,7 +15,7 @@ HANGING_TEARDOWN = textwrap.dedent('''
 
     ros.TEARDOWN_LIMIT_S = 0.5
 
-    class NodeWhoseTeardownHangs(Node):
+    class NodeWhoseTeardownHangs(ros.RunNodeHooks, Node):
         def __init__(self):
             super().__init__('teardown_hangs')
             self.finished = True  # stop spinning at once

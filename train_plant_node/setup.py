@@ -20,7 +20,7 @@ setup(
         'lockstep simulated time.'
     ),
     license='Apache-2.0',
-    tests_require=['pytest'],
+    tests_require=['pytest', 'numpy'],
     entry_points={
         'console_scripts': [
             'train_plant_node = train_plant_node.node:main'

@@ -204,7 +204,30 @@ def freeze_startup_objects() -> None:
 TEARDOWN_LIMIT_S = 5.0
 
 
-def tear_down(executor, node) -> None:
+class RunNodeHooks:
+    """What :func:`run_node` calls on the node it runs, with the defaults of a node that needs
+    none of it. Every node class of the suite inherits it before ``rclpy.node.Node``
+    (``class PlantNode(RunNodeHooks, Node)``); run_node refuses a node that does not.
+
+    ``finished``
+        run_node spins until this becomes True (or rclpy shuts down, or a signal arrives).
+        Default False: the node runs until it is stopped.
+    ``exit_code``
+        the process's exit status, read after the teardown. Default 0.
+    ``close_outputs()``
+        called once spinning has stopped, before the executor and the node are torn down and
+        with no time limit: flush and close what the node writes (the recorder's bag).
+        Default: nothing to close.
+    """
+
+    finished: bool = False
+    exit_code: int = 0
+
+    def close_outputs(self) -> None:
+        """Nothing to close by default."""
+
+
+def tear_down(executor, node: RunNodeHooks) -> None:
     """Shut the executor down (it lets go of every entity while the context is still valid),
     then destroy the node, within ``TEARDOWN_LIMIT_S``: past it, faulthandler writes every
     thread's stack to stderr and the process exits with code 1. The caller shuts rclpy down."""
@@ -213,10 +236,12 @@ def tear_down(executor, node) -> None:
     node.destroy_node()
 
 
-def run_node(make_node: Callable[[], 'rclpy.node.Node'], args=None) -> int:
+def run_node(make_node: Callable[[], RunNodeHooks], args=None) -> int:
     """Entry point body of every node: init, build, spin until shutdown or the node asks to stop
-    (``node.finished`` becomes True), clean up. SIGINT and SIGTERM end it cleanly with exit 0; a
-    configuration error is printed and gives exit 2 before anything is published.
+    (``node.finished`` becomes True), clean up. SIGINT and SIGTERM end it cleanly with exit 0
+    (or the node's ``exit_code``); a configuration error is printed and gives exit 2 before
+    anything is published. The node must declare the hooks (:class:`RunNodeHooks`): any other
+    object is a TypeError naming its class.
 
     Teardown order: the node's own outputs first (``node.close_outputs()``, e.g. the recorder's
     file, with no time limit), then, within ``TEARDOWN_LIMIT_S``, the executor (it lets go of
@@ -237,16 +262,18 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], args=None) -> int:
         except ConfigError as error:
             print(f'error: {error}', file=sys.stderr)
             return 2
+        if not isinstance(node, RunNodeHooks):  # rclpy.shutdown below lets go of it
+            raise TypeError(f'{type(node).__module__}.{type(node).__qualname__} does not declare '
+                            'the hooks run_node calls (finished, exit_code, close_outputs): '
+                            'inherit ato_common.ros.RunNodeHooks')
         executor = make_executor()
         executor.add_node(node)
-        while rclpy.ok() and not stop['requested'] and not getattr(node, 'finished', False):
+        while rclpy.ok() and not stop['requested'] and not node.finished:
             executor.spin_once(timeout_sec=0.05)
         node.get_logger().info('shutting down' + (' on signal' if stop['requested'] else ''))
-        close_outputs = getattr(node, 'close_outputs', None)
-        if close_outputs is not None:
-            close_outputs()
+        node.close_outputs()
         tear_down(executor, node)
-        return int(getattr(node, 'exit_code', 0))
+        return int(node.exit_code)
     finally:
         if rclpy.ok():
             rclpy.shutdown()

@@ -586,31 +586,3 @@ def scenario_data(track: str | Path, train: str | Path, journey: str | Path | No
         data['journey'] = {'ttobench': str(journey)}
     return data
 
-
-def main(argv=None) -> int:
-    """``python -m ato_common.ttobench TRACK TRAIN [--journey J] [--dwell S]``: print a scenario
-    YAML running them (save it, edit the planning limits, run it with SCENARIO=file)."""
-    import argparse
-    import sys
-
-    import yaml
-    parser = argparse.ArgumentParser(description=main.__doc__)
-    parser.add_argument('track')
-    parser.add_argument('train')
-    parser.add_argument('--journey')
-    parser.add_argument('--dwell', type=float, default=30.0, help='dwell at intermediate stops, s')
-    args = parser.parse_args(argv)
-    from ato_common.scenario import parse_scenario
-    try:
-        data = scenario_data(Path(args.track).resolve(), Path(args.train).resolve(),
-                             Path(args.journey).resolve() if args.journey else None, args.dwell)
-        parse_scenario(data)  # every file valid before anything is written
-    except ConfigError as error:
-        print(f'error: {error}', file=sys.stderr)
-        return 2
-    yaml.safe_dump(data, sys.stdout, sort_keys=False)
-    return 0
-
-
-if __name__ == '__main__':
-    raise SystemExit(main())

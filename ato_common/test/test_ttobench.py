@@ -9,8 +9,8 @@ import pytest
 import yaml
 
 from ato_common import units
-from ato_common.scenario import load_scenario, parse_scenario
-from ato_common.ttobench import load_journey, load_track, load_train, scenario_data
+from ato_common.scenario import load_scenario
+from ato_common.ttobench import load_journey, load_track, load_train
 from ato_common.validation import ConfigError
 
 # The BSD-2 TTOBench samples ship with the tests (tests/data/ttobench, with their licence), so
@@ -183,34 +183,8 @@ def test_a_scenario_naming_a_missing_or_broken_file_says_which(tmp_path):
         load_scenario_file(tmp_path, {'line': {'ttobench': 'track.json', 'dwell': 3}})
 
 
-def test_every_sample_track_loads_and_yields_a_curve_within_its_limits_and_stops(tmp_path):
-    import numpy as np
-
-    from profile_node.planner import plan_reference
-    assert len(TRACKS) >= 14 and len(TRAINS) >= 3
-    for i, track in enumerate(TRACKS):
-        train = TRAINS[i % len(TRAINS)]   # every track, every train at least once
-        scenario = parse_scenario(scenario_data(track, train, dwell_s=20.0))
-        raw = json.loads(track.read_text())
-        stops = raw['stops']['values']
-        assert [s.position_m for s in scenario.line.stations] == stops
-        plan = plan_reference(scenario)
-        assert [s.station.position_m for s in plan.stops] == stops[1:]
-        for stop in plan.stops:
-            at = plan.trajectory.at(stop.arrival_s)
-            assert at.position == pytest.approx(stop.station.position_m, abs=0.01), track.name
-            assert at.speed == pytest.approx(0.0, abs=1e-9)
-        limits = raw['speed limits']['values']
-        top = load_train(train).max_speed_mps
-        for t in np.arange(0.0, plan.trajectory.end_time, 1.3):
-            p = plan.trajectory.at(t)
-            static = [v for s, v in limits if s <= p.position][-1] / 3.6
-            assert p.speed <= min(static, top) + 1e-9, (track.name, p)
-            assert p.speed <= plan.permitted_speed(p.position, t) + 1e-6
-
-
 def test_the_scenario_command_writes_a_runnable_scenario(tmp_path, capsys):
-    from ato_common.ttobench import main
+    from ato_common.scenario_from_ttobench import main
     assert main([str(TRACKS[0]), str(TRAINS[0]), '--dwell', '15']) == 0
     path = tmp_path / 's.yaml'
     path.write_text(capsys.readouterr().out)
@@ -219,31 +193,3 @@ def test_the_scenario_command_writes_a_runnable_scenario(tmp_path, capsys):
     assert main([str(tmp_path / 'nope.json'), str(TRAINS[0])]) == 2
     assert 'line.ttobench: no such file' in capsys.readouterr().err
     assert math.isfinite(scenario.train.mass_kg)
-
-
-def test_a_journey_timetable_holds_departures_and_reports_its_windows(tmp_path):
-    from profile_node.planner import plan_reference
-    write(tmp_path, 'track.json', TRACK)
-    journey = copy.deepcopy(JOURNEY)
-    journey['timing points']['values'] = [[0, 0, 0, 0, 0], [3500, None, None, 10, 60],
-                                          [6000, 300, 330, 0, 0], [6000, 600, None, 0, 0],
-                                          [12000, 650, 700, 0, 0]]
-    write(tmp_path, 'journey.json', journey)
-    scenario = load_scenario_file(tmp_path, {'line': {'ttobench': 'track.json'},
-                                             'journey': {'ttobench': 'journey.json'}})
-    plan = plan_reference(scenario)
-    middle = plan.stops[0]
-    # the dwell is the difference of the earliest times (300 s), and the departure waits for
-    # its earliest time
-    assert middle.arrival_s < 300.0
-    assert middle.departure_s == pytest.approx(600.0)
-    checks = plan.timing
-    assert [c.point.position_m for c in checks] == [0, 3500, 6000, 6000, 12000]
-    assert checks[2].planned_s == middle.arrival_s and checks[3].planned_s == middle.departure_s
-    # arriving before the earliest arrival time is outside the window: reported
-    assert [c.within_window for c in checks[:4]] == [True, True, False, True]
-    # 6 km from a 600 s departure cannot be done by 700 s at 140 km/h: reported as missed
-    assert checks[4].planned_s > 700.0 and not checks[4].within_window
-    passing = plan.trajectory.at(checks[1].planned_s)
-    assert passing.position == pytest.approx(3500.0, abs=1e-3)
-    assert passing.speed <= 60 / 3.6 + 1e-9

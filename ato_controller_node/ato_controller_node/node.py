@@ -25,6 +25,7 @@ from ato_common.knowledge import knowledge_of
 from ato_common.params import Param, ParameterTable
 from ato_common.ros import (
     MessageError,
+    RunNodeHooks,
     command_to_msg,
     diagnostic_status,
     freeze_startup_objects,
@@ -92,7 +93,7 @@ def gain_params() -> list[Param]:
     return params
 
 
-class AtoControllerNode(Node):
+class AtoControllerNode(RunNodeHooks, Node):
     def __init__(self):
         super().__init__('ato_controller_node')
         self.params = ParameterTable(self, NODE_PARAMS + tuple(gain_params()))

@@ -4,7 +4,7 @@ switch, saturation and projection, and the paper's result on the paper's own mod
 Two reproductions: one on the paper's plant (eq 8: piecewise-constant modes, four motors, the
 failure pattern of Section 4) integrated here, exactly what the paper simulates; one on the
 suite's plant with the built-in scenario mao_2017_modes (the same modes and failure, the
-preset's traction limits)."""
+preset's traction limits), in ato_bringup/test/test_mao_2017_suite_plant.py."""
 
 from __future__ import annotations
 
@@ -14,8 +14,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pytest
 
-from ato_bringup.offline import run_offline
-from ato_common.scenario import load_scenario
 from ato_common.trains import DavisResistance, train_preset
 from ato_common.types import ReferencePoint
 from ato_common.units import STANDARD_GRAVITY
@@ -167,27 +165,6 @@ def test_printed_sign_of_35_drives_k_nu_the_wrong_way(paper_run):
     window_printed = (t_printed > 700.0) & (t_printed < 800.0)
     assert np.max(np.abs(ex_printed[window_printed])) > 5.0 * np.max(np.abs(ex[window]))
     assert printed[-1].estimates['k_nu_hat'] < 2.0
-
-
-def test_preset_mao_2017_modes_on_the_suite_plant():
-    """The built-in scenario: same modes and failure, 200 km/h cruise, the mao_2017_500t
-    limits (the healthy motors stay within them after the failure). The paper's result holds
-    on the suite's plant: the position error goes back to about zero after every mode switch
-    (400, 800, 1400 s) and every change of the failure (600, 1000, 1200 s)."""
-    scenario = load_scenario('mao_2017_modes')
-    run = run_offline(scenario, 'mao_2017')
-    t, ex = run.times_s, run.ref_positions - run.positions
-    assert not any(run.faults)
-    for event in (400.0, 600.0, 800.0, 1000.0, 1200.0, 1400.0):   # measured at most 0.048 m
-        window = (t > event + 100.0) & (t < event + 200.0)
-        assert np.max(np.abs(ex[window])) < 0.15, event
-    outage = (t > 1250.0) & (t < 1400.0)
-    limits = np.array([scenario.train.traction.limits_at(v)[1] / 4 for v in run.speeds[outage]])
-    assert np.all(run.actuator_forces[outage, 1:] < limits[:, None])  # measured 75 % at most
-    assert np.all(run.actuator_forces[outage, 0] == 0.0)          # the failed motor
-    assert np.max(np.abs(ex)) < 1.0                               # measured 0.30 m
-    assert np.max(np.abs(ex[t > 1700.0])) < 0.05                  # measured 0.006 m
-    assert abs(run.metrics().stop_errors_m['Stop']) < 0.05        # measured 0.006 m
 
 
 def law(modes=paper_modes(), **settings) -> Mao2017Law:

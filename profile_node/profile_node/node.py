@@ -25,6 +25,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from ato_common.params import Param, ParameterTable
 from ato_common.ros import (
+    RunNodeHooks,
     freeze_startup_objects,
     from_duration,
     from_time,
@@ -53,7 +54,7 @@ PARAMS = (
 )
 
 
-class ProfileNode(Node):
+class ProfileNode(RunNodeHooks, Node):
     def __init__(self):
         super().__init__('profile_node')
         self.params = ParameterTable(self, PARAMS)

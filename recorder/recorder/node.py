@@ -20,12 +20,12 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
 
-from ato_common.ros import freeze_startup_objects, run_node
+from ato_common.ros import RunNodeHooks, freeze_startup_objects, run_node
 from recorder.bag import DEFAULT_FLUSH_PERIOD_S, BagError, BagWriter
 from recorder.ros_io import message_class, qos_to_yaml, subscription_qos
 
 
-class RecorderNode(Node):
+class RecorderNode(RunNodeHooks, Node):
     def __init__(self, writer: BagWriter, topics: list[str] | None, discovery_period_s: float):
         super().__init__('recorder')
         self.writer = writer

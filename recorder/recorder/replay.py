@@ -22,7 +22,7 @@ from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 
-from ato_common.ros import make_executor, tear_down, to_time
+from ato_common.ros import RunNodeHooks, make_executor, tear_down, to_time
 from recorder.bag import BagError, bag_info, read_messages
 from recorder.ros_io import message_class, qos_from_yaml
 
@@ -48,6 +48,16 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     if options.start_offset < 0.0:
         parser.error(f'--start-offset must be >= 0, got {options.start_offset}')
     return options
+
+
+class ReplayNode(RunNodeHooks, Node):
+    """The replay's node. It plays in :func:`main`'s own loop rather than under run_node, but
+    ends like every node of the suite (:func:`ato_common.ros.tear_down`) and declares the same
+    hooks: ``finished`` once the recording has been played, ``exit_code`` 2 when it cannot be
+    read; it writes nothing, so ``close_outputs`` is the default."""
+
+    def __init__(self):
+        super().__init__('replay')
 
 
 class Replayer:
@@ -102,7 +112,7 @@ def main(args=None) -> int:
     argv = remove_ros_args(args if args is not None else sys.argv)[1:]
     options = parse_args(argv)
     rclpy.init(args=args)
-    node = Node('replay')
+    node = ReplayNode()
     executor = make_executor()
     executor.add_node(node)
     try:
@@ -122,10 +132,12 @@ def main(args=None) -> int:
         while time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
         node.get_logger().info(f'replayed {replayer.published} messages')
-        return 0
+        node.finished = True
+        return node.exit_code
     except BagError as error:
         print(f'error: {error}', file=sys.stderr)
-        return 2
+        node.exit_code = 2
+        return node.exit_code
     except KeyboardInterrupt:
         return 0
     finally:

@@ -1,6 +1,13 @@
 """report: a run's metrics and plots from its recording alone.
 
     ros2 run recorder report runs/my_run            # writes runs/my_run/report/*.png
+    ros2 run recorder report runs/fleet --namespace /train1
+
+The topics are the suite's (:data:`ato_common.conventions.TOPICS`). Their relative names are
+found in the namespace the stack ran in (``-r __ns:=/train1``): by default the one namespace in
+which the recording holds them, under their names and types; ``--namespace`` chooses when it
+holds several (``/`` is the root namespace). ``/diagnostics`` is global: in a recording of
+several stacks it mixes their laws' estimates.
 
 The metrics are those ``make demo`` prints (:mod:`ato_common.metrics`): the lead car's true
 state against the reference at each stamp, stopping errors read where the latched target curve
@@ -17,11 +24,62 @@ from pathlib import Path
 import numpy as np
 from mcap_ros2.decoder import DecoderFactory
 
+from ato_common.conventions import TOPICS
 from ato_common.metrics import RunMetrics, StopSample, compute_metrics, format_summary
-from recorder.bag import BagError, read_messages
+from recorder.bag import BagError, bag_info, read_messages
 
-TOPICS = {'state': '/train/state', 'reference': '/ato/reference', 'command': '/ato/command',
-          'curve': '/ato/reference/curve', 'diagnostics': '/diagnostics'}
+REPORTED = ('state', 'reference', 'command', 'curve', 'diagnostics')
+"""The keys of the conventions' topics the report reads."""
+
+
+def normalise_namespace(namespace: str) -> str:
+    """'/train1', 'train1' and 'train1/' are '/train1'; '' and '/' are the root namespace ('')."""
+    return '/' + namespace.strip().strip('/') if namespace.strip().strip('/') else ''
+
+
+def _shown(namespace: str) -> str:
+    return namespace or '/'
+
+
+def topic_in(namespace: str, name: str) -> str:
+    """The absolute name of a conventions name in ``namespace`` (a global name stays global)."""
+    return name if name.startswith('/') else f'{normalise_namespace(namespace)}/{name}'
+
+
+def namespaces_of(recorded: dict[str, str]) -> set[str]:
+    """The namespaces in which ``recorded`` (topic name -> type) holds a relative topic of the
+    conventions under its name and type."""
+    found = set()
+    for name, type_name in recorded.items():
+        for convention in TOPICS.values():
+            relative = convention.name
+            if (not relative.startswith('/') and type_name == convention.type_name
+                    and name.endswith('/' + relative)):
+                found.add(name[:-len(relative) - 1])
+    return found
+
+
+def resolve_topics(bag: Path, namespace: str | None = None) -> dict[str, str]:
+    """The recorded names of the reported topics (key -> absolute name): in ``namespace``, or
+    else in the one namespace where the recording holds the suite's topics. A BagError names the
+    namespaces when there are none or several to choose from."""
+    recorded = {name: t.type for name, t in bag_info(bag).topics.items()}
+    found = namespaces_of(recorded)
+    relative = ', '.join(TOPICS[k].name for k in REPORTED if not TOPICS[k].name.startswith('/'))
+    if namespace is None:
+        if not found:
+            raise BagError(f'{bag} holds none of the suite\'s topics ({relative}) in any '
+                           f'namespace; it has {", ".join(sorted(recorded)) or "no topics"}')
+        if len(found) > 1:
+            raise BagError(f'{bag} holds the suite\'s topics in several namespaces: '
+                           f'{", ".join(_shown(n) for n in sorted(found))}; choose one with '
+                           '--namespace')
+        (namespace,) = found
+    elif normalise_namespace(namespace) not in found:
+        raise BagError(f'{bag} holds none of the suite\'s topics ({relative}) in namespace '
+                       f'{_shown(normalise_namespace(namespace))}; it holds them in '
+                       f'{", ".join(_shown(n) for n in sorted(found)) or "no namespace"}')
+    return {key: topic_in(namespace, TOPICS[key].name) for key in REPORTED}
 
 
 @dataclass
@@ -78,26 +136,28 @@ def stops_from_curve(times: np.ndarray, positions: np.ndarray, speeds: np.ndarra
     return stops
 
 
-def load_run(bag: Path) -> RunData:
+def load_run(bag: Path, namespace: str | None = None) -> RunData:
+    """The run recorded in ``bag``; ``namespace``: see :func:`resolve_topics`."""
+    topics = resolve_topics(bag, namespace)
     decode = _decoder()
     states, references, commands, estimates = {}, {}, [], {}
     stops: list[StopSample] = []
-    for message in read_messages(bag, list(TOPICS.values())):
+    for message in read_messages(bag, list(topics.values())):
         msg = decode(message)
-        if message.topic == TOPICS['state']:
+        if message.topic == topics['state']:
             p = msg.points[0]
             states[_stamp(msg.header)] = (p.positions[0], p.velocities[0], sum(p.effort))
-        elif message.topic == TOPICS['reference']:
+        elif message.topic == topics['reference']:
             p = msg.points[0]
             references[_stamp(msg.header)] = (p.positions[0], p.velocities[0])
-        elif message.topic == TOPICS['command']:
+        elif message.topic == topics['command']:
             commands.append((_stamp(msg.header), sum(msg.effort), msg.header.frame_id))
-        elif message.topic == TOPICS['curve']:
+        elif message.topic == topics['curve']:
             times = np.array([p.time_from_start.sec + p.time_from_start.nanosec * 1e-9
                               for p in msg.points])
             stops = stops_from_curve(times, np.array([p.positions[0] for p in msg.points]),
                                      np.array([p.velocities[0] for p in msg.points]))
-        elif message.topic == TOPICS['diagnostics']:
+        elif message.topic == topics['diagnostics']:
             for status in msg.status:
                 for kv in status.values:
                     if kv.key.startswith('estimate.'):
@@ -107,10 +167,10 @@ def load_run(bag: Path) -> RunData:
                         except ValueError:
                             pass
     if not states:
-        raise BagError(f'{bag} has no {TOPICS["state"]} messages: nothing to report on')
+        raise BagError(f'{bag} has no {topics["state"]} messages: nothing to report on')
     stamps = np.array(sorted(k for k in states if k in references))
     if stamps.size == 0:
-        raise BagError(f'{bag}: no {TOPICS["reference"]} message matches a state stamp')
+        raise BagError(f'{bag}: no {topics["reference"]} message matches a state stamp')
     s = np.array([states[k] for k in stamps])
     r = np.array([references[k] for k in stamps])
     commands.sort()
@@ -188,9 +248,12 @@ def main(argv=None) -> int:
     parser.add_argument('bag', type=Path)
     parser.add_argument('--output', type=Path, default=None,
                         help='folder for the plots (default: <bag>/report)')
+    parser.add_argument('--namespace', default=None,
+                        help="namespace the stack ran in (-r __ns:=...), '/' for the root "
+                             "(default: the one namespace holding the suite's topics)")
     options = parser.parse_args(argv)
     try:
-        data = load_run(options.bag)
+        data = load_run(options.bag, options.namespace)
     except BagError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2

@@ -23,6 +23,7 @@ from ato_common.params import Param, ParameterTable
 from ato_common.plant_setup import parse_failure_injection
 from ato_common.ros import (
     MessageError,
+    RunNodeHooks,
     actuator_forces_to_msg,
     command_from_msg,
     diagnostic_status,
@@ -90,7 +91,7 @@ PARAMS = (
 DIAGNOSTIC_PERIOD_S = 1.0
 
 
-class TrainPlantNode(Node):
+class TrainPlantNode(RunNodeHooks, Node):
     def __init__(self):
         super().__init__('train_plant_node')
         self.params = ParameterTable(self, PARAMS)

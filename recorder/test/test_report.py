@@ -1,0 +1,95 @@
+"""The report reads the suite's topics by the conventions' names, in the namespace the stack ran
+in: found when the recording holds one, chosen with --namespace when it holds several."""
+
+from dataclasses import replace
+
+import pytest
+from rclpy.serialization import serialize_message
+
+from ato_common.conventions import TOPICS
+from ato_common.ros import command_to_msg, reference_to_msg, state_to_msg
+from ato_common.types import Command, Reference, ReferencePoint, TrainState
+from recorder.bag import BagError, BagWriter
+from recorder.report import load_run, main, namespaces_of, resolve_topics
+
+SECONDS = 11  # one sample a second: moving at 10 m/s, then stopped at the end of the curve
+
+
+def write_run(writer: BagWriter, namespace: str, lag_m: float) -> None:
+    """A run in ``namespace`` whose train lags its reference by ``lag_m``."""
+    def name(key):
+        return TOPICS[key].name if TOPICS[key].name.startswith('/') else \
+            f'{namespace}/{TOPICS[key].name}'
+    for key in ('state', 'reference', 'command', 'curve'):
+        writer.add_topic(name(key), TOPICS[key].type_name)
+    curve = Reference(0, tuple(ReferencePoint(float(k), 10.0 * min(k, 9), 10.0 if k < 9 else 0.0,
+                                              0.0) for k in range(SECONDS)))
+    writer.write(name('curve'), 0, serialize_message(reference_to_msg(curve)))
+    for k in range(SECONDS):
+        stamp = k * 1_000_000_000
+        x_ref = 10.0 * min(k, 9)
+        state = TrainState(stamp, ('car_1',), (x_ref - lag_m,), (10.0 if k < 9 else 0.0,),
+                           (0.0,), (1000.0,))
+        reference = Reference(stamp, (ReferencePoint(float(k), x_ref, state.speeds[0], 0.0),))
+        command = Command(stamp, ('car_1',), (1000.0,), f'law{namespace.replace("/", "_")}')
+        writer.write(name('state'), stamp, serialize_message(state_to_msg(state)))
+        writer.write(name('reference'), stamp, serialize_message(reference_to_msg(reference)))
+        writer.write(name('command'), stamp, serialize_message(command_to_msg(command)))
+
+
+def record(folder, runs: dict[str, float]):
+    """A recording of one run per namespace ('' is the root), namespace -> lag."""
+    writer = BagWriter(folder)
+    for namespace, lag in runs.items():
+        write_run(writer, namespace, lag)
+    writer.close()
+    return folder
+
+
+@pytest.mark.parametrize('namespace', ['', '/train1', '/fleet/train1'],
+                         ids=['root', 'train1', 'nested'])
+def test_the_one_namespace_of_the_recording_is_found(tmp_path, namespace):
+    bag = record(tmp_path / 'run', {namespace: 0.25})
+    assert resolve_topics(bag)['state'] == f'{namespace}/train/state'
+    assert resolve_topics(bag)['diagnostics'] == '/diagnostics'   # global by convention
+    data = load_run(bag)
+    assert len(data.stamps_ns) == SECONDS
+    assert data.ref_positions - data.positions == pytest.approx([0.25] * SECONDS)
+    assert data.laws == [f'law{namespace.replace("/", "_")}']
+    assert [(s.station_position_m, s.time_s) for s in data.stops] == [(90.0, 10.0)]
+
+
+def test_the_names_come_from_the_conventions(tmp_path, monkeypatch):
+    bag = record(tmp_path / 'run', {'/train1': 0.0})
+    assert namespaces_of({'/train1/train/state': TOPICS['state'].type_name}) == {'/train1'}
+    assert namespaces_of({'/train1/train/state': 'std_msgs/msg/Float64'}) == set()  # type
+    monkeypatch.setitem(TOPICS, 'state', replace(TOPICS['state'], name='renamed/state'))
+    assert resolve_topics(bag)['state'] == '/train1/renamed/state'
+
+
+def test_several_namespaces_are_an_error_naming_them_until_one_is_chosen(tmp_path, capsys):
+    bag = record(tmp_path / 'run', {'/train1': 0.5, '/train2': 2.0, '': 1.0})
+    with pytest.raises(BagError, match=r'several namespaces: /, /train1, /train2; choose one '
+                                       r'with --namespace'):
+        load_run(bag)
+    for chosen, lag in (('/train2', 2.0), ('train1', 0.5), ('/', 1.0)):
+        data = load_run(bag, chosen)
+        assert data.ref_positions - data.positions == pytest.approx([lag] * SECONDS), chosen
+    assert main([str(bag)]) == 2
+    assert 'several namespaces: /, /train1, /train2' in capsys.readouterr().err
+    assert main([str(bag), '--namespace', '/train2', '--output', str(tmp_path / 'plots')]) == 0
+    assert 'law_train2' in capsys.readouterr().out
+    assert (tmp_path / 'plots' / 'tracking.png').exists()
+
+
+def test_a_namespace_without_the_topics_or_a_recording_without_any_says_where_they_are(
+        tmp_path):
+    bag = record(tmp_path / 'run', {'/train1': 0.0})
+    with pytest.raises(BagError, match=r'in namespace /train9; it holds them in /train1'):
+        load_run(bag, '/train9')
+    other = BagWriter(tmp_path / 'other')
+    other.add_topic('/chatter', 'std_msgs/msg/String')
+    other.close()
+    with pytest.raises(BagError, match=r"none of the suite's topics \(train/state, "
+                                       r'ato/reference, .*\) in any namespace; it has /chatter'):
+        load_run(tmp_path / 'other')
