@@ -3,6 +3,7 @@ the code that cover every topic, parameter, law, scenario and preset, and a navi
 holds every page."""
 
 import re
+import subprocess
 from pathlib import Path
 
 import yaml
@@ -74,3 +75,28 @@ def test_a_changed_description_changes_the_generated_page(monkeypatch):
     changed[name] = replace(TOPICS[name], description='a description only this test uses')
     monkeypatch.setattr(reference_pages, 'TOPICS', changed)
     assert 'a description only this test uses' in reference_pages.topics_page()
+
+
+#: a code span that names a file of the repository
+_PATH = re.compile(r'`([A-Za-z0-9_.\-]+(?:/[A-Za-z0-9_.\-]+)+'
+                   r'\.(?:py|yaml|yml|json|md|sh|txt|xml|toml|ini))(?:::[A-Za-z0-9_]+)?[ `]')
+#: paths that are examples or made by a run, not files of the repository
+_NOT_IN_REPOSITORY = ('runs/', 'journeys/', 'trains/', 'tracks/', '/path/', 'share/')
+
+
+def test_every_file_the_docs_name_exists():
+    """A hand-written page that names a file of the repository (a test, a module, a data
+    file) names one that exists: a moved file fails here until the page follows it."""
+    tracked = subprocess.run(['git', '-C', str(ROOT), 'ls-files'], capture_output=True,
+                             text=True, check=True).stdout.split()
+    missing = []
+    for page in [ROOT / 'README.md', *sorted((ROOT / 'docs').rglob('*.md'))]:
+        for number, line in enumerate(page.read_text().splitlines(), 1):
+            for path in _PATH.findall(line + ' '):
+                if path.startswith(_NOT_IN_REPOSITORY) or 'my_' in path or 'example' in path:
+                    continue
+                # a path relative to the repository, or to a package folder (`laws/base.py`)
+                if not (ROOT / path).exists() and not any(t.endswith('/' + path)
+                                                          for t in tracked):
+                    missing.append(f'{page.relative_to(ROOT)}:{number}: {path}')
+    assert not missing, 'the docs name files that do not exist:\n' + '\n'.join(missing)
