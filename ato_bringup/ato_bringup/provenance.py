@@ -68,7 +68,7 @@ def machine_description() -> str:
     load = ', '.join(f'{x:.1f}' for x in os.getloadavg())
     return (f'{platform.machine()}, {cpu}, {os.cpu_count()} cores{memory}, '
             f'{platform.system()} {platform.release()}, Python {platform.python_version()}, '
-            f'load average {load} when written')
+            f'load average {load} at the start')
 
 
 def provenance(ignore: tuple[str, ...] = ()) -> Provenance:
