@@ -24,7 +24,7 @@ setup(
         'and the comparison of the laws.'
     ),
     license='Apache-2.0',
-    tests_require=['pytest', 'numpy', 'grimp'],
+    tests_require=['pytest', 'numpy', 'PyYAML', 'grimp', 'ruff', 'mkdocs', 'mkdocs-gen-files'],
     entry_points={
         'console_scripts': [
             'run_scenario = ato_bringup.run_scenario:main'
