@@ -7,7 +7,7 @@ SCENARIO ?=
 CONTROLLER ?=
 PYTEST_ARGS ?=
 
-.PHONY: help setup build demo compare test test-unit test-integration lint docs docs-serve bench curves clean
+.PHONY: help setup build demo compare reproduce test test-unit test-integration lint docs docs-serve bench curves clean
 
 help:
 	@echo "make setup   create .venv with pinned packages and build ros_ws (idempotent)"
@@ -16,6 +16,7 @@ help:
 	@echo "             (SCENARIO=name-or-file CONTROLLER=law to override)"
 	@echo "make compare every applicable law on every built-in scenario, offline, in parallel:"
 	@echo "             runs/compare/compare.md (tables, ranking) and plots (SCENARIO=name: one only)"
+	@echo "make reproduce  run the papers' reproduction tests and write docs/results/reproduction.md"
 	@echo "make test    lint, build the docs strictly, run every test (unit tests of the cores and"
 	@echo "             integration tests over rclpy)"
 	@echo "make lint    ruff over the repository"
@@ -36,6 +37,9 @@ demo: setup
 compare: setup
 	@$(ENV) python -m ato_bringup.compare \
 	  $(if $(SCENARIO),--scenario $(SCENARIO),--results-page docs/results/comparison.md)
+
+reproduce: setup
+	@$(ENV) python -m ato_bringup.reproduction
 
 test: setup lint docs
 	@$(ENV) python -m pytest $(PYTEST_ARGS)
