@@ -17,7 +17,7 @@ from ato_common.types import TrainState
 from recorder.bag import BagError, BagWriter, bag_file, bag_info, read_messages, recover
 from recorder.cli import info_main, recover_main
 from recorder.definitions import full_definition
-from recorder.ros_io import qos_from_yaml, qos_to_yaml
+from recorder.ros_io import offered_profiles, replay_qos
 
 STATE_TYPE = 'trajectory_msgs/msg/JointTrajectory'
 
@@ -30,7 +30,7 @@ def state_bytes(k: int) -> bytes:
 
 def write_bag(folder, count=100, **options):
     writer = BagWriter(folder, **options)
-    writer.add_topic('/train/state', STATE_TYPE, qos_to_yaml([QoSProfile(depth=10)]))
+    writer.add_topic('/train/state', STATE_TYPE, offered_profiles([QoSProfile(depth=10)]))
     for k in range(count):
         writer.write('/train/state', k * 100_000_000, state_bytes(k))
     return writer
@@ -145,11 +145,11 @@ def test_an_unclosed_recording_keeps_what_was_flushed(tmp_path):
 
 def test_offered_qos_round_trip_keeps_latched_topics_latched():
     latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    assert qos_from_yaml(qos_to_yaml([latched])).durability == DurabilityPolicy.TRANSIENT_LOCAL
-    assert qos_from_yaml(qos_to_yaml([QoSProfile(depth=5)])).durability == \
+    assert replay_qos(offered_profiles([latched])).durability == DurabilityPolicy.TRANSIENT_LOCAL
+    assert replay_qos(offered_profiles([QoSProfile(depth=5)])).durability == \
         DurabilityPolicy.VOLATILE
-    mixed = qos_to_yaml([latched, QoSProfile(depth=5)])
-    assert qos_from_yaml(mixed).durability == DurabilityPolicy.VOLATILE
+    mixed = offered_profiles([latched, QoSProfile(depth=5)])
+    assert replay_qos(mixed).durability == DurabilityPolicy.VOLATILE
 
 
 def test_a_corrupt_chunk_gives_a_clear_error_and_recover_keeps_the_original_safe(tmp_path):
