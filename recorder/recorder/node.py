@@ -120,7 +120,8 @@ class RecorderNode(RunNodeHooks, Node):
     def _callback(self, topic: str, stamped: bool):
         write, clock = self.writer.write, self.get_clock()
 
-        def on_message(data: bytes, info=None) -> None:
+        # Two parameters, no default: rclpy passes the message info only to such a callback.
+        def on_message(data: bytes, info) -> None:
             if self.finished:
                 return
             log_time_ns = cdr_stamp_ns(data) if stamped else None
@@ -135,7 +136,7 @@ class RecorderNode(RunNodeHooks, Node):
             self.received += 1
         if self.publish_time == 'source':
             return on_message
-        return lambda data: on_message(data)
+        return lambda data: on_message(data, None)
 
     def flush(self) -> None:
         try:
