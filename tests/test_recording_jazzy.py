@@ -5,7 +5,6 @@ into Jazzy's format replayed reliable and latched where it was recorded so."""
 
 import signal
 import subprocess
-import time
 
 import pytest
 import yaml
@@ -149,19 +148,33 @@ def test_sigkill_in_lockstep_loses_at_most_a_second_of_simulated_time(tmp_path, 
     assert recorded == sorted(set(recorded)) and len(recorded) > 150
 
 
-def test_replay_stops_on_sigint_and_sigterm_with_exit_0(recorded, domain_id):
-    for sent in (signal.SIGINT, signal.SIGTERM):
-        process = subprocess.Popen(
-            [executable_path('recorder', 'replay'), str(recorded), '--loop'],
-            env={**__import__('os').environ, 'ROS_DOMAIN_ID': str(domain_id)},
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        time.sleep(3.0)  # under way
+def test_replay_stops_on_sigint_and_sigterm_with_exit_0(recorded, tmp_path, domain_id):
+    with Stack(StackConfig(scenario='short_line', domain_id=domain_id,
+                           log_dir=tmp_path / 'logs')) as stack:
+        for sent in (signal.SIGINT, signal.SIGTERM):
+            stop_replay(stack, recorded, sent)
+
+
+def stop_replay(stack, recorded, sent):
+    states = []
+    stack.node.create_subscription(JointTrajectory, '/train/state', states.append,
+                                   QoSProfile(depth=100))
+    process = subprocess.Popen(
+        [executable_path('recorder', 'replay'), str(recorded), '--loop'],
+        env=stack.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        # under way: publishing the recorded states
+        assert stack.spin_until(lambda: len(states) > 5, 120.0)
         assert process.poll() is None
         process.send_signal(sent)
         out, err = process.communicate(timeout=60)
-        assert process.returncode == 0, (sent, err)
-        assert 'Traceback' not in err and 'Exception' not in err, err
-        assert 'stopped on signal' in out + err
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert process.returncode == 0, (sent, err)
+    assert 'Traceback' not in err and 'Exception' not in err, err
+    assert 'stopped on signal' in out + err
 
 
 def test_a_bag_converted_by_rosbags_replays_reliable_and_latched(recorded, tmp_path,

@@ -31,6 +31,7 @@ from recorder.ros_io import message_class, replay_qos
 from recorder.rosbag2_format import FormatError
 
 CLOCK_TOPIC = '/clock'
+MATCH_SETTLE_S = 0.5
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
@@ -148,12 +149,18 @@ def main(args=None) -> int:
         replayer = Replayer(node, options)
         stop['replayer'] = replayer
         replayer.stopped = stop['requested']
+        node.get_logger().info(f'replaying {len(replayer.topics)} topics of {options.bag}')
         if options.wait_for_subscribers:
             publishers = list(replayer.publishers.values()) + [
                 p for p in (replayer.clock_pub,) if p is not None]
             while rclpy.ok() and not replayer.stopped and any(
                     p.get_subscription_count() < options.wait_for_subscribers
                     for p in publishers):
+                executor.spin_once(timeout_sec=0.05)
+            # Matched on the publishers' side; give the subscribers' side the moment it may
+            # need to match too, or a reliable volatile subscriber can miss the first messages.
+            settle = time.monotonic() + MATCH_SETTLE_S
+            while not replayer.stopped and time.monotonic() < settle:
                 executor.spin_once(timeout_sec=0.05)
         while not replayer.stopped:
             replayer.play_once(executor)
