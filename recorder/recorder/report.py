@@ -13,7 +13,8 @@ The metrics are those ``make demo`` prints (:mod:`ato_common.metrics`): the lead
 state against the reference at each stamp, stopping errors read where the latched target curve
 leaves each stop, traction energy from the applied force.
 
-The plots (``<bag>/report/*.png``): target, actual and permitted speed (the profile's permitted
+The plots (``<bag>/report/*.png``, and all of them with the summary table in the single page
+``report.html``): target, actual and permitted speed (the profile's permitted
 speed: static limits and braking curves) with the ATP's interventions and the command
 watchdog's events marked on the time axis (from the plant's and the controller's diagnostics);
 tracking errors; distance to go; the stops with their stopping errors; per car, position, speed
@@ -431,6 +432,49 @@ def plot(data: RunData, folder: Path) -> list[Path]:
     return written
 
 
+def summary_rows(metrics: RunMetrics, laws: list[str]) -> list[tuple[str, str]]:
+    """The summary table: quantity (with its unit) and value."""
+    rows = [('controller', ', '.join(laws)),
+            ('speed error, RMS (km/h)', f'{metrics.rms_speed_error_kmh:.4f}'),
+            ('speed error, max (km/h)', f'{metrics.max_speed_error_kmh:.4f}'),
+            ('position error, RMS (m)', f'{metrics.rms_position_error_m:.4f}'),
+            ('position error, max (m)', f'{metrics.max_position_error_m:.4f}')]
+    rows += [(f'stopping error, {station} (m)', f'{error:+.4f}')
+             for station, error in metrics.stop_errors_m.items()]
+    rows += [('traction energy (kWh)', f'{metrics.traction_energy_kwh:.2f}'),
+             ('simulated time (s)', f'{metrics.simulated_time_s:.1f}'),
+             ('samples', str(metrics.samples))]
+    return rows
+
+
+def write_html(path: Path, title: str, metrics: RunMetrics, data: RunData,
+               plots: list[Path]) -> Path:
+    """One self-contained page: the summary table, the events, and every plot embedded (no
+    file beside it needed, no script)."""
+    import base64
+    from html import escape
+    rows = ''.join(f'<tr><th scope="row">{escape(k)}</th><td>{escape(v)}</td></tr>'
+                   for k, v in summary_rows(metrics, data.laws))
+    events = ''.join(f'<tr><td>{t:.2f}</td><td>{escape(kind)}</td><td>{escape(message)}</td>'
+                     '</tr>' for t, kind, message in data.events)
+    figures = ''.join(
+        f'<figure id="{escape(p.stem)}"><img alt="{escape(p.stem)}" src="data:image/png;base64,'
+        f'{base64.b64encode(p.read_bytes()).decode()}"><figcaption>{escape(p.stem)}'
+        '</figcaption></figure>' for p in plots)
+    page = (
+        '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+        f'<title>{escape(title)}</title><style>body{{font-family:sans-serif;margin:2em}}'
+        'table{border-collapse:collapse}th,td{border:1px solid #ccc;padding:0.2em 0.6em;'
+        'text-align:left}img{max-width:100%}</style></head><body>'
+        f'<h1>{escape(title)}</h1><h2>Summary</h2><table id="summary">{rows}</table>'
+        '<h2>ATP interventions and watchdog events</h2>'
+        + (f'<table id="events"><tr><th>time (s)</th><th>event</th><th>message</th></tr>'
+           f'{events}</table>' if data.events else '<p id="events">none</p>')
+        + f'<h2>Plots</h2>{figures}</body></html>\n')
+    path.write_text(page, encoding='utf-8')
+    return path
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog='report', description=__doc__.split('\n\n')[0])
     parser.add_argument('bag', type=Path)
@@ -450,8 +494,12 @@ def main(argv=None) -> int:
     for t, kind, message in data.events:
         print(f'event at {t:9.2f} s: {kind}: {message}')
     folder = options.output or Path(options.bag) / 'report'
-    for path in plot(data, folder):
+    plots = plot(data, folder)
+    for path in plots:
         print(f'plot: {path}')
+    page = write_html(folder / 'report.html', f'Run report: {Path(options.bag).name}', metrics,
+                      data, plots)
+    print(f'html: {page}')
     return 0
 
 

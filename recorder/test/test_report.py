@@ -145,3 +145,36 @@ def test_the_report_marks_atp_and_watchdog_events_and_plots_every_actuator(tmp_p
     for name in ('tracking', 'errors', 'distance_to_go', 'stops', 'commands', 'actuators',
                  'energy'):
         assert (tmp_path / 'plots' / f'{name}.png').exists(), name
+
+
+def test_the_html_report_holds_the_summary_and_every_plot(tmp_path):
+    import base64
+    from html.parser import HTMLParser
+
+    bag = record(tmp_path / 'run', {'': 0.25})
+    assert main([str(bag), '--output', str(tmp_path / 'plots')]) == 0
+    pngs = sorted(p.stem for p in (tmp_path / 'plots').glob('*.png'))
+
+    class Page(HTMLParser):
+        images, cells, in_cell = {}, [], False
+
+        def handle_starttag(self, tag, attrs):
+            attrs = dict(attrs)
+            if tag == 'img':
+                self.images[attrs['alt']] = attrs['src']
+            self.in_cell = tag in ('th', 'td')
+
+        def handle_data(self, data):
+            if self.in_cell:
+                self.cells.append(data)
+
+    page = Page()
+    page.feed((tmp_path / 'plots' / 'report.html').read_text())
+    assert sorted(page.images) == pngs and 'tracking' in pngs
+    for name, src in page.images.items():
+        prefix = 'data:image/png;base64,'
+        assert src.startswith(prefix), name
+        assert base64.b64decode(src[len(prefix):]) == (tmp_path / 'plots' /
+                                                       f'{name}.png').read_bytes()
+    assert 'position error, max (m)' in page.cells and '0.2500' in page.cells
+    assert 'stopping error, stop at 90 m (m)' in page.cells
