@@ -18,7 +18,7 @@ The plots (``<bag>/report/*.png``, and all of them with the summary table in the
 speed: static limits and braking curves) with the ATP's interventions and the command
 watchdog's events marked on the time axis (from the plant's and the controller's diagnostics);
 tracking errors; distance to go; the stops with their stopping errors; per car, position, speed
-and coupler force (the effort of train/state) for multi-car runs; per actuator, the commanded
+and applied force (the effort of train/state) for multi-car runs; per actuator, the commanded
 and the applied force (train/actuators/*); traction energy over time; the measured against the
 true state; the law's estimates. Every axis is labelled with its quantity and unit.
 """
@@ -129,7 +129,7 @@ class RunData:
     cars: list[str] = field(default_factory=list)
     car_positions: np.ndarray | None = None  # (samples, cars)
     car_speeds: np.ndarray | None = None
-    car_forces: np.ndarray | None = None     # effort per car: coupler force ahead of it, N
+    car_forces: np.ndarray | None = None     # effort per car: the force applied on it, N
     measured: dict[int, tuple[float, float]] = field(default_factory=dict)  # stamp -> (x, v)
     permitted: list[tuple[float, float]] = field(default_factory=list)  # (s, m/s)
     distance_to_go: list[tuple[float, float]] = field(default_factory=list)  # (s, m)
@@ -391,10 +391,10 @@ def plot(data: RunData, folder: Path) -> list[Path]:
             axes[2].plot(t, data.car_forces[:, i] / 1000, label=car, lw=1)
         axes[0].set_ylabel('position behind the\nlead car (m)')
         axes[1].set_ylabel('speed (km/h)')
-        axes[2].set_ylabel('coupler force (kN)')
+        axes[2].set_ylabel('applied force (kN)')
         axes[2].set_xlabel('time (s)')
         axes[0].legend(fontsize=7, ncol=min(len(data.cars), 6))
-        fig.suptitle('per car: position, speed and coupler force')
+        fig.suptitle('per car: position, speed and applied force')
         save(fig, 'cars.png')
 
     fig, a = plt.subplots(figsize=(10, 3.5))

@@ -178,3 +178,26 @@ def test_the_html_report_holds_the_summary_and_every_plot(tmp_path):
                                                        f'{name}.png').read_bytes()
     assert 'position error, max (m)' in page.cells and '0.2500' in page.cells
     assert 'stopping error, stop at 90 m (m)' in page.cells
+
+
+def test_a_multi_car_run_is_plotted_per_car(tmp_path):
+    writer = BagWriter(tmp_path / 'run')
+    for key in ('state', 'reference', 'command', 'curve'):
+        writer.add_topic('/' + TOPICS[key].name, TOPICS[key].type_name)
+    for k in range(SECONDS):
+        stamp = k * 1_000_000_000
+        state = TrainState(stamp, ('car_1', 'car_2'), (10.0 * k, 10.0 * k - 25.0),
+                           (10.0, 10.0 - 0.1 * k), (0.0, 0.0), (1000.0, -500.0))
+        reference = Reference(stamp, (ReferencePoint(float(k), 10.0 * k, 10.0, 0.0),))
+        writer.write('/train/state', stamp, serialize_message(state_to_msg(state)))
+        writer.write('/ato/reference', stamp, serialize_message(reference_to_msg(reference)))
+        writer.write('/ato/command', stamp, serialize_message(command_to_msg(
+            Command(stamp, ('car_1',), (500.0,), 'pid'))))
+    writer.close()
+    data = load_run(tmp_path / 'run')
+    assert data.cars == ['car_1', 'car_2']
+    assert data.car_positions[:, 1] - data.car_positions[:, 0] == pytest.approx([-25.0] * 11)
+    assert data.car_speeds[-1, 1] == pytest.approx(9.0)
+    assert data.car_forces[0].tolist() == [1000.0, -500.0]
+    assert main([str(tmp_path / 'run'), '--output', str(tmp_path / 'plots')]) == 0
+    assert (tmp_path / 'plots' / 'cars.png').exists()
