@@ -146,8 +146,8 @@ def test_replay_with_offset_topic_selection_and_remap(recorded, tmp_path, domain
     info = bag_info(out)
     states = sorted(state_stamp(m) for m in read_messages(out, ['/replayed/state']))
     assert set(info.topics) == {'/replayed/state', '/clock'}  # the recorded /clock goes along
-    # The offset counts in log time (when the recorder received a message), as rosbag2's does:
-    # a state stamped 149.9 s may have been logged after /clock reached 150 s.
+    # The offset counts in log time, as rosbag2's does (the suite's stamped topics are logged at
+    # their stamp, by default).
     offset_ns = bag_info(bag).start_ns + 150_000_000_000
     expected = sorted(state_stamp(m) for m in read_messages(bag, ['/train/state'])
                       if m.log_time_ns >= offset_ns)

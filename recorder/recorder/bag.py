@@ -1,11 +1,16 @@
 """Bags in the rosbag2 MCAP conventions: a folder with ``<name>_0.mcap`` and ``metadata.yaml``.
 
-MCAP profile ``ros2``; one schema per type, encoding ``ros2msg`` with the full definition and its
-dependencies; message encoding ``cdr`` (the raw bytes as received); each channel carries
-``offered_qos_profiles`` (YAML, as rosbag2 writes it) so a latched topic replays latched. Chunks
-are zstd-compressed and closed at least every ``flush_period_s`` of wall time, so a killed
-recorder loses at most about that much; ``recover`` turns what a killed recording holds back into
-a valid bag.
+As rosbag2 Jazzy's MCAP storage plugin writes them: MCAP profile ``ros2``; one schema per type,
+encoding ``ros2msg`` with the full definition and its dependencies; message encoding ``cdr`` (the
+raw bytes as received), sequence 0; each channel carries ``offered_qos_profiles`` (version 9 YAML,
+named policies, as the publishers offered them) and ``topic_type_hash`` (RIHS01); at the close a
+``rosbag2`` metadata record holds the bag's metadata (``serialized_metadata``) and
+``metadata.yaml`` (version 9) is written beside the file (:mod:`recorder.rosbag2_format`).
+
+Chunks are zstd-compressed and closed at least every ``flush_period_s`` of wall time and every
+``flush_period_log_s`` of log time (simulated time in a lockstep run), so a killed recorder loses
+at most about the smaller of the two; ``recover`` turns what a killed recording holds back into a
+valid bag.
 """
 
 from __future__ import annotations
@@ -27,6 +32,14 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from recorder.definitions import DefinitionNotFound, full_definition
+from recorder.rosbag2_format import (
+    FormatError,
+    bag_metadata,
+    dump_qos_profiles,
+    dump_yaml,
+    parse_qos_profiles,
+    type_hash,
+)
 
 log = logging.getLogger(__name__)
 
@@ -36,10 +49,11 @@ READ_ERRORS = (McapError, ValueError, EOFError, KeyError, struct.error, zstandar
                RuntimeError)
 
 METADATA_FILE = 'metadata.yaml'
-# Version 8: offered_qos_profiles as one YAML string with numeric policies (version 9 lists them).
-ROSBAG2_METADATA_VERSION = 8
+MCAP_MAGIC = b'\x89MCAP0\r\n'
+METADATA_RECORD = 'rosbag2'  # the MCAP metadata record rosbag2 writes its metadata into
 DEFAULT_CHUNK_SIZE = 256 * 1024
 DEFAULT_FLUSH_PERIOD_S = 0.5
+DEFAULT_FLUSH_PERIOD_LOG_S = 0.25
 
 
 class BagError(RuntimeError):
@@ -50,8 +64,17 @@ class BagError(RuntimeError):
 class TopicInfo:
     name: str
     type: str
-    offered_qos_profiles: str = ''
+    offered_qos_profiles: list[dict] = field(default_factory=list)  # version 9, named
     message_count: int = 0
+    type_description_hash: str = ''
+    serialization_format: str = 'cdr'
+
+    def as_metadata(self) -> dict:
+        return {'name': self.name, 'type': self.type,
+                'serialization_format': self.serialization_format,
+                'offered_qos_profiles': self.offered_qos_profiles,
+                'type_description_hash': self.type_description_hash,
+                'message_count': self.message_count}
 
 
 @dataclass
@@ -60,6 +83,7 @@ class BagInfo:
     start_ns: int
     end_ns: int
     topics: dict[str, TopicInfo] = field(default_factory=dict)
+    custom_data: dict[str, str] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
@@ -77,11 +101,24 @@ def bag_file(folder: Path) -> Path:
 class BagWriter:
     def __init__(self, folder: Path, compression: str = 'zstd',
                  chunk_size: int = DEFAULT_CHUNK_SIZE,
-                 flush_period_s: float = DEFAULT_FLUSH_PERIOD_S):
+                 flush_period_s: float = DEFAULT_FLUSH_PERIOD_S,
+                 flush_period_log_s: float = DEFAULT_FLUSH_PERIOD_LOG_S,
+                 custom_data: dict[str, str] | None = None):
         kinds = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
                  'none': CompressionType.NONE}
         if compression not in kinds:
             raise BagError(f"compression '{compression}' is not one of {', '.join(kinds)}")
+        for name, period in (('flush_period_s', flush_period_s),
+                             ('flush_period_log_s', flush_period_log_s)):
+            if not (isinstance(period, (int, float)) and period > 0.0 and period < float('inf')):
+                raise BagError(f'{name} must be a positive number of seconds, got {period!r}')
+        custom_data = dict(custom_data or {})
+        bad = [f'{k!r}: {v!r}' for k, v in custom_data.items()
+               if not isinstance(k, str) or not isinstance(v, str) or not k]
+        if bad:
+            raise BagError(f'custom_data holds non-empty string keys and string values only: '
+                           f'{", ".join(bad)}')
+        self.custom_data = custom_data
         self.folder = Path(folder)
         if self.folder.exists() and any(self.folder.iterdir()):
             raise BagError(f'{self.folder} exists and is not empty: choose another output folder')
@@ -94,7 +131,9 @@ class BagWriter:
         self._writer = Writer(self._file, chunk_size=chunk_size, compression=kinds[compression])
         self._writer.start(profile='ros2', library='ato-emulator recorder')
         self.flush_period_s = flush_period_s
+        self.flush_period_log_ns = int(flush_period_log_s * 1e9)
         self._last_flush = time.monotonic()
+        self._last_flush_log_ns: int | None = None
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self.topics: dict[str, TopicInfo] = {}
@@ -104,25 +143,40 @@ class BagWriter:
         self.failed = False
         self.warnings: list[str] = []
 
-    def add_topic(self, topic: str, type_name: str, offered_qos_profiles: str = '') -> None:
+    def add_topic(self, topic: str, type_name: str, offered_qos_profiles=(),
+                  type_description_hash: str | None = None) -> None:
+        """A channel for ``topic``: ``offered_qos_profiles`` as its publishers offered them (a
+        list of version 9 profiles, or their YAML in either version), and the RIHS01 hash of the
+        type (computed by rosbags from the definition when None)."""
         if topic in self._channels:
             return
-        schema_id = self._schemas.get(type_name)
-        if schema_id is None:
-            try:
-                definition = full_definition(type_name)
-            except (DefinitionNotFound, ValueError) as error:
+        try:
+            profiles = parse_qos_profiles(list(offered_qos_profiles) if not
+                                          isinstance(offered_qos_profiles, str)
+                                          else offered_qos_profiles)
+        except FormatError as error:
+            raise BagError(f'{topic}: offered QoS not in the rosbag2 format: {error}') from None
+        definition = ''
+        try:
+            definition = full_definition(type_name)
+        except (DefinitionNotFound, ValueError) as error:
+            if type_name not in self._schemas:
                 # Still recorded; readers that need the definition will not decode it.
-                definition = ''
                 warning = f'no message definition for {type_name} ({error}); {topic} is ' \
                           'recorded without one'
                 self.warnings.append(warning)
                 log.warning(warning)
+        schema_id = self._schemas.get(type_name)
+        if schema_id is None:
             schema_id = self._writer.register_schema(type_name, 'ros2msg', definition.encode())
             self._schemas[type_name] = schema_id
+        if type_description_hash is None:
+            type_description_hash = type_hash(type_name, definition)
         self._channels[topic] = self._writer.register_channel(
-            topic, 'cdr', schema_id, {'offered_qos_profiles': offered_qos_profiles})
-        self.topics[topic] = TopicInfo(topic, type_name, offered_qos_profiles)
+            topic, 'cdr', schema_id, {'offered_qos_profiles': dump_qos_profiles(profiles),
+                                      'topic_type_hash': type_description_hash})
+        self.topics[topic] = TopicInfo(topic, type_name, profiles,
+                                       type_description_hash=type_description_hash)
 
     def _failed(self, error: OSError) -> BagError:
         self.failed = True
@@ -137,20 +191,24 @@ class BagWriter:
             raise BagError(f'{self.path}: the recording stopped after a write error')
         info = self.topics[topic]
         try:
+            # Sequence 0, as rosbag2 writes it.
             self._writer.add_message(self._channels[topic], log_time=log_time_ns, data=data,
                                      publish_time=log_time_ns if publish_time_ns is None
-                                     else publish_time_ns, sequence=info.message_count)
+                                     else publish_time_ns, sequence=0)
         except OSError as error:
             raise self._failed(error) from None
         info.message_count += 1
         if self.start_ns is None or log_time_ns < self.start_ns:
             self.start_ns = log_time_ns
         self.end_ns = max(self.end_ns, log_time_ns)
+        if self._last_flush_log_ns is None:
+            self._last_flush_log_ns = log_time_ns
         now = time.monotonic()
-        if now - self._last_flush >= self.flush_period_s:
-            self.flush(now)
+        if (now - self._last_flush >= self.flush_period_s
+                or log_time_ns - self._last_flush_log_ns >= self.flush_period_log_ns):
+            self.flush(now, log_time_ns)
 
-    def flush(self, now: float | None = None) -> None:
+    def flush(self, now: float | None = None, log_time_ns: int | None = None) -> None:
         """Close the open chunk and push it to the file (what a SIGKILL cannot take back)."""
         if self.failed or self.closed:
             return
@@ -159,6 +217,8 @@ class BagWriter:
         except OSError as error:
             raise self._failed(error) from None
         self._last_flush = time.monotonic() if now is None else now
+        if log_time_ns is not None or self.topics:
+            self._last_flush_log_ns = self.end_ns if log_time_ns is None else log_time_ns
 
     def close(self) -> BagInfo:
         """Finish the file and write metadata.yaml; after a write error only release the file
@@ -168,6 +228,8 @@ class BagWriter:
         self.closed = True
         if not self.failed:
             try:
+                self._writer.add_metadata(METADATA_RECORD, {
+                    'serialized_metadata': serialized_metadata(self.info())})
                 self._writer.finish()
                 self._file.flush()
                 os.fsync(self._file.fileno())
@@ -186,36 +248,29 @@ class BagWriter:
 
     def info(self) -> BagInfo:
         start = self.start_ns or 0
-        return BagInfo(self.path, start, max(self.end_ns, start), dict(self.topics))
+        return BagInfo(self.path, start, max(self.end_ns, start), dict(self.topics),
+                       dict(self.custom_data))
+
+
+def metadata_of(info: BagInfo) -> dict:
+    """The bag's ``rosbag2_bagfile_information``, as rosbag2 Jazzy writes it."""
+    return bag_metadata(start_ns=info.start_ns, end_ns=info.end_ns,
+                        relative_path=info.path.name,
+                        topics=[t.as_metadata() for t in info.topics.values()],
+                        custom_data=info.custom_data)
+
+
+def serialized_metadata(info: BagInfo) -> str:
+    """What the MCAP's ``rosbag2`` metadata record holds under ``serialized_metadata``."""
+    return dump_yaml(metadata_of(info))
 
 
 def write_metadata(info: BagInfo) -> None:
     """metadata.yaml as rosbag2 writes it, so the folder opens as a bag."""
-    relative = info.path.name
-    data = {'rosbag2_bagfile_information': {
-        'version': ROSBAG2_METADATA_VERSION,
-        'storage_identifier': 'mcap',
-        'duration': {'nanoseconds': info.end_ns - info.start_ns},
-        'starting_time': {'nanoseconds_since_epoch': info.start_ns},
-        'message_count': info.message_count,
-        'topics_with_message_count': [
-            {'topic_metadata': {'name': t.name, 'type': t.type, 'serialization_format': 'cdr',
-                                'offered_qos_profiles': t.offered_qos_profiles,
-                                'type_description_hash': ''},
-             'message_count': t.message_count} for t in info.topics.values()],
-        'compression_format': '',
-        'compression_mode': '',
-        'relative_file_paths': [relative],
-        'files': [{'path': relative,
-                   'starting_time': {'nanoseconds_since_epoch': info.start_ns},
-                   'duration': {'nanoseconds': info.end_ns - info.start_ns},
-                   'message_count': info.message_count}],
-        'custom_data': {},
-        'ros_distro': 'jazzy',
-    }}
+    data = {'rosbag2_bagfile_information': metadata_of(info)}
     target = info.path.parent / METADATA_FILE
     temporary = target.with_suffix('.yaml.tmp')
-    temporary.write_text(yaml.safe_dump(data, sort_keys=False))
+    temporary.write_text(dump_yaml(data))
     temporary.replace(target)  # never a half-written metadata.yaml
 
 
@@ -302,13 +357,33 @@ def bag_info(path: Path) -> BagInfo:
         raise BagError(f'{file} has no summary: it was not closed; recover it with: '
                        f'ros2 run recorder recover {file}')
     stats = summary.statistics
-    topics = {}
-    for channel_id, channel in summary.channels.items():
-        schema = summary.schemas.get(channel.schema_id)
-        topics[channel.topic] = TopicInfo(channel.topic, schema.name if schema else '',
-                                          channel.metadata.get('offered_qos_profiles', ''),
-                                          stats.channel_message_counts.get(channel_id, 0))
-    return BagInfo(file, stats.message_start_time, stats.message_end_time, topics)
+    topics = {channel.topic: topic_of(file, channel, summary.schemas.get(channel.schema_id),
+                                      stats.channel_message_counts.get(channel_id, 0))
+              for channel_id, channel in summary.channels.items()}
+    return BagInfo(file, stats.message_start_time, stats.message_end_time, topics,
+                   _custom_data(file))
+
+
+def topic_of(file: Path, channel: Channel, schema: Schema | None, count: int) -> TopicInfo:
+    """A channel's topic: its offered QoS (version 8 or 9) and type hash from its metadata."""
+    try:
+        profiles = parse_qos_profiles(channel.metadata.get('offered_qos_profiles', ''))
+    except FormatError as error:
+        raise BagError(f'{file}: the offered_qos_profiles of {channel.topic} are not in the '
+                       f'rosbag2 format: {error}') from None
+    return TopicInfo(channel.topic, schema.name if schema else '', profiles, count,
+                     channel.metadata.get('topic_type_hash', ''), channel.message_encoding)
+
+
+def _custom_data(file: Path) -> dict[str, str]:
+    """custom_data of the bag's metadata.yaml, if the folder has one that holds it."""
+    metadata = file.parent / METADATA_FILE
+    try:
+        data = yaml.safe_load(metadata.read_text())
+        custom = data['rosbag2_bagfile_information'].get('custom_data') or {}
+    except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError):
+        return {}
+    return {str(k): str(v) for k, v in custom.items()} if isinstance(custom, dict) else {}
 
 
 def recover(path: Path) -> tuple[BagInfo, int]:
@@ -320,6 +395,14 @@ def recover(path: Path) -> tuple[BagInfo, int]:
     bytes that could not be read.
     """
     file = resolve(path)
+    try:
+        with open(file, 'rb') as stream:
+            head = stream.read(len(MCAP_MAGIC))
+    except OSError as error:
+        raise BagError(f'{file}: cannot read: {error.strerror}') from None
+    if head != MCAP_MAGIC:
+        raise BagError(f'{file} is not an MCAP file (it does not start with the MCAP magic); '
+                       'there is nothing to recover and it was left untouched')
     damaged = file.with_name(file.name + '.damaged')
     if damaged.exists():
         raise BagError(f'{damaged} exists already: move it away first')
@@ -346,6 +429,13 @@ def recover(path: Path) -> tuple[BagInfo, int]:
         raise BagError(f'{file}: cannot read: {error.strerror}') from None
     temporary = file.with_name(file.name + '.recovering')
     counts: dict[int, int] = {}
+    times = [m.log_time for m in messages] or [0]
+    try:
+        topics = {c.topic: topic_of(file, c, schemas.get(c.schema_id), 0)
+                  for c in channels.values()}
+    except BagError:
+        topics = {c.topic: TopicInfo(c.topic, schemas[c.schema_id].name if c.schema_id in
+                                     schemas else '') for c in channels.values()}
     try:
         with open(temporary, 'wb') as out:
             writer = Writer(out, compression=CompressionType.ZSTD)
@@ -361,6 +451,11 @@ def recover(path: Path) -> tuple[BagInfo, int]:
                     writer.add_message(channel_ids[m.channel_id], m.log_time, m.data,
                                        m.publish_time, m.sequence)
                     counts[m.channel_id] = counts.get(m.channel_id, 0) + 1
+            for cid, c in channels.items():
+                topics[c.topic].message_count = counts.get(cid, 0)
+            info = BagInfo(file, min(times), max(times), topics, _custom_data(file))
+            writer.add_metadata(METADATA_RECORD, {'serialized_metadata':
+                                                  serialized_metadata(info)})
             writer.finish()
             out.flush()
             os.fsync(out.fileno())
@@ -370,10 +465,5 @@ def recover(path: Path) -> tuple[BagInfo, int]:
         temporary.unlink(missing_ok=True)
         raise BagError(f'cannot write the recovered bag next to {file}: {error.strerror}; '
                        'the damaged file is unchanged') from None
-    times = [m.log_time for m in messages] or [0]
-    topics = {c.topic: TopicInfo(c.topic, schemas[c.schema_id].name if c.schema_id in schemas
-                                 else '', c.metadata.get('offered_qos_profiles', ''),
-                                 counts.get(cid, 0)) for cid, c in channels.items()}
-    info = BagInfo(file, min(times), max(times), topics)
     write_metadata(info)
     return info, lost

@@ -3,15 +3,27 @@
     ros2 run recorder recorder -o runs/my_run                 # every topic, new ones too
     ros2 run recorder recorder -o runs/my_run /train/state /ato/command
 
-Messages are written as the raw CDR bytes received (no deserialise/serialise), logged at the
-recorder's ROS time on receipt (simulated time with ``--ros-args -p use_sim_time:=true``).
-SIGINT and SIGTERM close the file properly; a SIGKILL loses at most the last flush period
-(``--flush-period``, 0.5 s of wall time by default): ``ros2 run recorder recover <bag>``.
+Messages are written as the raw CDR bytes received (no deserialise/serialise). Log time
+(``--log-time``): by default ``stamp``, the suite's stamped topics (those of
+:data:`ato_common.conventions.TOPICS` whose message starts with a header stamp or a time, /clock
+included) are logged at their own stamp, so a recording is the same however late the recorder
+received them; every other topic at the recorder's ROS time on receipt (simulated time with
+``--ros-args -p use_sim_time:=true``). ``receipt`` logs every topic on receipt, as rosbag2 does.
+The publish time (``--publish-time``): by default ``source``, the publisher's source timestamp
+(wall time) as rosbag2 records it; rclpy hands it only to a subscription served by its
+single-threaded executor, so the recorder spins that one (``ATO_EXECUTOR=single`` in its own
+process). ``log`` writes the log time instead and keeps the suite's default executor.
+
+SIGINT and SIGTERM close the file properly; a SIGKILL loses at most the last flush period:
+chunks are flushed every ``--flush-period`` of wall time (0.5 s) and every
+``--flush-period-log`` of log time (0.25 s, simulated time in a lockstep run), whichever comes
+first; ``ros2 run recorder recover <bag>`` makes a valid bag of the rest.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from datetime import datetime
 from pathlib import Path
@@ -20,15 +32,44 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
 
+from ato_common.conventions import TOPICS
 from ato_common.ros import RunNodeHooks, freeze_startup_objects, run_node
-from recorder.bag import DEFAULT_FLUSH_PERIOD_S, BagError, BagWriter
-from recorder.ros_io import message_class, qos_to_yaml, subscription_qos
+from recorder.bag import (
+    DEFAULT_FLUSH_PERIOD_LOG_S,
+    DEFAULT_FLUSH_PERIOD_S,
+    BagError,
+    BagWriter,
+)
+from recorder.ros_io import message_class, offered_profiles, subscription_qos
+from recorder.rosbag2_format import cdr_stamp_ns, starts_with_stamp
+
+LOG_TIMES = ('stamp', 'receipt')
+
+
+def is_suite_topic(topic: str, type_name: str) -> bool:
+    """Whether ``topic`` is one of the conventions' topics, in any namespace, with its type."""
+    for convention in TOPICS.values():
+        name = convention.name
+        if type_name != convention.type_name:
+            continue
+        if topic == name if name.startswith('/') else (
+                topic == '/' + name or topic.endswith('/' + name)):
+            return True
+    return False
+
+
+def logs_at_stamp(topic: str, type_name: str, log_time: str) -> bool:
+    return log_time == 'stamp' and is_suite_topic(topic, type_name) and \
+        starts_with_stamp(type_name)
 
 
 class RecorderNode(RunNodeHooks, Node):
-    def __init__(self, writer: BagWriter, topics: list[str] | None, discovery_period_s: float):
+    def __init__(self, writer: BagWriter, topics: list[str] | None, discovery_period_s: float,
+                 log_time: str = 'stamp', publish_time: str = 'source'):
         super().__init__('recorder')
         self.writer = writer
+        self.log_time = log_time
+        self.publish_time = publish_time
         self.wanted = set(topics) if topics else None
         self.subscribed: dict[str, object] = {}
         self.received = 0
@@ -63,24 +104,39 @@ class RecorderNode(RunNodeHooks, Node):
             offered = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
             if not offered:
                 continue  # only subscribers so far: wait for a publisher to learn its QoS
-            self.writer.add_topic(topic, type_name, qos_to_yaml(offered))
+            try:
+                self.writer.add_topic(topic, type_name, offered_profiles(offered))
+            except BagError as error:
+                self.get_logger().warning(f'{error}; not recorded')
+                self.subscribed[topic] = None
+                continue
+            stamped = logs_at_stamp(topic, type_name, self.log_time)
             self.subscribed[topic] = self.create_subscription(
-                msg_type, topic, self._callback(topic), subscription_qos(offered), raw=True)
-            self.get_logger().info(f'recording {topic} [{type_name}]')
+                msg_type, topic, self._callback(topic, stamped), subscription_qos(offered),
+                raw=True)
+            self.get_logger().info(f'recording {topic} [{type_name}], logged at '
+                                   f'{"its stamp" if stamped else "receipt"}')
 
-    def _callback(self, topic: str):
+    def _callback(self, topic: str, stamped: bool):
         write, clock = self.writer.write, self.get_clock()
 
-        def on_message(data: bytes) -> None:
+        # Two parameters, no default: rclpy passes the message info only to such a callback.
+        def on_message(data: bytes, info) -> None:
             if self.finished:
                 return
+            log_time_ns = cdr_stamp_ns(data) if stamped else None
+            if log_time_ns is None:
+                log_time_ns = clock.now().nanoseconds
             try:
-                write(topic, clock.now().nanoseconds, data)
+                write(topic, log_time_ns, data,
+                      info.get('source_timestamp') or None if info else None)
             except BagError as error:
                 self.stop_on_error(error)
                 return
             self.received += 1
-        return on_message
+        if self.publish_time == 'source':
+            return on_message
+        return lambda data: on_message(data, None)
 
     def flush(self) -> None:
         try:
@@ -123,6 +179,17 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('--flush-period', type=float, default=DEFAULT_FLUSH_PERIOD_S,
                         help='close a chunk at least this often, s of wall time (what a '
                              'SIGKILL can lose)')
+    parser.add_argument('--flush-period-log', type=float, default=DEFAULT_FLUSH_PERIOD_LOG_S,
+                        help='close a chunk at least this often, s of log time (simulated '
+                             'time with use_sim_time)')
+    parser.add_argument('--log-time', choices=LOG_TIMES, default='stamp',
+                        help="stamp: the suite's stamped topics at their stamp, others on "
+                             'receipt (default); receipt: every topic on receipt')
+    parser.add_argument('--publish-time', choices=('source', 'log'), default='source',
+                        help="source: the publisher's source timestamp, as rosbag2 (default); "
+                             'log: the log time')
+    parser.add_argument('--custom-data', action='append', default=[], metavar='KEY=VALUE',
+                        help="a string pair for metadata.yaml's custom_data (repeatable)")
     parser.add_argument('--discovery-period', type=float, default=0.1,
                         help='how often to look for new topics, s')
     return parser.parse_args(argv)
@@ -132,14 +199,26 @@ def main(args=None) -> int:
     argv = remove_ros_args(args if args is not None else sys.argv)[1:]
     options = parse_args(argv)
     output = options.output or Path('runs') / datetime.now().strftime('rec-%Y%m%d-%H%M%S')
+    custom_data = {'log_time': options.log_time}
+    for pair in options.custom_data:
+        key, sep, value = pair.partition('=')
+        if not sep or not key:
+            print(f'error: --custom-data {pair!r} is not KEY=VALUE', file=sys.stderr)
+            return 2
+        custom_data[key] = value
+    if options.publish_time == 'source':
+        # rclpy gives the message info (the source timestamp) only to the default executor.
+        os.environ['ATO_EXECUTOR'] = 'single'
     try:
-        writer = BagWriter(output, options.compression, flush_period_s=options.flush_period)
+        writer = BagWriter(output, options.compression, flush_period_s=options.flush_period,
+                           flush_period_log_s=options.flush_period_log,
+                           custom_data=custom_data)
     except BagError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
     try:
-        return run_node(lambda: RecorderNode(writer, options.topics, options.discovery_period),
-                        args)
+        return run_node(lambda: RecorderNode(writer, options.topics, options.discovery_period,
+                                             options.log_time, options.publish_time), args)
     finally:
         if not writer.closed:  # the node never came up
             try:

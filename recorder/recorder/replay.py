@@ -4,7 +4,9 @@
     ros2 run recorder replay runs/my_run --loop --ros-args -r /train/state:=/replayed/state
 
 Messages go out as the recorded bytes, each topic with the QoS its publishers offered (a latched
-topic is replayed latched). ``/clock`` is replayed as recorded, so nodes with use_sim_time follow
+topic is replayed latched, a reliable one reliable), read from the recording's offered QoS in
+either rosbag2 format: version 9 (named policies, Jazzy) or 8 (numbers). SIGINT and SIGTERM stop
+the replay with exit 0. ``/clock`` is replayed as recorded, so nodes with use_sim_time follow
 the recording; a recording without ``/clock`` gets one synthesised from the log times
 (``--no-clock`` turns both off). /clock is replayed whatever ``--topics`` selects. Topics are
 renamed with the standard ROS remapping (``--ros-args -r from:=to``), which applies to the
@@ -14,6 +16,7 @@ replay node's publishers.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import time
 from pathlib import Path
@@ -24,9 +27,11 @@ from rosgraph_msgs.msg import Clock
 
 from ato_common.ros import RunNodeHooks, make_executor, tear_down, to_time
 from recorder.bag import BagError, bag_info, read_messages
-from recorder.ros_io import message_class, qos_from_yaml
+from recorder.ros_io import message_class, replay_qos
+from recorder.rosbag2_format import FormatError
 
 CLOCK_TOPIC = '/clock'
+MATCH_SETTLE_S = 0.5
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
@@ -77,29 +82,42 @@ class Replayer:
             wanted.add(CLOCK_TOPIC)  # nodes with use_sim_time follow the recording
         self.topics = sorted(wanted)
         self.publishers = {}
+        self.qos = {}
         for name in self.topics:
             topic = self.info.topics[name]
-            self.publishers[name] = node.create_publisher(
-                message_class(topic.type), name,
-                qos_from_yaml(topic.offered_qos_profiles))
+            try:
+                msg_class = message_class(topic.type)
+            except LookupError as error:
+                raise BagError(f'{options.bag}: {name}: {error}') from None
+            try:
+                qos = replay_qos(topic.offered_qos_profiles)
+            except FormatError as error:
+                raise BagError(f'{options.bag}: {name}: {error}') from None
+            self.qos[name] = qos
+            self.publishers[name] = node.create_publisher(msg_class, name, qos)
         self.synthesise_clock = not recorded_clock and not options.no_clock
-        self.clock_pub = (node.create_publisher(Clock, CLOCK_TOPIC, qos_from_yaml(''))
+        self.clock_pub = (node.create_publisher(Clock, CLOCK_TOPIC, replay_qos([]))
                           if self.synthesise_clock else None)
         self.published = 0
+        self.stopped = False  # set by SIGINT or SIGTERM
 
     def play_once(self, executor) -> None:
         start_ns = self.info.start_ns + int(self.options.start_offset * 1e9)
         wall_start = time.monotonic()
         last_clock = -1
         for message in read_messages(self.options.bag, self.topics):
+            if self.stopped:
+                return
             if message.log_time_ns < start_ns:
                 continue
             due = wall_start + (message.log_time_ns - start_ns) / 1e9 / self.options.rate
-            while True:
+            while not self.stopped:
                 delay = due - time.monotonic()
                 if delay <= 0.0:
                     break
                 executor.spin_once(timeout_sec=min(delay, 0.05))
+            if self.stopped:
+                return
             if self.clock_pub is not None and message.log_time_ns > last_clock:
                 self.clock_pub.publish(Clock(clock=to_time(message.log_time_ns)))
                 last_clock = message.log_time_ns
@@ -109,29 +127,51 @@ class Replayer:
 
 def main(args=None) -> int:
     import rclpy
+    import rclpy.signals
     argv = remove_ros_args(args if args is not None else sys.argv)[1:]
     options = parse_args(argv)
-    rclpy.init(args=args)
+    # Our own handlers: rclpy's would shut the context down under the executor (an
+    # ExternalShutdownException out of spin_once, exit 1).
+    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    stop = {'requested': False, 'replayer': None}
+
+    def on_signal(signum, frame):
+        stop['requested'] = True
+        if stop['replayer'] is not None:
+            stop['replayer'].stopped = True
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
     node = ReplayNode()
     executor = make_executor()
     executor.add_node(node)
     try:
         replayer = Replayer(node, options)
+        stop['replayer'] = replayer
+        replayer.stopped = stop['requested']
+        node.get_logger().info(f'replaying {len(replayer.topics)} topics of {options.bag}')
         if options.wait_for_subscribers:
             publishers = list(replayer.publishers.values()) + [
                 p for p in (replayer.clock_pub,) if p is not None]
-            while rclpy.ok() and any(p.get_subscription_count() < options.wait_for_subscribers
-                                     for p in publishers):
+            while rclpy.ok() and not replayer.stopped and any(
+                    p.get_subscription_count() < options.wait_for_subscribers
+                    for p in publishers):
                 executor.spin_once(timeout_sec=0.05)
-        while True:
+            # Matched on the publishers' side; give the subscribers' side the moment it may
+            # need to match too, or a reliable volatile subscriber can miss the first messages.
+            settle = time.monotonic() + MATCH_SETTLE_S
+            while not replayer.stopped and time.monotonic() < settle:
+                executor.spin_once(timeout_sec=0.05)
+        while not replayer.stopped:
             replayer.play_once(executor)
             if not options.loop:
                 break
         # Let reliable subscribers take the last messages before the publishers go away.
         deadline = time.monotonic() + 1.0
-        while time.monotonic() < deadline:
+        while time.monotonic() < deadline and not replayer.stopped:
             executor.spin_once(timeout_sec=0.05)
-        node.get_logger().info(f'replayed {replayer.published} messages')
+        node.get_logger().info(f'replayed {replayer.published} messages'
+                               + (' (stopped on signal)' if replayer.stopped else ''))
         node.finished = True
         return node.exit_code
     except BagError as error:
@@ -141,6 +181,8 @@ def main(args=None) -> int:
     except KeyboardInterrupt:
         return 0
     finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # only the teardown from here
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
         tear_down(executor, node)
         if rclpy.ok():
             rclpy.shutdown()

@@ -17,7 +17,7 @@ from ato_common.types import TrainState
 from recorder.bag import BagError, BagWriter, bag_file, bag_info, read_messages, recover
 from recorder.cli import info_main, recover_main
 from recorder.definitions import full_definition
-from recorder.ros_io import qos_from_yaml, qos_to_yaml
+from recorder.ros_io import offered_profiles, replay_qos
 
 STATE_TYPE = 'trajectory_msgs/msg/JointTrajectory'
 
@@ -30,7 +30,7 @@ def state_bytes(k: int) -> bytes:
 
 def write_bag(folder, count=100, **options):
     writer = BagWriter(folder, **options)
-    writer.add_topic('/train/state', STATE_TYPE, qos_to_yaml([QoSProfile(depth=10)]))
+    writer.add_topic('/train/state', STATE_TYPE, offered_profiles([QoSProfile(depth=10)]))
     for k in range(count):
         writer.write('/train/state', k * 100_000_000, state_bytes(k))
     return writer
@@ -145,11 +145,11 @@ def test_an_unclosed_recording_keeps_what_was_flushed(tmp_path):
 
 def test_offered_qos_round_trip_keeps_latched_topics_latched():
     latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    assert qos_from_yaml(qos_to_yaml([latched])).durability == DurabilityPolicy.TRANSIENT_LOCAL
-    assert qos_from_yaml(qos_to_yaml([QoSProfile(depth=5)])).durability == \
+    assert replay_qos(offered_profiles([latched])).durability == DurabilityPolicy.TRANSIENT_LOCAL
+    assert replay_qos(offered_profiles([QoSProfile(depth=5)])).durability == \
         DurabilityPolicy.VOLATILE
-    mixed = qos_to_yaml([latched, QoSProfile(depth=5)])
-    assert qos_from_yaml(mixed).durability == DurabilityPolicy.VOLATILE
+    mixed = offered_profiles([latched, QoSProfile(depth=5)])
+    assert replay_qos(mixed).durability == DurabilityPolicy.VOLATILE
 
 
 def test_a_corrupt_chunk_gives_a_clear_error_and_recover_keeps_the_original_safe(tmp_path):
@@ -182,3 +182,62 @@ def test_a_full_disk_stops_the_recording_with_a_clear_error_and_no_valid_looking
     with pytest.raises(BagError, match='could not be finished'):
         writer.close()
     assert not (tmp_path / 'run' / 'metadata.yaml').exists()
+
+
+def test_recover_of_a_file_that_is_not_mcap_says_so_and_leaves_it_untouched(tmp_path, capsys):
+    bogus = tmp_path / 'bogus.mcap'
+    content = b'certainly not an MCAP recording\n' * 50
+    bogus.write_bytes(content)
+    with pytest.raises(BagError, match='is not an MCAP file.*left untouched'):
+        recover(bogus)
+    assert recover_main([str(bogus)]) == 2
+    err = capsys.readouterr().err
+    assert 'is not an MCAP file' in err and 'Traceback' not in err
+    assert bogus.read_bytes() == content
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['bogus.mcap']  # no bag, no .damaged
+
+
+def test_chunks_are_flushed_by_log_time_as_well_as_by_wall_time(tmp_path):
+    # No wall-clock flush within the test; 0.25 s of log time between flushes.
+    writer = write_bag(tmp_path / 'run', count=0, chunk_size=1 << 24, flush_period_s=3600.0,
+                       flush_period_log_s=0.25)
+    sizes = []
+    for k in range(20):  # 0.1 s of log time apart
+        writer.write('/train/state', k * 100_000_000, state_bytes(k))
+        sizes.append(writer.path.stat().st_size)
+    grew = [k for k in range(1, 20) if sizes[k] > sizes[k - 1]]
+    assert grew == [3, 6, 9, 12, 15, 18]  # every 0.3 s: the first write at or past 0.25 s
+    killed = tmp_path / 'killed'
+    killed.mkdir()
+    shutil.copy(writer.path, killed / 'killed_0.mcap')  # the file as a SIGKILL leaves it
+    info, _ = recover(killed)
+    assert info.message_count == 19  # all but the one written after the last flush
+
+
+@pytest.mark.parametrize('period', [0.0, -1.0, float('nan'), float('inf')])
+def test_a_flush_period_must_be_positive_and_finite(tmp_path, period):
+    with pytest.raises(BagError, match='flush_period_log_s must be a positive number'):
+        BagWriter(tmp_path / 'run', flush_period_log_s=period)
+    with pytest.raises(BagError, match='flush_period_s must be a positive number'):
+        BagWriter(tmp_path / 'run2', flush_period_s=period)
+
+
+def test_custom_data_holds_strings_only(tmp_path):
+    with pytest.raises(BagError, match='custom_data holds'):
+        BagWriter(tmp_path / 'run', custom_data={'runs': 3})
+
+
+def test_the_stamp_is_read_from_the_cdr_bytes_of_stamped_types():
+    from builtin_interfaces.msg import Time
+    from rosgraph_msgs.msg import Clock
+    from std_msgs.msg import Float64
+
+    from recorder.rosbag2_format import cdr_stamp_ns, starts_with_stamp
+    assert starts_with_stamp(STATE_TYPE) and starts_with_stamp('rosgraph_msgs/msg/Clock')
+    assert starts_with_stamp('diagnostic_msgs/msg/DiagnosticArray')
+    assert not starts_with_stamp('std_msgs/msg/Float64')
+    assert not starts_with_stamp('std_msgs/msg/String')
+    assert cdr_stamp_ns(state_bytes(37)) == 3_700_000_000
+    clock = serialize_message(Clock(clock=Time(sec=12, nanosec=345)))
+    assert cdr_stamp_ns(clock) == 12_000_000_345
+    assert cdr_stamp_ns(serialize_message(Float64(data=1.0))[:8]) is None  # too short

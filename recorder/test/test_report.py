@@ -5,6 +5,7 @@ from dataclasses import replace
 
 import pytest
 from rclpy.serialization import serialize_message
+from std_msgs.msg import Header
 
 from ato_common.conventions import TOPICS
 from ato_common.ros import command_to_msg, reference_to_msg, state_to_msg
@@ -93,3 +94,110 @@ def test_a_namespace_without_the_topics_or_a_recording_without_any_says_where_th
     with pytest.raises(BagError, match=r"none of the suite's topics \(train/state, "
                                        r'ato/reference, .*\) in any namespace; it has /chatter'):
         load_run(tmp_path / 'other')
+
+
+def test_labels_name_the_quantity_and_its_unit():
+    from recorder.report import label
+    assert label('integral_action_mps2') == 'integral action (m/s²)'
+    assert label('mass_kg') == 'mass (kg)'
+    assert label('davis_b_n_per_mps') == 'davis b (N/(m/s))'
+    assert label('speed_error_mps') == 'speed error (m/s)'
+    assert label('gain') == 'gain'
+
+
+def test_the_report_marks_atp_and_watchdog_events_and_plots_every_actuator(tmp_path, capsys):
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from std_msgs.msg import Float64
+
+    from ato_common.ros import actuator_forces_to_msg, diagnostic_status, to_time
+    writer = BagWriter(tmp_path / 'run')
+    write_run(writer, '', 0.0)
+    for key in ('permitted_speed', 'distance_to_go', 'actuators_commanded',
+                'actuators_applied', 'diagnostics'):
+        writer.add_topic('/' + TOPICS[key].name.lstrip('/'), TOPICS[key].type_name)
+    plant = [('normal', False), ('normal', False), ('service brake', False),
+             ('service brake', True), ('normal', False)] + [('normal', False)] * 6
+    for k in range(SECONDS):
+        stamp = k * 1_000_000_000
+        writer.write('/ato/permitted_speed', stamp, serialize_message(Float64(data=20.0)))
+        writer.write('/ato/distance_to_go', stamp, serialize_message(Float64(data=90.0 - k)))
+        writer.write('/train/actuators/commanded', stamp, serialize_message(
+            actuator_forces_to_msg(stamp, ['unit_1', 'unit_2'], [1000.0, 2000.0])))
+        writer.write('/train/actuators/applied', stamp, serialize_message(
+            actuator_forces_to_msg(stamp, ['unit_1', 'unit_2'], [900.0, 0.0])))
+        watchdog, atp = plant[k]
+        status = diagnostic_status('train_plant_node: simulation', 'train', DiagnosticStatus.OK,
+                                   'running', {'watchdog': watchdog, 'atp_intervention': atp,
+                                               'estimate.x': 1.0})
+        writer.write('/diagnostics', stamp, serialize_message(
+            DiagnosticArray(header=Header(stamp=to_time(stamp)), status=[status])))
+    writer.close()
+    data = load_run(tmp_path / 'run')
+    assert [(t, kind) for t, kind, _ in data.events] == [
+        (2.0, 'watchdog: service brake'), (3.0, 'ATP intervention'), (4.0, 'ATP released'),
+        (4.0, 'watchdog: normal')]
+    assert sorted(data.actuators_applied) == ['unit_1', 'unit_2']
+    assert [f for _, f in data.actuators_applied['unit_2']] == [0.0] * SECONDS
+    assert [v for _, v in data.permitted] == [20.0] * SECONDS
+    assert main([str(tmp_path / 'run'), '--output', str(tmp_path / 'plots')]) == 0
+    out = capsys.readouterr().out
+    assert 'ATP intervention' in out and 'watchdog: service brake' in out
+    for name in ('tracking', 'errors', 'distance_to_go', 'stops', 'commands', 'actuators',
+                 'energy'):
+        assert (tmp_path / 'plots' / f'{name}.png').exists(), name
+
+
+def test_the_html_report_holds_the_summary_and_every_plot(tmp_path):
+    import base64
+    from html.parser import HTMLParser
+
+    bag = record(tmp_path / 'run', {'': 0.25})
+    assert main([str(bag), '--output', str(tmp_path / 'plots')]) == 0
+    pngs = sorted(p.stem for p in (tmp_path / 'plots').glob('*.png'))
+
+    class Page(HTMLParser):
+        images, cells, in_cell = {}, [], False
+
+        def handle_starttag(self, tag, attrs):
+            attrs = dict(attrs)
+            if tag == 'img':
+                self.images[attrs['alt']] = attrs['src']
+            self.in_cell = tag in ('th', 'td')
+
+        def handle_data(self, data):
+            if self.in_cell:
+                self.cells.append(data)
+
+    page = Page()
+    page.feed((tmp_path / 'plots' / 'report.html').read_text())
+    assert sorted(page.images) == pngs and 'tracking' in pngs
+    for name, src in page.images.items():
+        prefix = 'data:image/png;base64,'
+        assert src.startswith(prefix), name
+        assert base64.b64decode(src[len(prefix):]) == (tmp_path / 'plots' /
+                                                       f'{name}.png').read_bytes()
+    assert 'position error, max (m)' in page.cells and '0.2500' in page.cells
+    assert 'stopping error, stop at 90 m (m)' in page.cells
+
+
+def test_a_multi_car_run_is_plotted_per_car(tmp_path):
+    writer = BagWriter(tmp_path / 'run')
+    for key in ('state', 'reference', 'command', 'curve'):
+        writer.add_topic('/' + TOPICS[key].name, TOPICS[key].type_name)
+    for k in range(SECONDS):
+        stamp = k * 1_000_000_000
+        state = TrainState(stamp, ('car_1', 'car_2'), (10.0 * k, 10.0 * k - 25.0),
+                           (10.0, 10.0 - 0.1 * k), (0.0, 0.0), (1000.0, -500.0))
+        reference = Reference(stamp, (ReferencePoint(float(k), 10.0 * k, 10.0, 0.0),))
+        writer.write('/train/state', stamp, serialize_message(state_to_msg(state)))
+        writer.write('/ato/reference', stamp, serialize_message(reference_to_msg(reference)))
+        writer.write('/ato/command', stamp, serialize_message(command_to_msg(
+            Command(stamp, ('car_1',), (500.0,), 'pid'))))
+    writer.close()
+    data = load_run(tmp_path / 'run')
+    assert data.cars == ['car_1', 'car_2']
+    assert data.car_positions[:, 1] - data.car_positions[:, 0] == pytest.approx([-25.0] * 11)
+    assert data.car_speeds[-1, 1] == pytest.approx(9.0)
+    assert data.car_forces[0].tolist() == [1000.0, -500.0]
+    assert main([str(tmp_path / 'run'), '--output', str(tmp_path / 'plots')]) == 0
+    assert (tmp_path / 'plots' / 'cars.png').exists()
