@@ -41,9 +41,26 @@ from typing import Any
 from ato_common import units
 from ato_common.line import Curve, Line, PiecewiseConstant, Station, Tunnel
 from ato_common.trains import DavisResistance, TractionCharacteristic, TrainParameters
-from ato_common.validation import ConfigError
+from ato_common.validation import ConfigError, unknown_field_message
 
 ID_PATTERN = re.compile(r'^[A-Za-z0-9_]+$')
+
+# The fields of each object of the format (TTOBench's READMEs; its validator rejects any other
+# field, and so does this reader: a misspelt optional field would otherwise pass as absent).
+METADATA_FIELDS = ('id', 'library version', 'description', 'created by', 'license')
+TRACK_FIELDS = ('metadata', 'altitude', 'stops', 'speed limits', 'gradients', 'curvatures',
+                'tunnels', 'ETCS braking data')
+TRACK_ETCS_FIELDS = ('M_NVAVADH', 'Kt_int')
+TRAIN_FIELDS = ('metadata', 'num seats', 'num coaches', 'length', 'mass', 'rho',
+                'max traction power', 'max reg braking power', 'max traction force',
+                'max reg braking force', 'max pn braking force', 'max acceleration',
+                'max deceleration', 'max speed', 'rolling resistance r0', 'rolling resistance r1',
+                'rolling resistance r2', 'efficiency traction', 'efficiency reg brake',
+                'tunnel resistance', 'ETCS braking data')
+TRAIN_ETCS_FIELDS = ('A_brake_emergency', 'A_brake_service', 'K_dry_rst', 'K_wet_rst',
+                     'T_traction', 'T_be', 'T_bs', 'v_uncertainty')
+JOURNEY_FIELDS = ('metadata', 'timing points')
+JOURNEY_METADATA_FIELDS = METADATA_FIELDS + ('associated track',)
 # Length of the speed restriction standing for a passing point's upper speed bound, m.
 PASSING_POINT_RESTRICTION_M = 1.0
 
@@ -90,9 +107,22 @@ class _Reader:
     def __init__(self, path: Path, data: Any, where: str = ''):
         self.path, self.data, self.where = path, data, where
 
+    def _place(self, field_name: str) -> str:
+        return f'{self.where}.{field_name}' if self.where else field_name
+
     def fail(self, field_name: str, what: str) -> ConfigError:
-        place = f'{self.where}.{field_name}' if self.where else field_name
-        return ConfigError(f'{self.path}: {place}: {what}')
+        return ConfigError(f'{self.path}: {self._place(field_name)}: {what}')
+
+    def only(self, valid: tuple[str, ...]) -> None:
+        """Reject any field of this object that is not one of ``valid``, naming the file, the
+        field, its likely intended name and the valid names."""
+        if not isinstance(self.data, dict):
+            raise ConfigError(f'{self.path}: {self.where or "the file"}: expected an object')
+        unknown = [str(k) for k in self.data if k not in valid]
+        if unknown:
+            place = f'{self.where}: ' if self.where else ''
+            raise ConfigError(f'{self.path}: {place}'
+                              f'{unknown_field_message(unknown, valid, quote=repr)}')
 
     def get(self, key: str, required: bool = True) -> Any:
         if not isinstance(self.data, dict):
@@ -132,6 +162,7 @@ class _Reader:
             return None
         if not isinstance(entry, dict) or 'value' not in entry:
             raise self.fail(key, 'expected {"unit": ..., "value": ...}')
+        _Reader(self.path, entry, self._place(key)).only(('unit', 'value'))
         convert = self.unit(f'{key}.unit', entry.get('unit'), quantity)
         return convert(self.number(entry['value'], f'{key}.value', minimum, exclusive))
 
@@ -146,7 +177,13 @@ class _Reader:
             raise self.fail(key, 'expected {"units": {...}, "values": [[...], ...]}')
         declared = entry.get('units', {})
         if len(columns) == 1 and 'unit' in entry:
+            _Reader(self.path, entry, self._place(key)).only(('unit', 'values'))
             declared = {columns[0][0]: entry['unit']}
+        else:
+            _Reader(self.path, entry, self._place(key)).only(('units', 'values'))
+            if isinstance(declared, dict):
+                _Reader(self.path, declared, self._place(f'{key}.units')).only(
+                    tuple(name for name, quantity in columns if quantity != 'raw'))
         converters = []
         for name, quantity in columns:
             if quantity == 'raw':
@@ -185,8 +222,9 @@ def _read_json(path: str | Path) -> tuple[Path, Any]:
         raise ConfigError(f'{path}: not valid JSON: {error}') from None
 
 
-def _metadata_id(reader: _Reader) -> str:
+def _metadata_id(reader: _Reader, fields: tuple[str, ...] = METADATA_FIELDS) -> str:
     metadata = _Reader(reader.path, reader.get('metadata'), 'metadata')
+    metadata.only(fields)
     identifier = metadata.get('id')
     if not isinstance(identifier, str) or not ID_PATTERN.match(identifier):
         raise metadata.fail('id', f'must contain only letters, numbers and underscores, got '
@@ -215,7 +253,9 @@ def load_track(path: str | Path, dwell_s: float = 0.0) -> TTOBenchTrack:
     """A TTOBench track as a Line; every stop becomes a station with ``dwell_s``."""
     path, data = _read_json(path)
     reader = _Reader(path, data)
+    reader.only(TRACK_FIELDS)
     identifier = _metadata_id(reader)
+    reader.scalar('altitude', 'length', required=False)
     stops = [row[0] for row in reader.table('stops', [('position', 'length')])]
     if len(stops) < 2:
         raise reader.fail('stops.values', 'at least two stops (origin and destination) are '
@@ -288,6 +328,7 @@ def load_track(path: str | Path, dwell_s: float = 0.0) -> TTOBenchTrack:
     etcs = reader.get('ETCS braking data', required=False)
     if etcs is not None:
         sub = _Reader(path, etcs, 'ETCS braking data')
+        sub.only(TRACK_ETCS_FIELDS)
         m_nvavadh = sub.scalar('M_NVAVADH', 'fraction')
         kt_int = sub.scalar('Kt_int', 'fraction')
 
@@ -343,7 +384,9 @@ def _deceleration_table(reader: _Reader, key: str) -> tuple[tuple[float, float],
 def load_train(path: str | Path) -> TTOBenchTrain:
     path, data = _read_json(path)
     reader = _Reader(path, data)
+    reader.only(TRAIN_FIELDS)
     identifier = _metadata_id(reader)
+    reader.scalar('num seats', 'count', required=False, minimum=0.0)
     mass = reader.scalar('mass', 'mass', minimum=0.0, exclusive=True)
     rho = reader.scalar('rho', 'fraction', required=False, minimum=0.0) or 0.0
     equivalent_mass = mass * (1.0 + rho)
@@ -374,6 +417,7 @@ def load_train(path: str | Path) -> TTOBenchTrain:
     etcs = reader.get('ETCS braking data', required=False)
     if etcs is not None:
         sub = _Reader(path, etcs, 'ETCS braking data')
+        sub.only(TRAIN_ETCS_FIELDS)
         braking = ETCSBrakingData(
             emergency=_deceleration_table(sub, 'A_brake_emergency'),
             service=_deceleration_table(sub, 'A_brake_service'),
@@ -468,7 +512,8 @@ class TTOBenchJourney:
 def load_journey(path: str | Path) -> TTOBenchJourney:
     path, data = _read_json(path)
     reader = _Reader(path, data)
-    identifier = _metadata_id(reader)
+    reader.only(JOURNEY_FIELDS)
+    identifier = _metadata_id(reader, JOURNEY_METADATA_FIELDS)
     metadata = _Reader(path, reader.get('metadata'), 'metadata')
     track_id = metadata.get('associated track')
     if not isinstance(track_id, str) or not identifier.startswith(track_id + '_'):
@@ -479,9 +524,11 @@ def load_journey(path: str | Path) -> TTOBenchJourney:
              'lower speed constraint', 'upper speed constraint')
     quantities = ('length', 'time', 'time', 'speed', 'speed')
     if isinstance(entry, dict):
+        _Reader(path, entry, 'timing points').only(('units', 'values'))
         declared = entry.get('units')
         if not isinstance(declared, dict):
             raise reader.fail('timing points.units', 'expected the unit of each column')
+        _Reader(path, declared, 'timing points.units').only(names)
         converters = []
         for name, quantity in zip(names, quantities):
             if name not in declared:
