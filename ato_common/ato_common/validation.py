@@ -16,6 +16,11 @@ class ConfigError(ValueError):
     """A configuration file or value is wrong; the message names where and what."""
 
 
+class DataWarning(UserWarning):
+    """A file loads, but a figure of it was changed to keep the physics physical (the message
+    names the file, the figure and the bound)."""
+
+
 def likely_meant(name: str, valid: Iterable[str]) -> str | None:
     """The valid name that ``name`` is most likely a typo of (difflib's closest match with its
     default cutoff of 0.6), or None."""
