@@ -6,6 +6,7 @@ its documented bound (adhesion mu g on the static mass, the file's ETCS decelera
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from ato_common import units
@@ -106,3 +107,34 @@ def test_no_train_brakes_beyond_its_bound_in_the_plant_planner_and_supervision(t
     assert sum(sim.applied) == pytest.approx(-traction.max_service_brake_force_n, rel=1e-12)
     assert braking_deceleration_measured(sim)[0] <= traction.max_service_brake_force_n / mass \
         * (1 + 1e-9) <= bound * (1 + 1e-9)
+
+
+TRACKS = sorted((SAMPLES / 'tracks').glob('*.json'))
+
+
+@pytest.mark.filterwarnings('ignore::ato_common.validation.DataWarning')
+@pytest.mark.parametrize('train', sorted((SAMPLES / 'trains').glob('*.json')), ids=lambda p: p.stem)
+def test_every_sample_track_with_every_sample_train_brakes_within_the_bound(train):
+    """The closed loop (offline, pid) on every sample track: the applied braking force and the
+    measured deceleration, less resistance and the line's forces, never beyond the bound; and
+    every run is clean (no ATP intervention, no stop error beyond 0.5 m)."""
+    from ato_bringup.offline import run_offline
+    from ato_bringup.run_events import run_events, stations_of
+    from ato_common.ttobench import scenario_data
+    bound = documented_bound({'ttobench': str(train)}, 'dry')
+    for track in TRACKS:
+        s = parse_scenario(scenario_data(track, train, dwell_s=20.0))
+        run = run_offline(s, 'pid')
+        mass, line = s.train.mass_kg, s.line
+        assert -run.forces.min() / mass <= bound * (1 + 1e-12), track.name
+        dt = np.diff(run.times_s)
+        deceleration = -np.diff(run.speeds) / dt
+        resistance = np.array([s.train.davis.force(v) for v in run.speeds[:-1]]) / mass
+        line_force = np.maximum([line.line_force_per_kg(x) for x in run.positions[:-1]],
+                                [line.line_force_per_kg(x) for x in run.positions[1:]])
+        moving = run.speeds[1:] > 0.0  # at standstill the resistance is static friction
+        excess = (deceleration - resistance - line_force)[moving]
+        assert excess.max() <= bound + 1e-6, (track.name, excess.max(), bound)
+        events = run_events(s, run.metrics(), stations_of(run.plan), run.times_s,
+                            run.positions, run.speeds)
+        assert events.clean, (track.name, events.format())
