@@ -21,6 +21,11 @@ class DataWarning(UserWarning):
     names the file, the figure and the bound)."""
 
 
+#: how close (difflib's ratio) a field not read must be to a missing required one to be named as
+#: its typo
+TYPO_CUTOFF = 0.85
+
+
 def likely_meant(name: str, valid: Iterable[str]) -> str | None:
     """The valid name that ``name`` is most likely a typo of (difflib's closest match with its
     default cutoff of 0.6), or None."""
@@ -74,9 +79,13 @@ class Fields:
     def _missing(self, key: str, what: str) -> ConfigError:
         """A required field is missing: if a field not read so far looks like a typo of it,
         name that field ('unknown field per_mile; did you mean per_mille?')."""
-        unread = [k for k in map(str, self._data) if k not in self._used and k != key]
+        # A close match only (difflib ratio >= 0.85: per_mile/per_mille 0.94), and not a longer
+        # name containing the key, which is more likely a valid field not read yet
+        # (end_radius_m beside a missing radius_m).
+        unread = [k for k in map(str, self._data)
+                  if k not in self._used and k != key and key not in k]
         for typo in unread:
-            if likely_meant(typo, [key]) is not None:
+            if difflib.get_close_matches(typo, [key], n=1, cutoff=TYPO_CUTOFF):
                 return ConfigError(f'{self.where or "the file"}: unknown field {typo}; did you '
                                    f'mean {key}? (the required {what} {key} is missing)')
         return ConfigError(f'{self._path(key)}: required {what} is missing')

@@ -157,6 +157,12 @@ def test_a_missing_required_key_without_a_lookalike_is_reported_missing():
     with pytest.raises(ConfigError, match=r'line.gradients\[0\].per_mille: required number is '
                                           r'missing'):
         parse_scenario(data)
+    # a valid field read later is not taken for the typo of a missing one
+    data = valid_scenario()
+    data['line']['curves'] = [{'start_m': 100, 'length_m': 50, 'end_radius_m': 900}]
+    with pytest.raises(ConfigError, match=r'line.curves\[0\].radius_m: required number is '
+                                          r'missing'):
+        parse_scenario(data)
 
 
 def test_an_unknown_optional_key_of_the_suites_yaml_names_the_likely_one(tmp_path):
