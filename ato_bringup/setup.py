@@ -27,7 +27,8 @@ setup(
     tests_require=['pytest', 'numpy', 'PyYAML', 'grimp', 'ruff', 'mkdocs', 'mkdocs-gen-files'],
     entry_points={
         'console_scripts': [
-            'run_scenario = ato_bringup.run_scenario:main'
+            'run_scenario = ato_bringup.run_scenario:main',
+            'run_offline = ato_bringup.run_offline:main',
         ],
     },
 )

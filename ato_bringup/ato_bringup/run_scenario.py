@@ -6,6 +6,12 @@ simulated time; then every process is stopped and the run's summary printed.
 Without --controller the law is the one that ``make compare`` ranked best on jinan_xuzhou
 (runs/compare/compare.json, see ato_bringup.compare), else pid; a ranked law that cannot drive
 the scenario's train falls back to pid, with the reason printed.
+
+The summary ends with what went wrong (ato_bringup.run_events): ATP interventions, watchdog
+brakes, missed journey windows and stopping errors beyond the platform tolerance, each with its
+count and first occurrence. Exit code: 0 for a clean run (or any completed run with
+--no-fail-on-events), 3 for a completed run with such events, 1 for a failed run, 2 for bad
+input.
 """
 
 from __future__ import annotations
@@ -17,6 +23,7 @@ from datetime import datetime
 from pathlib import Path
 
 from ato_bringup.compare import DEFAULT_DEMO_LAW, DEFAULT_OUT, ranked_demo_law
+from ato_bringup.run_events import PLATFORM_TOLERANCE_M, exit_code
 from ato_bringup.runner import RunFailed, run_lockstep
 from ato_bringup.stack import StackConfig
 from ato_common.knowledge import knowledge_of
@@ -48,7 +55,18 @@ def parse_args(argv=None) -> argparse.Namespace:
                              '(default: runs/<time>-<scenario>-<controller>)')
     parser.add_argument('--no-record', action='store_true',
                         help='do not record the run (by default: <log-dir>/bag, with a report)')
-    return parser.parse_args(argv)
+    parser.add_argument('--no-fail-on-events', action='store_true',
+                        help='exit with 0 even if the run had ATP interventions, watchdog brakes, '
+                             'missed journey windows or stopping errors beyond the tolerance '
+                             '(by default such a run exits with 3)')
+    parser.add_argument('--stop-tolerance', type=float, default=PLATFORM_TOLERANCE_M,
+                        metavar='M', help='the platform tolerance of a stopping error, m '
+                                          f'(default {PLATFORM_TOLERANCE_M:g})')
+    args = parser.parse_args(argv)
+    if not args.stop_tolerance >= 0.0 or args.stop_tolerance == float('inf'):
+        parser.error(f'--stop-tolerance: must be a finite number >= 0 m, got '
+                     f'{args.stop_tolerance}')
+    return args
 
 
 def default_controller(scenario_name: str, ranking: Path) -> tuple[str, str]:
@@ -81,7 +99,8 @@ def main(argv=None) -> int:
     print(f'running {args.scenario} with {args.controller} in lockstep '
           f'(ROS_DOMAIN_ID={args.domain_id}, node logs in {log_dir})', file=sys.stderr)
     try:
-        outcome = run_lockstep(config, timeout_s=args.timeout, progress=True)
+        outcome = run_lockstep(config, timeout_s=args.timeout, progress=True,
+                               stop_tolerance_m=args.stop_tolerance)
     except ConfigError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
@@ -90,6 +109,7 @@ def main(argv=None) -> int:
         return 1
     print(format_summary(outcome.metrics, outcome.scenario.name, ', '.join(outcome.laws),
                          outcome.wall_time_s))
+    print(outcome.events.format())
     if record_to is not None:
         try:
             plots = plot(load_run(record_to), record_to / 'report')
@@ -98,7 +118,11 @@ def main(argv=None) -> int:
             return 1
         print(f'recording             {record_to} (ros2 run recorder info {record_to})')
         print(f'report                {plots[0].parent} ({", ".join(p.name for p in plots)})')
-    return 0
+    code = exit_code(outcome.events, not args.no_fail_on_events)
+    if code:
+        print(f'the run was not clean: exit code {code} (--no-fail-on-events: 0)',
+              file=sys.stderr)
+    return code
 
 
 if __name__ == '__main__':

@@ -10,6 +10,7 @@ from typing import Callable
 import numpy as np
 
 from ato_bringup.offline import run_end_time_s, stop_samples
+from ato_bringup.run_events import PLATFORM_TOLERANCE_M, RunEvents, run_events, stations_of
 from ato_bringup.stack import Sample, Stack, StackConfig
 from ato_common.metrics import RunMetrics, compute_metrics
 from ato_common.scenario import Scenario, load_scenario
@@ -34,6 +35,7 @@ class RunOutcome:
     parameter_results: list = field(default_factory=list)
     arrivals: list[tuple[float, int]] = field(default_factory=list)
     counts: dict[str, int] = field(default_factory=dict)  # messages the monitor received
+    events: RunEvents = field(default_factory=RunEvents)  # what went wrong (run_events)
 
     def steady_real_time_factor(self, start: float = 0.1, end: float = 0.9) -> float:
         """Simulated over wall time between two fractions of the run (start-up excluded)."""
@@ -60,9 +62,12 @@ def prepare(config: StackConfig) -> tuple[Scenario, float]:
 
 
 def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], object]] | None = None,
-                 timeout_s: float = 600.0, progress: bool = False) -> RunOutcome:
+                 timeout_s: float = 600.0, progress: bool = False,
+                 stop_tolerance_m: float = PLATFORM_TOLERANCE_M) -> RunOutcome:
     """Run to the scenario's end. ``actions`` maps a simulated time to a callable run on the
-    stack once the run has passed it (e.g. a parameter change); its result is kept."""
+    stack once the run has passed it (e.g. a parameter change); its result is kept. The
+    outcome's ``events`` are the ATP interventions and watchdog brakes the plant reported, and
+    the missed journey windows and stopping errors beyond ``stop_tolerance_m`` measured."""
     scenario, end_time_s = prepare(config)
     plan = plan_reference(scenario)
     pending = sorted((actions or {}).items())
@@ -110,5 +115,8 @@ def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], obj
                               [s.ref_position for _, s in samples],
                               [s.ref_speed for _, s in samples], stop_samples(plan))
     laws = sorted({s.law for _, s in samples if s.law})
+    events = run_events(scenario, metrics, stations_of(plan), times,
+                        [s.positions[0] for _, s in samples], diagnostics=diagnostics,
+                        tolerance_m=stop_tolerance_m)
     return RunOutcome(scenario, config, samples, diagnostics, wall, codes, metrics, laws, results,
-                      arrivals, counts)
+                      arrivals, counts, events)

@@ -92,16 +92,38 @@ def ceiling_margin(limit_mps: float, margins_kmh: tuple[float, float]) -> float:
     return units.kmh_to_mps(low + share * (high - low))
 
 
+def tail_clear_position(end_m: float, train_length_m: float) -> float:
+    """The first position (a float) of the front at which the tail has left a section ending at
+    ``end_m``: the smallest float x with x - train_length_m >= end_m in exact arithmetic.
+
+    ``end_m + train_length_m`` rounded to nearest can fall one unit in the last place short of
+    the exact sum; the front there still has its tail (x - L, exactly) inside the section. The
+    rounding error of the sum is found exactly (Knuth's TwoSum) and the sum rounded up when it
+    fell short, so no tolerance is involved."""
+    total = end_m + train_length_m
+    if not math.isfinite(total):
+        return total
+    length_part = total - end_m
+    end_part = total - length_part
+    error = (end_m - end_part) + (train_length_m - length_part)
+    return math.nextafter(total, math.inf) if error > 0.0 else total
+
+
 def most_restrictive_speed_profile(limits: PiecewiseConstant, end_m: float,
                                    train_length_m: float) -> PiecewiseConstant:
     """MRSP(x) = the lowest static limit over [x - train length, x]: a decrease applies at its
-    start, an increase once the train's tail has passed it."""
-    sections = limits.segments(end_m)
-    candidates = sorted({s for s, _, _ in sections} | {min(e + train_length_m, end_m)
-                                                        for _, e, _ in sections} - {end_m})
+    start, an increase once the train's tail has passed it.
+
+    A section [s, e) restricts a front position x when s <= x and x - L < e, exactly (the
+    positions taken as the floats they are); ``tail_clear_position`` gives the float where the
+    second condition ends, so the comparison is exact and no breakpoint is lost to rounding."""
+    sections = [(s, e, v, tail_clear_position(e, train_length_m))
+                for s, e, v in limits.segments(end_m)]
+    candidates = sorted({s for s, _, _, _ in sections}
+                        | {min(clear, end_m) for _, _, _, clear in sections} - {end_m})
     starts, values = [], []
     for x in candidates:
-        value = min(v for s, e, v in sections if s <= x and e > x - train_length_m)
+        value = min(v for s, _, v, clear in sections if s <= x < clear)
         if not values or value != values[-1]:
             starts.append(x)
             values.append(value)

@@ -13,13 +13,13 @@ and distances of the braking-curve supervision (:mod:`ato_common.braking_curves`
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
 
 import yaml
 
-from ato_common import ttobench, units
+from ato_common import trains, ttobench, units
 from ato_common.braking_curves import (
     SupervisionSettings,
     constant_deceleration,
@@ -109,8 +109,13 @@ def _file(fields: Fields, key: str, base: Path) -> Path:
 
 def _parse_train(f: Fields, base: Path) -> tuple[TrainParameters, ttobench.TTOBenchTrain | None]:
     fields = f.section('train', required=True)
+    # The rail condition sets the wheel-rail adhesion that bounds the braking (trains.py).
+    rail = fields.text('rail', 'dry')
+    if rail not in trains.RAIL_CONDITIONS:
+        raise ConfigError(f"{fields.where}.rail: unknown rail condition '{rail}'; valid: "
+                          f"{', '.join(trains.RAIL_CONDITIONS)}")
     if fields.has('ttobench'):
-        loaded = ttobench.load_train(_file(fields, 'ttobench', base))
+        loaded = ttobench.load_train(_file(fields, 'ttobench', base), rail)
         fields.reject_unknown()
         return loaded.parameters, loaded
     preset = fields.text('preset')
@@ -118,7 +123,12 @@ def _parse_train(f: Fields, base: Path) -> tuple[TrainParameters, ttobench.TTOBe
         raise ConfigError(f"{fields.where}.preset: unknown train '{preset}'; valid: "
                           f"{', '.join(sorted(TRAIN_PRESETS))}")
     fields.reject_unknown()
-    return train_preset(preset), None
+    train = train_preset(preset)
+    if rail == 'dry':
+        return train, None  # every preset is within the dry-rail bound (a test checks it)
+    # A preset gives only its equivalent mass: adhesion is taken on it.
+    bounded = trains.bound_braking(train.traction, train.mass_kg, rail)
+    return replace(train, traction=bounded.traction), None
 
 
 def _parse_line(f: Fields, base: Path) -> tuple[Line, ttobench.TTOBenchJourney | None]:

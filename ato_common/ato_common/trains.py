@@ -68,6 +68,70 @@ class TractionCharacteristic:
         return (-self.max_service_brake_force_n, self.max_traction_at(speed))
 
 
+# Wheel-rail adhesion available to the brakes, by rail condition: the braking force of a train
+# whose axles all brake cannot exceed mu m g (m its static mass, without rotating masses). Dry:
+# 0.15, the adhesion a brake design may demand at most in European practice (EN 14531-1 and the
+# TSI LOC&PAS compute brake performance with no more than 0.15); wet: 0.10, the lower end of the
+# 0.10-0.20 usually found on a wet rail (lower, contaminated rails, the autumn case, are not
+# modelled). docs/guide/plant.md gives the bound and where it applies.
+ADHESION_COEFFICIENT = {'dry': 0.15, 'wet': 0.10}
+RAIL_CONDITIONS = tuple(ADHESION_COEFFICIENT)
+
+
+def adhesion_braking_limit_n(static_mass_kg: float, rail: str = 'dry',
+                             gravity: float = units.STANDARD_GRAVITY) -> float:
+    """The most braking force the wheel-rail contact transmits: mu(rail) m g, N."""
+    if rail not in ADHESION_COEFFICIENT:
+        raise ValueError(f'unknown rail condition {rail!r}; valid: {", ".join(RAIL_CONDITIONS)}')
+    return ADHESION_COEFFICIENT[rail] * static_mass_kg * gravity
+
+
+@dataclass(frozen=True)
+class BoundedBraking:
+    """A train's braking capability after the physical bounds, and what each bound changed."""
+
+    traction: TractionCharacteristic
+    adhesion_limit_n: float
+    notes: tuple[str, ...]   # one per figure a bound lowered, naming the figure and the bound
+
+
+def bound_braking(traction: TractionCharacteristic, static_mass_kg: float, rail: str = 'dry',
+                  service_limit_n: float | None = None, emergency_limit_n: float | None = None,
+                  names: Mapping[str, str] | None = None) -> BoundedBraking:
+    """The service and emergency brake forces bounded by adhesion (``adhesion_braking_limit_n``)
+    and by the data's own limits where it has them (``service_limit_n``,
+    ``emergency_limit_n``: an ETCS deceleration times the equivalent mass); the emergency brake
+    is then never below the service brake. ``names`` names the two figures as the data does
+    (default: the field names)."""
+    names = {'service': 'max_service_brake_force_n', 'emergency': 'max_emergency_brake_force_n',
+             **(names or {})}
+    adhesion = adhesion_braking_limit_n(static_mass_kg, rail)
+    adhesion_text = (f'the wheel-rail adhesion bound {adhesion / 1000.0:.1f} kN (mu '
+                     f'{ADHESION_COEFFICIENT[rail]:g} on a {rail} rail x '
+                     f'{static_mass_kg / 1000.0:g} t x g)')
+    notes = []
+
+    def bounded(kind: str, force: float, data_limit: float | None, data_text: str) -> float:
+        exceeded = [text for limit, text in ((adhesion, adhesion_text), (data_limit, data_text))
+                    if limit is not None and force > limit]
+        if not exceeded:
+            return force
+        result = min(limit for limit in (adhesion, data_limit) if limit is not None)
+        notes.append(f'{names[kind]} {force / 1000.0:.1f} kN exceeds {" and ".join(exceeded)}; '
+                     f'bounded to {result / 1000.0:.1f} kN')
+        return result
+
+    service = bounded('service', traction.max_service_brake_force_n, service_limit_n,
+                      'the ETCS service deceleration times the equivalent mass '
+                      f'({(service_limit_n or 0.0) / 1000.0:.1f} kN)')
+    emergency = bounded('emergency', traction.max_emergency_brake_force_n, emergency_limit_n,
+                        'the ETCS emergency deceleration times the equivalent mass '
+                        f'({(emergency_limit_n or 0.0) / 1000.0:.1f} kN)')
+    return BoundedBraking(
+        TractionCharacteristic(traction.max_traction_force_n, traction.max_traction_power_w,
+                               service, max(emergency, service)), adhesion, tuple(notes))
+
+
 @dataclass(frozen=True)
 class CarParameters:
     """One car of a multi-car model (Mao, Tao, Jiang & Yan eqs 1-7), SI per kg of the car."""

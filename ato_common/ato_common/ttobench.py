@@ -20,9 +20,12 @@ Mapping (simplifications are stated where they are made):
   -> Davis in N with v in m/s (nominal = true: TTOBench gives one law); traction force and
   power; service braking force = regenerative + pneumatic braking force (the regenerative power
   limit is kept in ``TTOBenchTrain`` but not in the suite's force model); emergency braking =
-  the ETCS emergency deceleration at standstill times the equivalent mass if given, else the
-  service force. ``max speed``, comfort limits, efficiencies, the tunnel resistance table and
-  the ETCS braking data stay on ``TTOBenchTrain``.
+  the highest ETCS emergency deceleration times the equivalent mass if given, else the service
+  force. Both are bounded by wheel-rail adhesion (mu m g, ``trains.ADHESION_COEFFICIENT``) and
+  by the highest ETCS deceleration of their kind times the equivalent mass; a figure a bound
+  lowers is a ``DataWarning`` (real files give regenerative plus pneumatic forces of 10 m/s^2
+  and more). ``max speed``, comfort limits, efficiencies, the tunnel resistance table and
+  the ETCS braking data (its tables bounded by adhesion too) stay on ``TTOBenchTrain``.
 * journey -> the run's stations (stopping points: an arrival and a departure at one position
   give the dwell) and passing points (their upper speed bound becomes a speed restriction at
   that position, 1 m long, that the train-length rule then extends); time windows are kept for
@@ -34,16 +37,40 @@ from __future__ import annotations
 import json
 import math
 import re
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from ato_common import units
 from ato_common.line import Curve, Line, PiecewiseConstant, Station, Tunnel
-from ato_common.trains import DavisResistance, TractionCharacteristic, TrainParameters
-from ato_common.validation import ConfigError
+from ato_common.trains import (
+    DavisResistance,
+    TractionCharacteristic,
+    TrainParameters,
+    adhesion_braking_limit_n,
+    bound_braking,
+)
+from ato_common.validation import ConfigError, DataWarning, unknown_field_message
 
 ID_PATTERN = re.compile(r'^[A-Za-z0-9_]+$')
+
+# The fields of each object of the format (TTOBench's READMEs; its validator rejects any other
+# field, and so does this reader: a misspelt optional field would otherwise pass as absent).
+METADATA_FIELDS = ('id', 'library version', 'description', 'created by', 'license')
+TRACK_FIELDS = ('metadata', 'altitude', 'stops', 'speed limits', 'gradients', 'curvatures',
+                'tunnels', 'ETCS braking data')
+TRACK_ETCS_FIELDS = ('M_NVAVADH', 'Kt_int')
+TRAIN_FIELDS = ('metadata', 'num seats', 'num coaches', 'length', 'mass', 'rho',
+                'max traction power', 'max reg braking power', 'max traction force',
+                'max reg braking force', 'max pn braking force', 'max acceleration',
+                'max deceleration', 'max speed', 'rolling resistance r0', 'rolling resistance r1',
+                'rolling resistance r2', 'efficiency traction', 'efficiency reg brake',
+                'tunnel resistance', 'ETCS braking data')
+TRAIN_ETCS_FIELDS = ('A_brake_emergency', 'A_brake_service', 'K_dry_rst', 'K_wet_rst',
+                     'T_traction', 'T_be', 'T_bs', 'v_uncertainty')
+JOURNEY_FIELDS = ('metadata', 'timing points')
+JOURNEY_METADATA_FIELDS = METADATA_FIELDS + ('associated track',)
 # Length of the speed restriction standing for a passing point's upper speed bound, m.
 PASSING_POINT_RESTRICTION_M = 1.0
 
@@ -90,9 +117,22 @@ class _Reader:
     def __init__(self, path: Path, data: Any, where: str = ''):
         self.path, self.data, self.where = path, data, where
 
+    def _place(self, field_name: str) -> str:
+        return f'{self.where}.{field_name}' if self.where else field_name
+
     def fail(self, field_name: str, what: str) -> ConfigError:
-        place = f'{self.where}.{field_name}' if self.where else field_name
-        return ConfigError(f'{self.path}: {place}: {what}')
+        return ConfigError(f'{self.path}: {self._place(field_name)}: {what}')
+
+    def only(self, valid: tuple[str, ...]) -> None:
+        """Reject any field of this object that is not one of ``valid``, naming the file, the
+        field, its likely intended name and the valid names."""
+        if not isinstance(self.data, dict):
+            raise ConfigError(f'{self.path}: {self.where or "the file"}: expected an object')
+        unknown = [str(k) for k in self.data if k not in valid]
+        if unknown:
+            place = f'{self.where}: ' if self.where else ''
+            raise ConfigError(f'{self.path}: {place}'
+                              f'{unknown_field_message(unknown, valid, quote=repr)}')
 
     def get(self, key: str, required: bool = True) -> Any:
         if not isinstance(self.data, dict):
@@ -132,6 +172,7 @@ class _Reader:
             return None
         if not isinstance(entry, dict) or 'value' not in entry:
             raise self.fail(key, 'expected {"unit": ..., "value": ...}')
+        _Reader(self.path, entry, self._place(key)).only(('unit', 'value'))
         convert = self.unit(f'{key}.unit', entry.get('unit'), quantity)
         return convert(self.number(entry['value'], f'{key}.value', minimum, exclusive))
 
@@ -146,7 +187,13 @@ class _Reader:
             raise self.fail(key, 'expected {"units": {...}, "values": [[...], ...]}')
         declared = entry.get('units', {})
         if len(columns) == 1 and 'unit' in entry:
+            _Reader(self.path, entry, self._place(key)).only(('unit', 'values'))
             declared = {columns[0][0]: entry['unit']}
+        else:
+            _Reader(self.path, entry, self._place(key)).only(('units', 'values'))
+            if isinstance(declared, dict):
+                _Reader(self.path, declared, self._place(f'{key}.units')).only(
+                    tuple(name for name, quantity in columns if quantity != 'raw'))
         converters = []
         for name, quantity in columns:
             if quantity == 'raw':
@@ -185,8 +232,9 @@ def _read_json(path: str | Path) -> tuple[Path, Any]:
         raise ConfigError(f'{path}: not valid JSON: {error}') from None
 
 
-def _metadata_id(reader: _Reader) -> str:
+def _metadata_id(reader: _Reader, fields: tuple[str, ...] = METADATA_FIELDS) -> str:
     metadata = _Reader(reader.path, reader.get('metadata'), 'metadata')
+    metadata.only(fields)
     identifier = metadata.get('id')
     if not isinstance(identifier, str) or not ID_PATTERN.match(identifier):
         raise metadata.fail('id', f'must contain only letters, numbers and underscores, got '
@@ -215,7 +263,9 @@ def load_track(path: str | Path, dwell_s: float = 0.0) -> TTOBenchTrack:
     """A TTOBench track as a Line; every stop becomes a station with ``dwell_s``."""
     path, data = _read_json(path)
     reader = _Reader(path, data)
+    reader.only(TRACK_FIELDS)
     identifier = _metadata_id(reader)
+    reader.scalar('altitude', 'length', required=False)
     stops = [row[0] for row in reader.table('stops', [('position', 'length')])]
     if len(stops) < 2:
         raise reader.fail('stops.values', 'at least two stops (origin and destination) are '
@@ -288,6 +338,7 @@ def load_track(path: str | Path, dwell_s: float = 0.0) -> TTOBenchTrack:
     etcs = reader.get('ETCS braking data', required=False)
     if etcs is not None:
         sub = _Reader(path, etcs, 'ETCS braking data')
+        sub.only(TRACK_ETCS_FIELDS)
         m_nvavadh = sub.scalar('M_NVAVADH', 'fraction')
         kt_int = sub.scalar('Kt_int', 'fraction')
 
@@ -327,6 +378,8 @@ class TTOBenchTrain:
     tunnel_resistance: tuple[tuple[float, float], ...] = ()  # (cross section m^2, N/(m/s)^2)
     braking: ETCSBrakingData | None = None
     sources: dict = field(default_factory=dict)
+    braking_notes: tuple[str, ...] = ()  # what the physical braking bounds changed (warned)
+    braking_bound_mps2: float = math.inf  # the documented bound on the braking deceleration
 
 
 def _deceleration_table(reader: _Reader, key: str) -> tuple[tuple[float, float], ...]:
@@ -340,10 +393,20 @@ def _deceleration_table(reader: _Reader, key: str) -> tuple[tuple[float, float],
     return tuple((r[0], r[1]) for r in rows)
 
 
-def load_train(path: str | Path) -> TTOBenchTrain:
+def _bounded_table(table: tuple[tuple[float, float], ...], bound_mps2: float
+                   ) -> tuple[tuple[float, float], ...]:
+    return tuple((speed, min(deceleration, bound_mps2)) for speed, deceleration in table)
+
+
+def load_train(path: str | Path, rail: str = 'dry') -> TTOBenchTrain:
+    """A TTOBench train. Its braking is bounded by wheel-rail adhesion on a ``rail`` ('dry' or
+    'wet') rail and by its ETCS decelerations where it has them (``trains.bound_braking``);
+    each figure a bound lowers is a DataWarning naming the file, the figure and the bound."""
     path, data = _read_json(path)
     reader = _Reader(path, data)
+    reader.only(TRAIN_FIELDS)
     identifier = _metadata_id(reader)
+    reader.scalar('num seats', 'count', required=False, minimum=0.0)
     mass = reader.scalar('mass', 'mass', minimum=0.0, exclusive=True)
     rho = reader.scalar('rho', 'fraction', required=False, minimum=0.0) or 0.0
     equivalent_mass = mass * (1.0 + rho)
@@ -374,6 +437,7 @@ def load_train(path: str | Path) -> TTOBenchTrain:
     etcs = reader.get('ETCS braking data', required=False)
     if etcs is not None:
         sub = _Reader(path, etcs, 'ETCS braking data')
+        sub.only(TRAIN_ETCS_FIELDS)
         braking = ETCSBrakingData(
             emergency=_deceleration_table(sub, 'A_brake_emergency'),
             service=_deceleration_table(sub, 'A_brake_service'),
@@ -383,7 +447,38 @@ def load_train(path: str | Path) -> TTOBenchTrain:
             emergency_brake_build_up_s=sub.scalar('T_be', 'time', minimum=0.0),
             service_brake_build_up_s=sub.scalar('T_bs', 'time', minimum=0.0),
             speed_uncertainty=sub.scalar('v_uncertainty', 'fraction', minimum=0.0))
-    emergency_force = (braking.emergency[0][1] * equivalent_mass if braking else service_force)
+    # The braking capability (docs/guide/plant.md, "Braking bound"): the data's forces bounded
+    # by adhesion on the static mass and by the ETCS decelerations (their highest value, at
+    # the lowest speed) times the equivalent mass; the ETCS tables themselves by adhesion.
+    emergency_force = (max(d for _, d in braking.emergency) * equivalent_mass if braking
+                       else service_force)
+    unbounded = TractionCharacteristic(traction_force, power, service_force, emergency_force)
+    bounded = bound_braking(
+        unbounded, mass, rail,
+        service_limit_n=max(d for _, d in braking.service) * equivalent_mass if braking else None,
+        emergency_limit_n=(max(d for _, d in braking.emergency) * equivalent_mass if braking
+                           else None),
+        names={'service': 'max reg braking force + max pn braking force',
+               'emergency': 'ETCS braking data.A_brake_emergency x equivalent mass' if braking
+               else 'the emergency braking force (the service force: no ETCS data)'})
+    notes = list(bounded.notes)
+    adhesion_mps2 = adhesion_braking_limit_n(mass, rail) / equivalent_mass
+    if braking is not None:
+        for key, table in (('A_brake_emergency', braking.emergency),
+                           ('A_brake_service', braking.service)):
+            highest = max(d for _, d in table)
+            if highest > adhesion_mps2:
+                notes.append(f'ETCS braking data.{key} {highest:g} m/s^2 exceeds the wheel-rail '
+                             f'adhesion bound {adhesion_mps2:.3f} m/s^2 ({rail} rail); bounded')
+        braking = ETCSBrakingData(
+            _bounded_table(braking.emergency, adhesion_mps2),
+            _bounded_table(braking.service, adhesion_mps2), braking.k_dry_rst,
+            braking.k_wet_rst, braking.traction_cut_off_s, braking.emergency_brake_build_up_s,
+            braking.service_brake_build_up_s, braking.speed_uncertainty)
+    for note in notes:
+        warnings.warn(f'{path}: {note}', DataWarning, stacklevel=2)
+    bound_mps2 = min(adhesion_mps2, max(d for _, d in braking.emergency + braking.service)
+                     if braking else math.inf)
     if length is None:
         # The format makes the length optional; 25 m per coach, else a 200 m unit.
         length = 25.0 * coaches if coaches else 200.0
@@ -396,24 +491,26 @@ def load_train(path: str | Path) -> TTOBenchTrain:
         name=identifier,
         description=f'TTOBench train {identifier} ({path.name})',
         mass_kg=equivalent_mass, davis=davis, davis_nominal=davis,
-        traction=TractionCharacteristic(
-            max_traction_force_n=traction_force, max_traction_power_w=power,
-            max_service_brake_force_n=service_force,
-            max_emergency_brake_force_n=max(emergency_force, service_force)),
+        traction=bounded.traction,
         actuator_names=('traction',), length_m=length,
         sources={'all': f'TTOBench train file {path} (BSD-2, Kouzoupis et al. 2023)',
                  'mass_kg': 'mass times (1 + rho)', 'length_m': length_source,
-                 'max_service_brake_force_n': 'regenerative plus pneumatic braking force',
+                 'max_service_brake_force_n':
+                     'regenerative plus pneumatic braking force, bounded by adhesion '
+                     f'(mu on a {rail} rail x mass x g)'
+                     + (' and by the highest ETCS A_brake_service times the equivalent mass'
+                        if braking else ''),
                  'max_emergency_brake_force_n':
-                     'ETCS A_brake_emergency at standstill times the equivalent mass'
-                     if braking else 'the service braking force (no ETCS data)'})
+                     'the highest ETCS A_brake_emergency times the equivalent mass, bounded by '
+                     'adhesion' if braking else 'the service braking force (no ETCS data)'})
     return TTOBenchTrain(identifier, parameters, max_speed,
                          reader.scalar('max acceleration', 'acceleration', required=False,
                                        minimum=0.0, exclusive=True),
                          reader.scalar('max deceleration', 'acceleration', required=False,
                                        minimum=0.0, exclusive=True),
                          regenerative_power, efficiency_traction, efficiency_brake,
-                         tuple((r[0], r[1]) for r in tunnel), braking)
+                         tuple((r[0], r[1]) for r in tunnel), braking,
+                         braking_notes=tuple(notes), braking_bound_mps2=bound_mps2)
 
 
 @dataclass(frozen=True)
@@ -468,7 +565,8 @@ class TTOBenchJourney:
 def load_journey(path: str | Path) -> TTOBenchJourney:
     path, data = _read_json(path)
     reader = _Reader(path, data)
-    identifier = _metadata_id(reader)
+    reader.only(JOURNEY_FIELDS)
+    identifier = _metadata_id(reader, JOURNEY_METADATA_FIELDS)
     metadata = _Reader(path, reader.get('metadata'), 'metadata')
     track_id = metadata.get('associated track')
     if not isinstance(track_id, str) or not identifier.startswith(track_id + '_'):
@@ -479,9 +577,11 @@ def load_journey(path: str | Path) -> TTOBenchJourney:
              'lower speed constraint', 'upper speed constraint')
     quantities = ('length', 'time', 'time', 'speed', 'speed')
     if isinstance(entry, dict):
+        _Reader(path, entry, 'timing points').only(('units', 'values'))
         declared = entry.get('units')
         if not isinstance(declared, dict):
             raise reader.fail('timing points.units', 'expected the unit of each column')
+        _Reader(path, declared, 'timing points.units').only(names)
         converters = []
         for name, quantity in zip(names, quantities):
             if name not in declared:

@@ -86,6 +86,7 @@ def test_numbers_in_exponent_form_without_a_dot_are_numbers(tmp_path):
     assert (tunnel.start_m, tunnel.length_m, tunnel.cross_section_m2) == (7000.0, 1000.0, 40.0)
 
 
+@pytest.mark.filterwarnings('ignore::ato_common.validation.DataWarning')
 def test_a_train_converts_to_si():
     train = load_train(SAMPLES / 'trains' / 'CH_Stadler_FLIRT_TPF.json')
     p = train.parameters
@@ -96,7 +97,10 @@ def test_a_train_converts_to_si():
     assert p.davis.force(100 / 3.6) == pytest.approx(expected_n, rel=1e-12)
     assert p.traction.max_traction_at(1.0) == pytest.approx(200e3)
     assert p.traction.max_traction_at(100 / 3.6) == pytest.approx(2600e3 / (100 / 3.6))
-    assert p.traction.max_service_brake_force_n == pytest.approx(1420e3)
+    # 200 + 1220 kN of regenerative plus pneumatic braking (10.6 m/s^2) bounded by adhesion and
+    # by the file's own ETCS service deceleration (0.55 m/s^2 at most) times the mass
+    assert p.traction.max_service_brake_force_n == pytest.approx(0.55 * 122000.0 * 1.10)
+    assert p.traction.max_emergency_brake_force_n == pytest.approx(0.9 * 122000.0 * 1.10)
     assert p.traction.max_emergency_brake_force_n >= p.traction.max_service_brake_force_n
     assert train.max_speed_mps == pytest.approx(160 / 3.6)
     assert train.efficiency_traction == pytest.approx(0.9)
