@@ -9,6 +9,7 @@ setup(
     name=PACKAGE_NAME,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
+    package_data={PACKAGE_NAME: ['campaigns/*.yaml']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
         ('share/' + PACKAGE_NAME, ['package.xml']),
@@ -27,7 +28,8 @@ setup(
     tests_require=['pytest', 'numpy', 'grimp'],
     entry_points={
         'console_scripts': [
-            'run_scenario = ato_bringup.run_scenario:main'
+            'run_scenario = ato_bringup.run_scenario:main',
+            'campaign = ato_bringup.campaign:main',
         ],
     },
 )
