@@ -25,7 +25,7 @@ setup(
         'and the comparison of the laws.'
     ),
     license='Apache-2.0',
-    tests_require=['pytest', 'numpy', 'grimp'],
+    tests_require=['pytest', 'numpy', 'grimp', 'PyYAML', 'pandas', 'distributed'],
     entry_points={
         'console_scripts': [
             'run_scenario = ato_bringup.run_scenario:main',

@@ -39,6 +39,7 @@ import time
 import traceback
 import uuid
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping
 
@@ -62,6 +63,8 @@ STOP_ERROR_LIMIT_M = 0.5
 #: the key of a row: which run it is
 KEY = ('scenario', 'law', 'draw')
 STATUSES = ('ok', 'diverged', 'error', 'timeout')
+#: a row's field (not written) asking the engine to restart the worker a hung run is left on
+RESTART = '_restart_worker'
 #: the per-run metrics every row has (NaN when the run did not produce them)
 METRICS = ('rms_speed_error_kmh', 'max_speed_error_kmh', 'rms_position_error_m',
            'max_position_error_m', 'stop_error_m', 'arrival_error_s', 'traction_energy_kwh',
@@ -262,8 +265,17 @@ def load_campaign(path: str | Path) -> Campaign:
 # --- one run ------------------------------------------------------------------------------------
 
 class RunTimeout(BaseException):
-    """Raised inside a run's thread when it exceeds its wall-time limit (a BaseException: a
-    law's own ``except Exception`` does not swallow it)."""
+    """A run exceeded its wall-time limit (a BaseException: a law's own ``except Exception``
+    does not swallow it). ``lingering``: the run's thread did not stop (it is blocked in
+    compiled code); its worker should be restarted."""
+
+    def __init__(self, limit_s: float, lingering: bool = False):
+        super().__init__(f'exceeded the wall-time limit of {limit_s:g} s')
+        self.limit_s, self.lingering = limit_s, lingering
+
+
+#: after its time limit, a run's thread has this long to stop before it is left behind, s
+STOP_GRACE_S = 5.0
 
 
 def _raise_in(thread_id: int) -> None:
@@ -271,25 +283,43 @@ def _raise_in(thread_id: int) -> None:
                                                ctypes.py_object(RunTimeout))
 
 
-def with_time_limit(function: Callable[[], dict], limit_s: float | None) -> dict:
-    """``function()``, interrupted with RunTimeout after ``limit_s`` s of wall time (checked
-    between Python bytecodes: a law that loops in Python is stopped)."""
+def with_time_limit(function: Callable[[], Any], limit_s: float | None) -> Any:
+    """``function()`` in a thread of its own, waited for ``limit_s`` s of wall time; past it,
+    RunTimeout is raised in that thread (a law that loops in Python stops at its next
+    bytecode) and here. A thread blocked in compiled code cannot be stopped: RunTimeout then
+    says ``lingering`` and the caller restarts the worker."""
     if not limit_s:
         return function()
-    done = threading.Event()
-    me = threading.get_ident()
+    outcome: dict = {}
 
-    def expire():
-        if not done.wait(limit_s):
-            _raise_in(me)
+    def body():
+        try:
+            outcome['value'] = function()
+        except BaseException as error:  # noqa: BLE001 -- handed to the waiting thread
+            outcome['error'] = error
 
-    timer = threading.Thread(target=expire, daemon=True, name='campaign run time limit')
-    timer.start()
+    thread = threading.Thread(target=body, daemon=True, name='campaign run')
+    thread.start()
+    thread.join(limit_s)
+    if thread.is_alive():
+        _raise_in(thread.ident)
+        thread.join(STOP_GRACE_S)
+        raise RunTimeout(limit_s, lingering=thread.is_alive())
+    if 'error' in outcome:
+        error = outcome['error']
+        if isinstance(error, RunTimeout):  # raised just as the run finished
+            raise RunTimeout(limit_s) from None
+        raise error
+    return outcome['value']
+
+
+def worker_address() -> str:
+    """The address of the Dask worker this runs on ('' outside a worker)."""
     try:
-        return function()
-    finally:
-        done.set()
-        timer.join()
+        from distributed import get_worker
+        return get_worker().address
+    except (ImportError, ValueError):
+        return ''
 
 
 def base_row(task: Mapping) -> dict:
@@ -312,9 +342,11 @@ def run_task(task: Mapping, runner: Callable[[Mapping], dict] | None = None) -> 
             row.update(status='diverged', reason=(
                 f'speed error reached {row["max_speed_error_kmh"]:.1f} km/h '
                 f'(> {DIVERGED_SPEED_ERROR_KMH:g})'))
-    except RunTimeout:
+    except RunTimeout as timeout:
         row.update(status='timeout', reason=f'exceeded the wall-time limit of '
                                             f'{task["timeout_s"]:g} s (timeout_s)')
+        if timeout.lingering:
+            row[RESTART] = worker_address()
     except Exception as error:  # noqa: BLE001 -- any failure of a law is a result to show
         row.update(status='error', reason=f'{type(error).__name__}: {error} '
                    f'[{traceback.format_exc(limit=-1).splitlines()[-3].strip()}]')
@@ -424,46 +456,82 @@ def missing(campaign: Campaign, folder: Path) -> list[dict]:
     return [t for t in campaign.tasks() if (t['scenario'], t['law'], t['draw']) not in keys]
 
 
-def run_serial(tasks: Iterable[dict], finished: Callable[[dict], None],
-               runner: Callable | None = None) -> None:
-    for task in tasks:
-        finished(run_task(task, runner))
+def run_serial(items: Iterable, function: Callable[[Any], dict],
+               finished: Callable[[dict], None]) -> None:
+    for item in items:
+        row = function(item)
+        row.pop(RESTART, None)
+        finished(row)
 
 
-def open_client(scheduler: str | None, workers: int | None):
-    """A Dask client: to ``scheduler`` (or Dask's ``scheduler-address`` configuration), else to
-    a new LocalCluster of ``workers`` single-threaded worker processes (default: one per
-    core)."""
+def open_client(scheduler: str | None = None, workers: int | None = None,
+                allowed_failures: int | None = None):
+    """(client, cluster): a Dask client to ``scheduler`` (or Dask's ``scheduler-address``
+    configuration; cluster None), else to a new LocalCluster of ``workers`` single-threaded
+    worker processes (default: one per core). ``allowed_failures``: how often a run whose
+    worker died is tried again (Dask's default: 3)."""
     import dask
     from distributed import Client, LocalCluster
     address = scheduler or dask.config.get('scheduler-address', None)
     if address:
         return Client(address, timeout='30s'), None
-    cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
-                           processes=True, dashboard_address=None, silence_logs=40)
+    settings = {} if allowed_failures is None else {
+        'distributed.scheduler.allowed-failures': allowed_failures}
+    with dask.config.set(settings):
+        cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                               processes=True, dashboard_address=None, silence_logs=40)
     return Client(cluster), cluster
 
 
-def run_dask(client, tasks: list[dict], finished: Callable[[dict], None],
-             runner: Callable | None = None) -> None:
-    """Every task on the cluster of ``client``; ``finished`` gets each row as it arrives. A
-    lost worker's runs are run again by Dask; a run that fails on the cluster itself (not in
-    the law: run_task catches those) is a row with status error."""
+def run_dask(client, items: list, function: Callable[[Any], dict],
+             finished: Callable[[dict], None], lost: Callable[[Any, str], dict]) -> None:
+    """``function(item)`` for every item on the cluster of ``client``; ``finished`` gets each
+    row as it arrives. A run that the cluster itself loses (its worker died more often than
+    Dask's allowed-failures) is ``lost(item, reason)``; a worker where a hung run was left
+    behind is restarted."""
     from distributed import as_completed
-    futures = {client.submit(run_task, task, runner, key=f'campaign-{uuid.uuid4().hex}',
-                             pure=False): task for task in tasks}
+    futures = {client.submit(function, item, key=f'run-{uuid.uuid4().hex}', pure=False): item
+               for item in items}
     try:
         for future in as_completed(futures):
             try:
                 row = future.result()
             except Exception as error:  # noqa: BLE001 -- the cluster lost the run
-                row = base_row(futures[future])
-                row.update(status='error', reason=f'the cluster lost the run: '
-                                                  f'{type(error).__name__}: {error}')
+                row = lost(futures[future], f'the cluster lost the run: '
+                                            f'{type(error).__name__}: {error}')
+            address = row.pop(RESTART, '')
+            if address:
+                client.restart_workers([address], raise_for_error=False)
             finished(row)
     finally:
         for future in futures:
             future.cancel()
+
+
+def execute(items: list, function: Callable[[Any], dict], finished: Callable[[dict], None],
+            lost: Callable[[Any, str], dict], *, serial: bool = False,
+            scheduler: str | None = None, workers: int | None = None, client=None,
+            allowed_failures: int | None = None) -> None:
+    """Run ``function`` (module level: the workers import it) on every item, in this process
+    (``serial``), on ``client``'s cluster, on a running scheduler or on a new LocalCluster."""
+    if not items:
+        return
+    if serial:
+        run_serial(items, function, finished)
+        return
+    own, cluster = (client, None) if client is not None else open_client(
+        scheduler, workers, allowed_failures)
+    try:
+        run_dask(own, items, function, finished, lost)
+    finally:
+        if client is None:
+            own.close()
+            if cluster is not None:
+                cluster.close()
+
+
+def _lost_row(task: Mapping, reason: str) -> dict:
+    return dict(base_row(task), status='error', reason=reason)
 
 
 def run_campaign(campaign: Campaign, out: Path = DEFAULT_OUT, *, serial: bool = False,
@@ -482,19 +550,10 @@ def run_campaign(campaign: Campaign, out: Path = DEFAULT_OUT, *, serial: bool = 
         bar.set_postfix_str(f'{row["law"]} draw {row["draw"]}: {row["status"]}', refresh=False)
         bar.update(1)
 
+    function = run_task if runner is None else partial(run_task, runner=runner)
     try:
-        if todo and serial:
-            run_serial(todo, finished, runner)
-        elif todo:
-            own, cluster = (client, None) if client is not None else open_client(scheduler,
-                                                                                  workers)
-            try:
-                run_dask(own, todo, finished, runner)
-            finally:
-                if client is None:
-                    own.close()
-                    if cluster is not None:
-                        cluster.close()
+        execute(todo, function, finished, _lost_row, serial=serial, scheduler=scheduler,
+                workers=workers, client=client)
     finally:
         bar.close()
     rows = read_rows(folder, campaign.fingerprint)
