@@ -47,6 +47,9 @@ def main(argv=None) -> int:
     parser.add_argument('--results-page', type=Path, default=None,
                         help='also write the report, with date, machine and commit, to this '
                         'results page of the docs (make campaign: docs/results/campaign.md)')
+    parser.add_argument('--readme', type=Path, default=None,
+                        help='also write the summary between the campaign markers of this '
+                        'README (make campaign: README.md)')
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
     try:
@@ -68,10 +71,11 @@ def main(argv=None) -> int:
               'only the missing ones', file=sys.stderr)
         return 130
     elapsed = time.monotonic() - started
-    command = ('make campaign' if argv in ([], ['--results-page', str(DEFAULT_RESULTS_PAGE)])
+    command = ('make campaign' if argv in ([], ['--results-page', str(DEFAULT_RESULTS_PAGE),
+                                                '--readme', 'README.md'])
                else ' '.join(['python -m ato_bringup.campaign', *argv]))
     report = write_report(campaign, rows, args.out / campaign.name, command, elapsed,
-                          args.results_page, measured)
+                          args.results_page, measured, args.readme)
     print(f'wrote {report}')
     return 0
 

@@ -382,7 +382,7 @@ def run_metrics(run, dt: float) -> dict:
         ref = np.flatnonzero(run.ref_positions >= mark)
         if ref.size and stop.station.position_m > run.positions[0] + 1.0:
             arrival.append(run.times_s[truth[0]] - run.times_s[ref[0]] if truth.size
-                           else math.inf)
+                           else math.nan)  # not reached within the run: the stop error says it
     stop_errors = m.stop_errors_m
     return {
         'rms_speed_error_kmh': m.rms_speed_error_kmh,
@@ -391,7 +391,8 @@ def run_metrics(run, dt: float) -> dict:
         'max_position_error_m': m.max_position_error_m,
         'stop_error_m': max((abs(e) for e in stop_errors.values()), default=math.nan),
         'stop_errors_m': json.dumps(stop_errors),
-        'arrival_error_s': max(arrival, key=abs) if arrival else math.nan,
+        'arrival_error_s': (math.nan if not arrival or any(map(math.isnan, arrival))
+                            else max(arrival, key=abs)),
         'traction_energy_kwh': m.traction_energy_kwh,
         'max_jerk_mps3': float(np.max(np.abs(jerk))),
         'max_acceleration_mps2': float(np.max(np.abs(acc))),

@@ -73,13 +73,14 @@ def markdown(campaign: Campaign, rows, command: str, elapsed_s: float,
         best = ranked[0][0]
         tied = [law for law, _, apart in ranked[1:] if not apart]
         order = ' < '.join(f'{law} ({mean:.3f})' for law, mean, _ in ranked)
-        lines += [f'Ranking by mean RMS speed error over the ok runs (km/h): {order}. Best: '
-                  f'**{best}**' + (f'; cannot be told apart from it at '
+        lines += [f'Ranking by mean RMS speed error over the runs with metrics (km/h): {order}. '
+                  f'Best: **{best}**' + (f'; cannot be told apart from it at '
                                    f'{cs.CONFIDENCE:.0%} (paired bootstrap interval contains 0): '
                                    + ', '.join(tied) if tied else
                                    '; every other law is told apart from it at '
                                    f'{cs.CONFIDENCE:.0%}') + '.', '']
-        lines += ['### Metrics (ok runs: mean / median / p95 / worst)', '',
+        lines += ['### Metrics (the runs with metrics, ok or diverged: mean / median / p95 / '
+                  'worst)', '',
                   '| metric | ' + ' | '.join(e.label for e in campaign.laws) + ' |',
                   '|---|' + '---|' * len(campaign.laws)]
         for metric, label, fmt in TABLE_METRICS:
@@ -108,7 +109,7 @@ def markdown(campaign: Campaign, rows, command: str, elapsed_s: float,
         sens = cs.sensitivity(sub, RANK_METRIC)
         lines += ['', '### What drives the error (Spearman rank correlation with the RMS speed '
                   'error, the 3 strongest per law)', '',
-                  '| law | parameter | rho | p-value |', '|---|---|---|---|']
+                  '| law | parameter | rho | p-value |', '|---|---|---|---|']  # measured runs
         for e in campaign.laws:
             for r in sens[sens['law'] == e.label].head(3).itertuples():
                 lines.append(f'| {r.law} | `{r.parameter}` | {r.rho:+.2f} | {r.p_value:.2g} |')
@@ -135,7 +136,7 @@ def plot(campaign: Campaign, rows, folder: Path) -> list[Path]:
     labels = [e.label for e in campaign.laws]
     for key in campaign.scenarios:
         name = scenario_name(key)
-        ok = rows[(rows['scenario'] == key) & (rows['status'] == 'ok')]
+        ok = rows[(rows['scenario'] == key) & rows['status'].isin(cs.MEASURED)]
         if ok.empty:
             continue
         fig, axes = plt.subplots(1, len(BOX_METRICS), figsize=(4 * len(BOX_METRICS), 4))
@@ -187,8 +188,64 @@ def _save(fig, path: Path, plt) -> Path:
     return path
 
 
+README_START = '<!-- campaign summary: written by make campaign, do not edit -->'
+README_END = '<!-- end of the campaign summary -->'
+
+
+def summary_markdown(campaign: Campaign, rows, command: str) -> str:
+    """The short summary the README shows: per scenario, each law's mean RMS speed error, its
+    paired difference against the baseline, and its failure rates, with intervals."""
+    lines = [f'`{command}`: {len(campaign.laws)} laws x {campaign.draws} draws of the default '
+             f'uncertainty, seed {campaign.seed} (full report: '
+             '[docs/results/campaign.md](docs/results/campaign.md)).', '']
+    for key in campaign.scenarios:
+        sub = rows[rows['scenario'] == key]
+        if sub.empty:
+            continue
+        ranked = cs.ranking(sub, key, RANK_METRIC)
+        means = {law: mean for law, mean, _ in ranked}
+        diffs = cs.paired_differences(sub, campaign.baseline, RANK_METRIC).set_index('law')
+        rates = cs.failure_rates(sub).set_index(['law', 'kind'])
+        stop = f'stop outside +/-{STOP_ERROR_LIMIT_M:g} m'
+        tied = [law for law, _, apart in ranked[1:] if not apart]
+        lines += [f'**{scenario_name(key)}**: lowest mean RMS speed error **{ranked[0][0]}**'
+                  + (f' (not told apart at {cs.CONFIDENCE:.0%} from: {", ".join(tied)})'
+                     if tied else '') + '.', '',
+                  f'| law | mean RMS speed error (km/h) | minus {campaign.baseline}, '
+                  f'paired [{cs.CONFIDENCE:.0%} CI] | {stop} [CI] | did not finish [CI] |',
+                  '|---|---|---|---|---|']
+        for law, _, _ in ranked:
+            if law in diffs.index:
+                d = diffs.loc[law]
+                diff = f'{_f(d["mean_diff"], "+.3f")} [{_f(d["low"], "+.3f")}, ' \
+                       f'{_f(d["high"], "+.3f")}]'
+            else:
+                diff = '(baseline)'
+            cells = []
+            for kind in (stop, 'did not finish'):
+                r = rates.loc[(law, kind)]
+                cells.append(f'{r["k"]}/{r["n"]} [{r["low"]:.2f}, {r["high"]:.2f}]')
+            lines.append(f'| {law} | {_f(means[law], ".3f")} | {diff} | {cells[0]} | '
+                         f'{cells[1]} |')
+        lines.append('')
+    return '\n'.join(lines).strip()
+
+
+def update_readme(path: Path, summary: str) -> Path:
+    """Replace the text between README_START and README_END of ``path`` by ``summary``."""
+    text = path.read_text()
+    if README_START not in text or README_END not in text:
+        raise ValueError(f'{path}: no campaign summary markers ({README_START!r} ... '
+                         f'{README_END!r}) to write between')
+    head, rest = text.split(README_START, 1)
+    _, tail = rest.split(README_END, 1)
+    path.write_text(f'{head}{README_START}\n{summary}\n{README_END}{tail}')
+    return path
+
+
 def write_report(campaign: Campaign, rows, folder: Path, command: str, elapsed_s: float,
-                 results_page: Path | None = None, measured=None) -> Path:
+                 results_page: Path | None = None, measured=None,
+                 readme: Path | None = None) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     body = markdown(campaign, rows, command, elapsed_s)
     path = folder / 'report.md'
@@ -199,4 +256,6 @@ def write_report(campaign: Campaign, rows, folder: Path, command: str, elapsed_s
         write_results_page(results_page, f'Campaign {campaign.name}', command,
                            page_body + f'\n\nThe plots are written beside `{path}` when the '
                            'command runs.', measured)
+    if readme is not None:
+        update_readme(readme, summary_markdown(campaign, rows, command))
     return path

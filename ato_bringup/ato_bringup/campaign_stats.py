@@ -1,13 +1,14 @@
 """Statistics of a campaign's rows (scipy.stats), per scenario and law.
 
 - ``summary``: mean, median, 95th percentile and worst (largest |value|) of each metric over the
-  runs with status ok;
+  runs that produced metrics (status ok or diverged: MEASURED);
 - ``failure_rates``: the share of runs whose stop is outside +/-STOP_ERROR_LIMIT_M (a run that
   did not finish ok counts as outside; one without a stop in its window, as inside), that had
   an ATP intervention, and that did not finish (diverged, error or timeout), each with a Wilson
   score interval;
-- ``paired_differences``: law minus baseline on the same draws (common random numbers), with a
-  percentile bootstrap interval of the mean difference;
+- ``paired_differences``: law minus baseline on the same draws (common random numbers, the
+  draws where both produced a finite value), with a percentile bootstrap interval of the mean
+  difference;
 - ``ranking``: the laws by mean metric; a law whose paired interval against the best contains 0
   cannot be told apart from it at that confidence;
 - ``sensitivity``: Spearman's rank correlation of each drawn parameter with a metric.
@@ -27,8 +28,14 @@ BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 12345
 
 
+#: the statuses of the runs that produced metrics: a diverged run counts with its (large)
+#: errors, so a law that diverges is not flattered by leaving its worst runs out
+MEASURED = ('ok', 'diverged')
+
+
 def _ok(rows):
-    return rows[rows['status'] == 'ok']
+    """The runs that produced metrics (MEASURED)."""
+    return rows[rows['status'].isin(MEASURED)]
 
 
 def summary(rows, metric: str):
@@ -91,12 +98,12 @@ def bootstrap_mean(d: np.ndarray, confidence: float = CONFIDENCE,
 
 
 def paired(rows, scenario: str, law: str, baseline: str, metric: str) -> np.ndarray:
-    """``law`` minus ``baseline`` on the draws where both finished ok."""
+    """``law`` minus ``baseline`` on the draws where both produced a finite value."""
     ok = _ok(rows[rows['scenario'] == scenario])
     a = ok[ok['law'] == law].set_index('draw')[metric]
     b = ok[ok['law'] == baseline].set_index('draw')[metric]
-    joined = (a - b).dropna()
-    return joined.sort_index().to_numpy(dtype=float)
+    d = (a - b).sort_index().to_numpy(dtype=float)
+    return d[np.isfinite(d)]
 
 
 def paired_differences(rows, baseline: str, metric: str, confidence: float = CONFIDENCE):
@@ -116,8 +123,8 @@ def paired_differences(rows, baseline: str, metric: str, confidence: float = CON
 
 def ranking(rows, scenario: str, metric: str, confidence: float = CONFIDENCE
             ) -> list[tuple[str, float, bool]]:
-    """(law, mean metric, told apart from the best) in order of the mean over ok runs; a law
-    with no ok run comes last. The best is told apart from itself: True."""
+    """(law, mean metric, told apart from the best) in order of the mean over the measured runs;
+    a law without any comes last. The best is told apart from itself: True."""
     table = summary(rows[rows['scenario'] == scenario], metric)
     table = table.sort_values('mean', na_position='last', kind='stable')
     laws = list(table['law'])
@@ -134,7 +141,7 @@ def ranking(rows, scenario: str, metric: str, confidence: float = CONFIDENCE
 
 def sensitivity(rows, metric: str):
     """Spearman's rho and its p-value of each drawn parameter (``p_*`` columns that vary)
-    against ``metric``, per (scenario, law), over the ok runs; strongest |rho| first."""
+    against ``metric``, per (scenario, law), over the measured runs; strongest |rho| first."""
     import pandas as pd
     params = [c for c in rows.columns if c.startswith('p_')]
     out = []

@@ -354,3 +354,26 @@ def test_the_controller_of_a_perturbed_run_knows_the_nominal_train_only(monkeypa
     offline.run_offline(scenario, 'pid', end_time_s=2.0, uncertainty=values)
     assert seen['knowledge'] == knowledge_of(scenario)
     assert seen['truth'].train.mass_kg > scenario.train.mass_kg * 1.1
+
+
+def test_a_diverged_run_counts_in_the_distribution_and_a_failed_one_does_not():
+    rows = fixed_table()
+    rows.loc[(rows['law'] == 'A') & (rows['draw'] == 4), 'status'] = 'diverged'
+    rows.loc[(rows['law'] == 'A') & (rows['draw'] == 0), 'status'] = 'error'
+    table = cs.summary(rows, 'rms_speed_error_kmh').set_index('law')
+    assert table.loc['A', ['n_ok', 'mean', 'worst']].tolist() == pytest.approx([4, 4.75, 10.0])
+
+
+def test_the_readme_summary_is_written_between_its_markers_only(tmp_path, serial_rows):
+    from ato_bringup import campaign_report
+    campaign, rows = serial_rows
+    readme = tmp_path / 'README.md'
+    readme.write_text(f'# x\n\nbefore\n{campaign_report.README_START}\nold\n'
+                      f'{campaign_report.README_END}\nafter\n')
+    campaign_report.update_readme(readme, campaign_report.summary_markdown(campaign, rows, 'cmd'))
+    text = readme.read_text()
+    assert text.startswith('# x\n\nbefore\n') and text.endswith('after\n') and 'old' not in text
+    assert '| pid |' in text and '| luo_xu |' in text and '**short_line**' in text
+    readme.write_text('no markers')
+    with pytest.raises(ValueError, match='no campaign summary markers'):
+        campaign_report.update_readme(readme, 'x')
