@@ -28,7 +28,7 @@ from ato_bringup.provenance import results_page_provenance
 from ato_common.validation import ConfigError
 
 #: the default campaign of `make campaign`, shipped beside this module
-DEFAULT_CAMPAIGN = Path(__file__).with_name('campaigns') / 'default.yaml'
+DEFAULT_CAMPAIGN = Path(__file__).resolve().with_name('campaigns') / 'default.yaml'
 DEFAULT_RESULTS_PAGE = Path('docs/results/campaign.md')
 
 
@@ -52,8 +52,11 @@ def main(argv=None) -> int:
                         'README (make campaign: README.md)')
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
+    path = args.campaign
+    if path.resolve().is_relative_to(Path.cwd()):
+        path = path.resolve().relative_to(Path.cwd())  # as the report names it
     try:
-        campaign = load_campaign(args.campaign)
+        campaign = load_campaign(path)
     except ConfigError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2

@@ -1,11 +1,12 @@
 """The report of a campaign: ``<out>/<name>/report.md`` and its PNG plots, from the rows.
 
-Per scenario: the distribution of each metric per law (mean, median, p95, worst over the ok
-runs), the failure rates with Wilson intervals, the paired differences against the baseline law
-with bootstrap intervals, the ranking by RMS speed error (saying which laws cannot be told apart
-from the best), the parameters that drive each law's error (Spearman's rank correlation), and
-three plots: box plots of the metrics per law, the empirical CDF of the stop error, and the RMS
-speed error against the most influential parameter.
+Per scenario: the distribution of each metric per law (mean, median, p95, worst over the runs
+with metrics: ok or diverged), the failure rates with Wilson intervals, the paired differences
+against the baseline law with bootstrap intervals, the ranking by RMS speed error (saying which
+laws cannot be told apart from the best), the parameters that drive each law's RMS speed error
+and stop error (Spearman's rank correlation), and three plots: box plots of the metrics per
+law, the empirical CDF of the stop error, and the RMS speed error against the most influential
+parameter.
 """
 
 from __future__ import annotations
@@ -34,6 +35,8 @@ TABLE_METRICS = (('rms_speed_error_kmh', 'RMS speed error (km/h)', '.3f'),
                  ('saturated_fraction', 'share of steps saturated', '.3f'),
                  ('atp_interventions', 'ATP interventions', '.2f'),
                  ('watchdog_events', 'watchdog periods', '.2f'))
+#: the metrics whose drivers the report names
+SENSITIVITY_METRICS = ('rms_speed_error_kmh', 'stop_error_m')
 BOX_METRICS = ('rms_speed_error_kmh', 'stop_error_m', 'traction_energy_kwh', 'max_jerk_mps3')
 
 
@@ -55,8 +58,9 @@ def markdown(campaign: Campaign, rows, command: str, elapsed_s: float,
               f'scenario(s) x {len(campaign.laws)} laws x {campaign.draws} draws, seed '
               f'{campaign.seed}: {runs} runs ('
               + ', '.join(f'{n} {s}' for s, n in sorted(statuses.items())) +
-              f'), {elapsed_s:.0f} s of wall time for the runs this command made, '
-              f'{os.cpu_count()} cores; offline closed loop, the plant perturbed by each draw, '
+              f'); the runs took {rows["wall_s"].sum():.0f} s in sum, this command '
+              f'{elapsed_s:.0f} s of wall time on {os.cpu_count()} cores (a resumed campaign '
+              'runs only the missing rows); offline closed loop, the plant perturbed by each draw, '
               'the controller on the nominal train.', '',
               '## Uncertainty', '',
               '| parameter | unit | distribution | source |', '|---|---|---|---|']
@@ -106,13 +110,16 @@ def markdown(campaign: Campaign, rows, command: str, elapsed_s: float,
             for r in cs.paired_differences(sub, campaign.baseline, metric).itertuples():
                 lines.append(f'| {r.law} | {label} | {r.pairs} | {_f(r.mean_diff, fmt)} | '
                              f'[{_f(r.low, fmt)}, {_f(r.high, fmt)}] |')
-        sens = cs.sensitivity(sub, RANK_METRIC)
-        lines += ['', '### What drives the error (Spearman rank correlation with the RMS speed '
-                  'error, the 3 strongest per law)', '',
-                  '| law | parameter | rho | p-value |', '|---|---|---|---|']  # measured runs
-        for e in campaign.laws:
-            for r in sens[sens['law'] == e.label].head(3).itertuples():
-                lines.append(f'| {r.law} | `{r.parameter}` | {r.rho:+.2f} | {r.p_value:.2g} |')
+        for metric in SENSITIVITY_METRICS:
+            label = dict((m, text) for m, text, _ in TABLE_METRICS)[metric]
+            sens = cs.sensitivity(sub, metric)
+            lines += ['', f'### What drives the {label.split(" (")[0]} (Spearman rank '
+                      'correlation, the 3 strongest per law)', '',
+                      '| law | parameter | rho | p-value |', '|---|---|---|---|']
+            for e in campaign.laws:
+                for r in sens[sens['law'] == e.label].head(3).itertuples():
+                    lines.append(f'| {r.law} | `{r.parameter}` | {r.rho:+.2f} | '
+                                 f'{r.p_value:.2g} |')
         failed = sub[sub['status'] != 'ok']
         if len(failed):
             lines += ['', '### Runs that did not finish ok', '', '| law | draw | status | reason |',
