@@ -422,20 +422,22 @@ def write_row(folder: Path, row: dict) -> Path:
 
 def read_rows(folder: Path, fingerprint: str | None = None):
     """The dataset as a DataFrame (empty if none); only the rows of ``fingerprint`` if given,
-    one per key (the latest if a row was written twice)."""
+    one per key and fingerprint (the latest written if a row was written twice)."""
     import pandas as pd
-    files = sorted(folder.glob('*.parquet')) if folder.is_dir() else []
+    files = sorted(folder.glob('*.parquet'), key=lambda p: (p.stat().st_mtime_ns, p.name)) \
+        if folder.is_dir() else []
     if not files:
         return pd.DataFrame()
     table = pd.concat([pd.read_parquet(p) for p in files], ignore_index=True)
     if fingerprint is not None:
         table = table[table['fingerprint'] == fingerprint]
-    return table.drop_duplicates(list(KEY), keep='last').sort_values(
+    return table.drop_duplicates([*KEY, 'fingerprint'], keep='last').sort_values(
         ['scenario', 'law', 'draw']).reset_index(drop=True)
 
 
-def compact(folder: Path, fingerprint: str) -> None:
-    """Merge the one-row files into one file of the dataset (after a complete campaign)."""
+def compact(folder: Path) -> None:
+    """Merge the files of the dataset into one (after a complete campaign; the rows of other
+    fingerprints are kept)."""
     files = sorted(folder.glob('part-*.parquet'))
     if len(files) < 2:
         return
@@ -559,5 +561,5 @@ def run_campaign(campaign: Campaign, out: Path = DEFAULT_OUT, *, serial: bool = 
         bar.close()
     rows = read_rows(folder, campaign.fingerprint)
     if len(rows) == total:
-        compact(folder, campaign.fingerprint)
+        compact(folder)
     return rows

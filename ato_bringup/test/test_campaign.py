@@ -377,3 +377,15 @@ def test_the_readme_summary_is_written_between_its_markers_only(tmp_path, serial
     readme.write_text('no markers')
     with pytest.raises(ValueError, match='no campaign summary markers'):
         campaign_report.update_readme(readme, 'x')
+
+
+def test_the_rows_of_two_versions_of_a_campaign_live_side_by_side(serial_rows, tmp_path):
+    campaign, rows = serial_rows
+    out = tmp_path / 'out'
+    run_campaign(campaign, out, serial=True, progress=False)
+    changed = load_campaign(write(tmp_path, {**TINY, 'seed': 12}))
+    run_campaign(changed, out, serial=True, progress=False)
+    folder = rows_folder(out, campaign.name)
+    assert len(read_rows(folder)) == 16
+    pd.testing.assert_frame_equal(comparable(read_rows(folder, campaign.fingerprint)),
+                                  comparable(rows))
