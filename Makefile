@@ -5,9 +5,11 @@ ENV := set -eo pipefail; . scripts/env.sh;
 
 SCENARIO ?=
 CONTROLLER ?=
+CAMPAIGN ?=
+SCHEDULER ?=
 PYTEST_ARGS ?=
 
-.PHONY: help setup build demo compare reproduce test test-unit test-integration lint docs docs-serve bench curves clean
+.PHONY: help setup build demo compare campaign reproduce test test-unit test-integration lint docs docs-serve bench curves clean
 
 help:
 	@echo "make setup   create .venv with pinned packages and build ros_ws (idempotent)"
@@ -15,8 +17,12 @@ help:
 	@echo "             with the law that make compare ranked best on jinan_xuzhou, else pid"
 	@echo "             (SCENARIO=name-or-file CONTROLLER=law to override)"
 	@echo "make compare every applicable law on every built-in scenario, offline, in parallel:"
-	@echo "             runs/compare/compare.md (tables, ranking) and plots (SCENARIO=name: one only)"
-	@echo "make reproduce  run the papers' reproduction tests and write docs/results/reproduction.md"
+	@echo "             runs/compare/compare.md (tables, ranking) and plots (SCENARIO=name-or-file:"
+	@echo "             one only); a campaign of one nominal draw"
+	@echo "make campaign the default robustness campaign (laws under uncertainty, on Dask): rows in"
+	@echo "             runs/campaigns/default/, report.md and plots beside them, the results page"
+	@echo "             (CAMPAIGN=file for another, SCHEDULER=tcp://host:8786 for a running cluster)"
+	@echo "make reproduce run the papers' reproduction tests and write docs/results/reproduction.md"
 	@echo "make test    lint, build the docs strictly, run every test (unit tests of the cores and"
 	@echo "             integration tests over rclpy)"
 	@echo "make lint    ruff over the repository"
@@ -37,6 +43,11 @@ demo: setup
 compare: setup
 	@$(ENV) python -m ato_bringup.compare \
 	  $(if $(SCENARIO),--scenario $(SCENARIO),--results-page docs/results/comparison.md)
+
+campaign: setup
+	@$(ENV) python -m ato_bringup.campaign \
+	  $(if $(CAMPAIGN),$(CAMPAIGN),--results-page docs/results/campaign.md --readme README.md) \
+	  $(if $(SCHEDULER),--scheduler $(SCHEDULER))
 
 reproduce: setup
 	@$(ENV) python -m ato_bringup.reproduction

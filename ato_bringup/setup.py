@@ -9,6 +9,7 @@ setup(
     name=PACKAGE_NAME,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
+    package_data={PACKAGE_NAME: ['campaigns/*.yaml']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
         ('share/' + PACKAGE_NAME, ['package.xml']),
@@ -24,11 +25,13 @@ setup(
         'and the comparison of the laws.'
     ),
     license='Apache-2.0',
-    tests_require=['pytest', 'numpy', 'PyYAML', 'grimp', 'ruff', 'mkdocs', 'mkdocs-gen-files'],
+    tests_require=['pytest', 'numpy', 'PyYAML', 'grimp', 'ruff', 'mkdocs', 'mkdocs-gen-files',
+                   'pandas', 'distributed'],
     entry_points={
         'console_scripts': [
             'run_scenario = ato_bringup.run_scenario:main',
             'run_offline = ato_bringup.run_offline:main',
+            'campaign = ato_bringup.campaign:main',
         ],
     },
 )

@@ -7,6 +7,9 @@
 2. Controller step time (p50, p99, max) of every law on the same scenario, offline.
 3. Plant simulation speed standalone (simulated seconds per CPU second, one core), driven period
    by period and given all its commands at once (``TrainSimulation.run_commands``).
+4. Campaign throughput (ato_bringup.campaign): runs per minute of a small campaign with 1 and 2
+   Dask workers and their ratio, and the engine's overhead per run (Dask, the time limit, the
+   Parquet row) against the bare offline loop of the same runs.
 """
 
 from __future__ import annotations
@@ -141,6 +144,66 @@ class Page:
             self.lines.append(line)
 
 
+#: the campaign of the throughput measurement: whole runs of the scenario, default uncertainty
+BENCH_CAMPAIGN_DRAWS = 12
+BENCH_CAMPAIGN_LAWS = ('pid', 'luo_xu')
+
+
+def _warm_up() -> None:
+    """On each worker before the clock starts: imports and the plant kernels' compilation."""
+    from ato_bringup.offline import run_offline
+    run_offline(load_scenario(DEFAULT_SCENARIO), 'pid', end_time_s=5.0)
+
+
+def _cpu_s() -> float:
+    return time.process_time()
+
+
+def campaign_throughput(scenario: str) -> list[str]:
+    """Runs per minute with 1 and 2 workers, their ratio, and the engine's overhead per run, in
+    wall time and in CPU time (this process, with the scheduler, plus every worker's): on a
+    machine shared with other work the wall times move with the load, the CPU times much
+    less."""
+    from distributed import Client, LocalCluster
+
+    from ato_bringup.campaign_engine import offline_metrics, parse_campaign, run_campaign
+    data = {'name': 'bench', 'seed': 1, 'draws': BENCH_CAMPAIGN_DRAWS, 'scenarios': [scenario],
+            'laws': list(BENCH_CAMPAIGN_LAWS), 'uncertainty': 'default'}
+    campaign = parse_campaign(data, 'bench', Path.cwd())
+    tasks = campaign.tasks()
+    n = len(tasks)
+    _warm_up()
+    started, cpu = time.perf_counter(), _cpu_s()
+    for task in tasks:
+        offline_metrics(task)
+    bare_s, bare_cpu_s = time.perf_counter() - started, _cpu_s() - cpu
+    rows = [f'| bare offline loop, this process | {n} | {bare_s:.1f} s | {bare_cpu_s:.1f} s | '
+            f'{60 * n / bare_s:.1f} | - | - |']
+    rates = {}
+    for workers in (1, 2):
+        with tempfile.TemporaryDirectory() as out, \
+                LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                             dashboard_address=None, silence_logs=40) as cluster, \
+                Client(cluster) as client:
+            client.run(_warm_up)
+            before, cpu = client.run(_cpu_s), _cpu_s()
+            started = time.perf_counter()
+            run_campaign(campaign, Path(out), client=client, progress=False)
+            wall_s = time.perf_counter() - started
+            after = client.run(_cpu_s)
+            cpu_s = _cpu_s() - cpu + sum(after[w] - before[w] for w in after)
+        rates[workers] = 60 * n / wall_s
+        wall_overhead = (f'{100 * (wall_s - bare_s) / bare_s:+.1f} %' if workers == 1
+                         else '-')
+        rows.append(f'| Dask LocalCluster, {workers} worker{"s" if workers > 1 else ""} | '
+                    f'{n} | {wall_s:.1f} s | {cpu_s:.1f} s | {rates[workers]:.1f} | '
+                    f'{wall_overhead} | {100 * (cpu_s - bare_cpu_s) / bare_cpu_s:+.1f} % |')
+    load = ', '.join(f'{x:.1f}' for x in os.getloadavg())
+    rows += [f'| ratio 2 workers / 1 worker | | | | {rates[2] / rates[1]:.2f} | | |', '',
+             f'Load average at the end: {load} (on {os.cpu_count()} cores).']
+    return rows
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--scenario', default=DEFAULT_SCENARIO)
@@ -149,10 +212,26 @@ def main() -> int:
     parser.add_argument('--results-page', type=Path, default=None,
                         help='also write the figures, with date, machine and commit, to this '
                         'results page of the docs (make bench: docs/results/benchmarks.md)')
+    parser.add_argument('--only', choices=('campaign',), default=None,
+                        help='measure only this section (printed, no results page)')
     args = parser.parse_args()
     measured = (results_page_provenance(args.results_page)
                 if args.results_page is not None else None)
     page = Page()
+    campaign_section = [
+        '## Campaign throughput', '',
+        f'`make campaign`\'s engine on {BENCH_CAMPAIGN_DRAWS} draws x '
+        f'{len(BENCH_CAMPAIGN_LAWS)} laws ({", ".join(BENCH_CAMPAIGN_LAWS)}) of the whole '
+        f'scenario with the default uncertainty; the workers are started and warmed up before '
+        'the clock starts. Overhead: the 1-worker campaign (Dask, the time limit, one Parquet '
+        'row per run) against the same runs in a bare offline loop; goal under 5 %. Ratio goal '
+        'on 2 cores: at least 1.8.', '',
+        '| engine | runs | wall time | CPU time | runs per minute | overhead, wall | '
+        'overhead, CPU |', '|---|---|---|---|---|---|---|']
+    if args.only == 'campaign':
+        page.add(f'Scenario `{args.scenario}`.', '', *campaign_section)
+        page.add(*campaign_throughput(args.scenario))
+        return 0
     page.add(f'Scenario `{args.scenario}`.', '',
              '## Lockstep through the ROS graph', '',
              'Three node processes plus the run monitor of `run_scenario`; real-time factor = '
@@ -190,6 +269,8 @@ def main() -> int:
              '| model | largest speed error |', '|---|---|',
              f'| `point_mass` | {plant_accuracy("point_mass", "crh3_luo_xu", 60e3):.2e} m/s |',
              f'| `multi_car` | {plant_accuracy("multi_car", "crh2_4car_mao", 12e3):.2e} m/s |')
+    page.add('', *campaign_section)
+    page.add(*campaign_throughput(args.scenario))
     if args.results_page is not None:
         written = write_results_page(args.results_page, 'Benchmarks', 'make bench',
                                      '\n'.join(page.lines), measured)

@@ -1,18 +1,24 @@
 """compare: every applicable control law on every built-in scenario, offline, side by side.
 
-    python -m ato_bringup.compare [--out runs/compare] [--jobs 2] [--scenario NAME ...]
+    python -m ato_bringup.compare [--out runs/compare] [--jobs 2] [--scenario NAME|FILE ...]
                                   [--law NAME ...] [--timeout-s 1800]
+
+The comparison is a campaign of one nominal draw (ato_bringup.campaign_engine): the plant is
+the controller's nominal model, on a Dask LocalCluster of ``--jobs`` workers; the robustness
+of the laws under uncertainty is ``make campaign`` (docs/guide/campaigns.md). ``--scenario``
+takes a built-in scenario's name or a scenario file (``make compare SCENARIO=my_line.yaml``).
 
 A law applies to a scenario when its ``fits`` accepts the scenario's train and plant and the
 plant's sensors do not fail a measurement the law requires (a law without speed measurement
 would only hold its last command; a law that estimates the speed does not require it). The plant
 model is the scenario's, the same for every law on it: ``multi_car`` when the train has per-car
 data (what the 4-car laws need; a single-mass law then sees the lead car), else ``point_mass``.
-Each run is the offline closed loop (ato_bringup.offline), one process per run over ``--jobs``
-cores, stopped after ``--timeout-s`` of wall time, at the scenario's control rate; a law whose
-sampled-time design refuses that rate (its ``fits`` names the period it needs) runs at the first
-of FASTER_RATES_HZ it accepts, and if that makes more than MAX_STEPS steps, over the scenario's
-first MAX_STEPS steps only (the table shows the rate and the window; such a run is not ranked).
+Each run is the offline closed loop (ato_bringup.offline), on one of ``--jobs`` single-threaded
+Dask workers, stopped after ``--timeout-s`` of wall time, at the scenario's control rate; a law
+whose sampled-time design refuses that rate (its ``fits`` names the period it needs) runs at the
+first of FASTER_RATES_HZ it accepts, and if that makes more than MAX_STEPS steps, over the
+scenario's first MAX_STEPS steps only (the table shows the rate and the window; such a run is
+not ranked).
 The result, ``<out>/compare.md``, has one table per scenario and the plots
 ``<out>/<scenario>_{tracking,errors,commands,estimates}.png``; ``<out>/compare.json`` holds the
 same numbers and the ranking that ``make demo`` reads.
@@ -40,21 +46,31 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import multiprocessing
-import multiprocessing.connection
 import os
 import sys
 import time
 import traceback
 from dataclasses import dataclass
 from datetime import datetime, timezone
+from functools import partial
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
+from ato_bringup.campaign_engine import (
+    FASTER_RATES_HZ,
+    RESTART,
+    RunTimeout,
+    execute,
+    failed_measurement,
+    plant_model_for,
+    with_time_limit,
+    worker_address,
+)
 from ato_bringup.offline import run_end_time_s
 from ato_bringup.provenance import results_page_provenance, write_results_page
+from ato_common import uncertainty
 from ato_common.knowledge import knowledge_of
 from ato_common.scenario import builtin_scenarios, load_scenario
 from ato_controller_node.laws import LAWS
@@ -74,13 +90,8 @@ DEFAULT_DEMO_LAW = 'pid'
 PLOT_POINTS = 3000
 
 
-#: control rates tried, in order, for a law that refuses the scenario's rate (its sampled-time
-#: design needs a shorter period: the Liu & Li observer, the Mao multibody laws)
-FASTER_RATES_HZ = (200.0, 1000.0, 10000.0)
 #: wall-time limit of one run by default, s: the slowest runs took about 870 s on 2 shared cores
 DEFAULT_TIMEOUT_S = 1800.0
-#: after its result, a run's process has this long to exit before it is terminated, s
-EXIT_GRACE_S = 10.0
 #: control steps at most in one run; a law that needs a fast rate on a long scenario runs the
 #: scenario's first MAX_STEPS steps (the table says so)
 MAX_STEPS = 1_500_000
@@ -93,23 +104,6 @@ class Job:
     model: str
     rate_hz: float
     end_time_s: float | None = None  # None: the whole scenario
-
-
-def plant_model_for(scenario) -> str:
-    return 'multi_car' if scenario.train.cars else 'point_mass'
-
-
-def failed_measurement(law: str, scenario, model: str) -> str:
-    """Why the scenario's plant fails a measurement the law requires ('' if it does not)."""
-    lead = scenario.train.cars[0].name if model == 'multi_car' else 'train'
-    for quantity in LAWS[law].requires:
-        sensor = getattr(scenario.plant.sensors, quantity.removeprefix('car_').rstrip('s'))
-        if math.isinf(sensor.failed_from_s) or math.isfinite(sensor.failed_until_s):
-            continue  # never fails, or only for a while (the run then shows the held steps)
-        if quantity.startswith('car_') or not sensor.failed_cars or lead in sensor.failed_cars:
-            return (f'{law} needs the measured {quantity.replace("_", " ")}, which the plant\'s '
-                    f'sensor fails from {sensor.failed_from_s:g} s')
-    return ''
 
 
 def plan_jobs(scenarios: list[str], laws: list[str] | None = None
@@ -142,6 +136,27 @@ def plan_jobs(scenarios: list[str], laws: list[str] | None = None
     return jobs, skipped
 
 
+#: the one draw of the comparison: every uncertain parameter at its nominal value
+NOMINAL_DRAW = uncertainty.draw(uncertainty.NOMINAL, 0, 0)
+
+
+def scenario_label(name: str) -> str:
+    """A scenario as the tables, the plots' file names and the ranking name it: a built-in
+    scenario by its name, a scenario file by its stem."""
+    return name if name in builtin_scenarios() else Path(name).stem
+
+
+def scenario_argument(text: str) -> str:
+    """``--scenario``: a built-in scenario's name, or a scenario file (made absolute: the
+    workers may run elsewhere in the tree)."""
+    if text in builtin_scenarios():
+        return text
+    if Path(text).is_file():
+        return str(Path(text).resolve())
+    raise argparse.ArgumentTypeError(f"'{text}' is neither a built-in scenario "
+                                     f"({', '.join(builtin_scenarios())}) nor a scenario file")
+
+
 def _thin(values: np.ndarray, step: int) -> list:
     return np.asarray(values)[::step].tolist()
 
@@ -161,7 +176,7 @@ def run_job(job: Job) -> dict:
     try:
         scenario = load_scenario(job.scenario)
         run = run_offline(scenario, job.law, model=job.model, controller_rate_hz=job.rate_hz,
-                          end_time_s=job.end_time_s)
+                          end_time_s=job.end_time_s, uncertainty=NOMINAL_DRAW)
     except Exception as error:  # noqa: BLE001 -- any failure of a law is a result to show
         result.update(status='error', reason=f'{type(error).__name__}: {error}',
                       detail=traceback.format_exc(limit=3), wall_s=time.perf_counter() - started)
@@ -205,138 +220,53 @@ def run_job(job: Job) -> dict:
     return result
 
 
-class ProgressBar:
-    """A one-line bar on the terminal (stderr): done/total, elapsed time, the last finished."""
+def _limited(job: Job, run: Callable[[Job], dict], timeout_s: float | None) -> dict:
+    """``run(job)`` within ``timeout_s`` of wall time (ato_bringup.campaign_engine)."""
+    started = time.perf_counter()
+    try:
+        return with_time_limit(lambda: run(job), timeout_s)
+    except RunTimeout as timeout:
+        result = dict(job_fields(job), status='timeout', wall_s=time.perf_counter() - started,
+                      reason=f'exceeded the wall-time limit of {timeout_s:g} s (--timeout-s)')
+        if timeout.lingering:
+            result[RESTART] = worker_address()
+        return result
 
-    def __init__(self, total: int, width: int = 30, stream=None):
-        self.total, self.width = total, width
-        self.stream = stream if stream is not None else sys.stderr
-        self.done, self.started = 0, time.monotonic()
-        self.interactive = self.stream.isatty()
-        self.show('', force=True)
 
-    def show(self, last: str, force: bool = False) -> None:
-        if not (self.interactive or force):
-            return  # in a log, one line per finished run
-        filled = self.width * self.done // max(self.total, 1)
-        elapsed = time.monotonic() - self.started
-        line = (f'[{"#" * filled}{"." * (self.width - filled)}] {self.done}/{self.total} runs, '
-                f'{elapsed:5.0f} s{"  " + last if last else ""}')
-        if self.interactive:
-            self.stream.write('\r' + line[:150].ljust(150))
-        else:
-            self.stream.write(line + '\n')
-        self.stream.flush()
-
-    def advance(self, last: str) -> None:
-        self.done += 1
-        self.show(last, force=True)
-
-    def close(self) -> None:
-        if self.interactive:
-            self.stream.write('\n')
-            self.stream.flush()
+def _lost(job: Job, reason: str) -> dict:
+    return dict(job_fields(job), status='error', wall_s=math.nan, reason=reason)
 
 
 def run_all(jobs: list[Job], processes: int, timeout_s: float | None = None,
             run: Callable[[Job], dict] = run_job) -> list[dict]:
-    """The result of ``run`` (a module-level function) on every job, in the order the runs end.
-    With ``processes`` > 1 or a ``timeout_s``, each run has a process of its own, at most
-    ``processes`` at a time; one that takes more than ``timeout_s`` of wall time (None: no
-    limit) is terminated and its result has status ``timeout``. Else the runs take turns in
-    this process."""
-    bar = ProgressBar(len(jobs))
+    """The result of ``run`` (a module-level function) on every job, in the order the runs end:
+    the comparison is a campaign of one nominal draw (ato_bringup.campaign_engine). With
+    ``processes`` > 1 or a ``timeout_s``, the runs go to a Dask LocalCluster of ``processes``
+    single-threaded workers; a run past ``timeout_s`` of wall time (None: no limit) is stopped
+    and its result has status ``timeout``, one whose worker dies is an ``error``. Else the runs
+    take turns in this process. A progress bar (tqdm) on stderr shows the rate and the time
+    left; in a log (stderr not a terminal) one line per finished run."""
+    from tqdm import tqdm
+    bar = tqdm(total=len(jobs), unit='run', desc='compare', file=sys.stderr,
+               dynamic_ncols=True)
+    interactive = sys.stderr.isatty()
     results = []
 
-    def finished(result: dict) -> str:
+    def finished(result: dict) -> None:
         results.append(result)
         last = f'{result["law"]} on {result["scenario"]}: {result["status"]}'
-        bar.advance(last)
-        return last
+        bar.set_postfix_str(last, refresh=False)
+        bar.update(1)
+        if not interactive:
+            bar.write(f'{len(results)}/{len(jobs)} runs: {last}', file=sys.stderr)
 
-    if processes <= 1 and timeout_s is None:
-        for job in jobs:
-            finished(run(job))
-    else:
-        _run_in_processes(jobs, max(processes, 1), timeout_s, run, finished, bar)
-    bar.close()
-    return results
-
-
-def _run_in_child(run: Callable[[Job], dict], job: Job, connection) -> None:
-    """Body of a run's process: the result goes back through ``connection``."""
+    serial = processes <= 1 and timeout_s is None
     try:
-        connection.send(run(job))
+        execute(jobs, partial(_limited, run=run, timeout_s=timeout_s), finished, _lost,
+                serial=serial, workers=max(processes, 1), allowed_failures=0)
     finally:
-        connection.close()
-
-
-def _stop(process, grace_s: float) -> None:
-    """Wait ``grace_s`` for ``process`` to end, then terminate it (kill it if that fails)."""
-    process.join(grace_s)
-    if process.is_alive():
-        process.terminate()
-        process.join(EXIT_GRACE_S)
-    if process.is_alive():
-        process.kill()
-        process.join()
-    process.close()
-
-
-def _run_in_processes(jobs: list[Job], processes: int, timeout_s: float | None,
-                      run: Callable[[Job], dict], finished: Callable[[dict], str],
-                      bar: ProgressBar) -> None:
-    # One process per run (a Pool's worker cannot be stopped alone) with a pipe of its own (a
-    # terminated writer can corrupt a shared queue). Spawned: a child does not inherit a
-    # half-initialised parent.
-    context = multiprocessing.get_context('spawn')
-    waiting = list(reversed(jobs))
-    running: dict = {}  # reading end of the run's pipe -> (job, process, time.monotonic() at start)
-    last = ''
-    try:
-        while waiting or running:
-            while waiting and len(running) < processes:
-                job = waiting.pop()
-                reader, writer = context.Pipe(duplex=False)
-                process = context.Process(target=_run_in_child, args=(run, job, writer),
-                                          name=f'{job.law} on {job.scenario}', daemon=True)
-                process.start()
-                writer.close()  # the child holds the only writer: its exit is the reader's EOF
-                running[reader] = (job, process, time.monotonic())
-            wait_s = 1.0  # at least once a second: the bar's elapsed time keeps moving
-            if timeout_s is not None:
-                first_deadline = min(start for _, _, start in running.values()) + timeout_s
-                wait_s = min(wait_s, max(first_deadline - time.monotonic(), 0.0))
-            ended = multiprocessing.connection.wait(list(running), timeout=wait_s)
-            for reader in ended:
-                job, process, start = running.pop(reader)
-                try:
-                    result = reader.recv()
-                    grace_s = EXIT_GRACE_S
-                except EOFError:  # the process died before it sent a result
-                    process.join(EXIT_GRACE_S)
-                    result = dict(job_fields(job), status='error', wall_s=time.monotonic() - start,
-                                  reason=f"the run's process ended (exit code {process.exitcode}) "
-                                         'without a result')
-                    grace_s = 0.0
-                reader.close()
-                _stop(process, grace_s)
-                last = finished(result)
-            now = time.monotonic()
-            for reader, (job, process, start) in list(running.items()):
-                if timeout_s is not None and now - start >= timeout_s:
-                    del running[reader]
-                    reader.close()
-                    _stop(process, 0.0)
-                    last = finished(dict(
-                        job_fields(job), status='timeout', wall_s=now - start,
-                        reason=f'exceeded the wall-time limit of {timeout_s:g} s (--timeout-s)'))
-            if not ended:
-                bar.show(last)
-    finally:  # also on KeyboardInterrupt: no run outlives the comparison
-        for reader, (_, process, _) in running.items():
-            reader.close()
-            _stop(process, 0.0)
+        bar.close()
+    return results
 
 
 def best_law(results: list[dict]) -> str | None:
@@ -375,7 +305,7 @@ def markdown(results: list[dict], skipped: list[dict], scenarios: list[str], sta
     for name in scenarios:
         rows = sorted((r for r in results if r['scenario'] == name), key=lambda r: r['law'])
         best = best_law(rows)
-        lines += [f'## {name}', '', f'Best: **{best or "none"}**', '',
+        lines += [f'## {scenario_label(name)}', '', f'Best: **{best or "none"}**', '',
                   '| law | plant, rate | status | RMS speed err | max speed err | RMS pos err | '
                   'stop err | energy | max jerk | step p99 |',
                   '|---|---|---|---|---|---|---|---|---|---|']
@@ -398,7 +328,7 @@ def markdown(results: list[dict], skipped: list[dict], scenarios: list[str], sta
                              '| - | - | - | - | - | - | - |')
         lines.append('')
         if plots:
-            links = ', '.join(f'[{kind}]({name}_{kind}.png)'
+            links = ', '.join(f'[{kind}]({scenario_label(name)}_{kind}.png)'
                               for kind in ('tracking', 'errors', 'commands', 'estimates'))
             lines += [f'Plots: {links}', '']
     return '\n'.join(lines)
@@ -410,10 +340,11 @@ def plot_scenario(name: str, results: list[dict], folder: Path) -> list[Path]:
     import matplotlib.pyplot as plt
     runs = [r for r in sorted(results, key=lambda r: r['law'])
             if r['scenario'] == name and 'curves' in r]
+    label = scenario_label(name)
     paths = []
 
     def save(fig, kind):
-        path = folder / f'{name}_{kind}.png'
+        path = folder / f'{label}_{kind}.png'
         fig.tight_layout()
         fig.savefig(path, dpi=90)
         plt.close(fig)
@@ -426,7 +357,7 @@ def plot_scenario(name: str, results: list[dict], folder: Path) -> list[Path]:
     for r in runs:
         c = r['curves']
         ax.plot(c['time_s'], np.array(c['speed_mps']) * 3.6, lw=1, label=r['law'])
-    ax.set(xlabel='time (s)', ylabel='speed (km/h)', title=f'{name}: speed tracking')
+    ax.set(xlabel='time (s)', ylabel='speed (km/h)', title=f'{label}: speed tracking')
     ax.legend(fontsize=8)
     save(fig, 'tracking')
 
@@ -437,7 +368,7 @@ def plot_scenario(name: str, results: list[dict], folder: Path) -> list[Path]:
                  label=r['law'])
         bottom.plot(c['time_s'], np.array(c['ref_position_m']) - c['position_m'], lw=1,
                     label=r['law'])
-    top.set(ylabel='speed error (km/h)', title=f'{name}: errors (reference - truth)')
+    top.set(ylabel='speed error (km/h)', title=f'{label}: errors (reference - truth)')
     bottom.set(xlabel='time (s)', ylabel='position error (m)')
     top.legend(fontsize=8)
     save(fig, 'errors')
@@ -446,7 +377,7 @@ def plot_scenario(name: str, results: list[dict], folder: Path) -> list[Path]:
     for r in runs:
         c = r['curves']
         ax.plot(c['time_s'], np.array(c['force_n']) / 1e3, lw=1, label=r['law'])
-    ax.set(xlabel='time (s)', ylabel='applied force (kN)', title=f'{name}: commands (applied)')
+    ax.set(xlabel='time (s)', ylabel='applied force (kN)', title=f'{label}: commands (applied)')
     ax.legend(fontsize=8)
     save(fig, 'commands')
 
@@ -499,8 +430,9 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--out', type=Path, default=DEFAULT_OUT)
     parser.add_argument('--jobs', type=int, default=min(2, os.cpu_count() or 1))
-    parser.add_argument('--scenario', action='append', choices=builtin_scenarios(),
-                        help='only this built-in scenario (repeatable; default: all)')
+    parser.add_argument('--scenario', action='append', type=scenario_argument,
+                        help='only this built-in scenario or scenario file (repeatable; '
+                        'default: every built-in scenario)')
     parser.add_argument('--law', action='append', choices=sorted(LAWS),
                         help='only this law (repeatable; default: all)')
     parser.add_argument('--timeout-s', type=_timeout, default=DEFAULT_TIMEOUT_S,
@@ -532,7 +464,8 @@ def main(argv=None) -> int:
         write_results_page(args.results_page, 'Comparison of the control laws', command,
                            f'{body}\n\nThe plots of each scenario are written beside '
                            f'`{args.out}/compare.md` when the command runs.', measured)
-    best = {name: best_law([r for r in results if r['scenario'] == name]) for name in scenarios}
+    best = {scenario_label(name): best_law([r for r in results if r['scenario'] == name])
+            for name in scenarios}
     summary = [{k: v for k, v in r.items() if k not in ('curves', 'detail')} for r in results]
     (args.out / 'compare.json').write_text(json.dumps(
         {'generated': stamp, 'best': best, 'results': summary, 'not_applicable': skipped},

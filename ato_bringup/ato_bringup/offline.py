@@ -4,7 +4,10 @@ instant the plant's measurement and the reference at that time go to the control
 command is held while the plant advances one period.
 
 The plant simulates the whole scenario (the truth); the controller knows only
-``knowledge_of(scenario)`` (ato_common.knowledge): the nominal train and the known modes."""
+``knowledge_of(scenario)`` (ato_common.knowledge): the nominal train and the known modes. With
+``uncertainty`` (the values of one draw, ato_common.uncertainty) the plant runs the perturbed
+truth ``perturbed(scenario, uncertainty)`` while the controller keeps the knowledge of the
+nominal ``scenario``: no drawn value reaches it."""
 
 from __future__ import annotations
 
@@ -18,9 +21,10 @@ from ato_common.knowledge import knowledge_of
 from ato_common.metrics import RunMetrics, StopSample, compute_metrics
 from ato_common.scenario import Scenario
 from ato_common.types import nanoseconds, seconds
+from ato_common.uncertainty import perturbed
 from ato_controller_node.host import ControllerHost
 from profile_node.planner import Plan, plan_reference
-from train_plant_node.simulation import SensorSettings, TrainSimulation
+from train_plant_node.simulation import NORMAL, SensorSettings, TrainSimulation
 
 
 @dataclass
@@ -44,6 +48,12 @@ class OfflineRun:
     laws: list[str] = field(default_factory=list)
     estimates: list[dict] = field(default_factory=list)
     faults: list[str] = field(default_factory=list)
+    #: what the plant's safety functions counted: ATP emergency brake interventions, and
+    #: control periods in which the command watchdog braked the train
+    atp_interventions: int = 0
+    watchdog_events: int = 0
+    #: per control instant: the host limited the law's wanted force (StepResult.saturated)
+    saturated: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     def metrics(self) -> RunMetrics:
         return compute_metrics(self.times_s, self.positions, self.speeds, self.forces,
@@ -68,19 +78,23 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
                 switches: dict[float, str] | None = None,
                 sensors: SensorSettings = SensorSettings(), model: str = 'point_mass',
                 end_time_s: float | None = None, controller_rate_hz: float | None = None,
-                **model_options) -> OfflineRun:
+                uncertainty=None, **model_options) -> OfflineRun:
     """Run ``controller`` on ``scenario`` with the plant ``model``; ``switches`` maps times to
     law names selected then; ``end_time_s`` and ``controller_rate_hz`` override the scenario's
-    (a law that must run faster than a node can, e.g. Mao et al.'s feedback linearisation)."""
+    (a law that must run faster than a node can, e.g. Mao et al.'s feedback linearisation);
+    ``uncertainty``: the drawn values the plant's truth is perturbed by (None: nominal)."""
     plan = plan_reference(scenario)
     period_ns = nanoseconds(1.0 / (controller_rate_hz or scenario.run.controller_rate_hz))
-    sim = TrainSimulation(scenario, model, sensors=sensors, **model_options)
+    truth_scenario = perturbed(scenario, uncertainty) if uncertainty is not None else scenario
+    sim = TrainSimulation(truth_scenario, model, sensors=sensors, **model_options)
     host = ControllerHost(knowledge_of(scenario), seconds(period_ns), controller, settings)
     end = end_time_s if end_time_s is not None else run_end_time_s(scenario, plan)
     steps = int(end * 1e9 // period_ns)
     pending = sorted((switches or {}).items())
     rows, car_positions, car_speeds, actuator_forces, step_times = [], [], [], [], []
     laws, estimates, faults = [], [], []
+    watchdog_events = 0
+    saturated = []
     for _ in range(steps + 1):
         t = sim.time_s
         while pending and pending[0][0] <= t:
@@ -101,7 +115,10 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
         laws.append(result.law)
         estimates.append(dict(result.estimates))
         faults.append(result.fault)
+        saturated.append(result.saturated)
+        watchdog_events += sim.watchdog != NORMAL
         sim.advance(period_ns)
     data = np.array(rows)
     return OfflineRun(scenario, plan, *data.T, np.array(car_positions), np.array(car_speeds),
-                      np.array(actuator_forces), np.array(step_times), laws, estimates, faults)
+                      np.array(actuator_forces), np.array(step_times), laws, estimates, faults,
+                      sim.atp_interventions, watchdog_events, np.array(saturated, dtype=bool))

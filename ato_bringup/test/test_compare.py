@@ -139,17 +139,24 @@ def test_demo_runs_the_ranked_law_only_where_it_can_drive_the_train(tmp_path):
     assert law == 'pid' and 'drives 4 actuators' in why
 
 
-def test_progress_bar_in_a_log_writes_one_line_per_finished_run():
-    import io
-    log = io.StringIO()
-    bar = compare.ProgressBar(4, width=8, stream=log)
-    bar.show('running')          # a refresh between runs: nothing in a log
-    bar.advance('pid on short_line: ok')
-    bar.close()
-    lines = log.getvalue().splitlines()
-    assert len(lines) == 2
-    assert lines[1].startswith('[##......] 1/4 runs,')
-    assert lines[1].endswith('pid on short_line: ok')
+def test_a_scenario_file_is_compared_under_its_stem(tmp_path):
+    from importlib import resources
+    source = resources.files('ato_common') / 'scenarios' / 'short_line.yaml'
+    path = tmp_path / 'my_line.yaml'
+    path.write_text(source.read_text().replace('name: short_line', 'name: my_line', 1))
+    assert compare.main(['--scenario', str(path), '--law', 'pid', '--jobs', '1',
+                         '--timeout-s', '0', '--out', str(tmp_path / 'out')]) == 0
+    text = (tmp_path / 'out' / 'compare.md').read_text()
+    assert '## my_line' in text and '| pid | point_mass, 10 Hz | ok |' in text
+    assert (tmp_path / 'out' / 'my_line_tracking.png').is_file()
+    assert json.loads((tmp_path / 'out' / 'compare.json').read_text())['best'] == {
+        'my_line': 'pid'}
+
+
+def test_a_scenario_that_is_neither_built_in_nor_a_file_is_refused(capsys):
+    with pytest.raises(SystemExit):
+        compare.main(['--scenario', 'no_such_line.yaml'])
+    assert "'no_such_line.yaml' is neither a built-in scenario" in capsys.readouterr().err
 
 
 def test_a_law_that_needs_a_failed_measurement_does_not_apply():
@@ -166,20 +173,22 @@ def test_a_law_that_needs_a_failed_measurement_does_not_apply():
 
 
 def test_a_run_over_the_time_limit_is_stopped_and_listed_and_the_others_complete(capsys):
+    """On the Dask LocalCluster: the hanging run (blocked in time.sleep, where no exception
+    reaches it) is reported at its limit and its worker restarted; the crashing one takes its
+    worker down and is reported as lost."""
     jobs = [compare.Job('short_line', law, 'point_mass', 10.0)
             for law in ('hangs', 'quick', 'crashes', 'also_quick')]
     started = time.monotonic()
     results = compare.run_all(jobs, processes=2, timeout_s=6.0, run=stand_in_run)
-    assert time.monotonic() - started < 60.0   # not the hanging run's 600 s
-    assert multiprocessing.active_children() == []  # the hanging run's process is gone
+    assert time.monotonic() - started < 300.0   # not the hanging run's 600 s
+    assert multiprocessing.active_children() == []  # the cluster's processes are gone
     by_law = {r['law']: r for r in results}
     assert sorted(by_law) == ['also_quick', 'crashes', 'hangs', 'quick']
     assert by_law['hangs']['status'] == 'timeout'
     assert by_law['hangs']['reason'] == 'exceeded the wall-time limit of 6 s (--timeout-s)'
     assert by_law['hangs']['wall_s'] >= 6.0
     assert by_law['crashes']['status'] == 'error'
-    assert by_law['crashes']['reason'] == ("the run's process ended (exit code 3) without a "
-                                           'result')
+    assert by_law['crashes']['reason'].startswith('the cluster lost the run: KilledWorker')
     assert by_law['quick']['status'] == by_law['also_quick']['status'] == 'ok'
     assert 'hangs on short_line: timeout' in capsys.readouterr().err  # the progress bar
     text = compare.markdown(results, [], ['short_line'], 'now', 'make compare')
@@ -187,7 +196,7 @@ def test_a_run_over_the_time_limit_is_stopped_and_listed_and_the_others_complete
             '(--timeout-s)) |') in text
 
 
-def test_one_process_with_a_time_limit_still_runs_each_job_in_a_child_it_can_stop():
+def test_one_worker_with_a_time_limit_still_stops_a_hanging_run():
     jobs = [compare.Job('short_line', law, 'point_mass', 10.0) for law in ('hangs', 'quick')]
     results = compare.run_all(jobs, processes=1, timeout_s=4.0, run=stand_in_run)
     assert [(r['law'], r['status']) for r in results] == [('hangs', 'timeout'), ('quick', 'ok')]

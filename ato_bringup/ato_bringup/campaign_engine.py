@@ -1,0 +1,565 @@
+"""The campaign engine: every law of a campaign file on many draws of the uncertain train, on
+Dask (the command line is ato_bringup.campaign, the report ato_bringup.campaign_report).
+
+A campaign file (YAML) names the scenarios, the laws (optionally with gain overrides), the
+uncertainty (ato_common.uncertainty), the number of draws and the seed::
+
+    name: robustness
+    seed: 1
+    draws: 40
+    scenarios: [short_line]          # built-in names or paths (relative to the campaign file)
+    laws: [pid, {law: luo_xu_adaptive, settings: {gamma_a: 1.0e-4}}]
+    baseline: pid                    # paired differences are taken against it
+    uncertainty: default             # (if absent) or nominal, or a mapping of parameters
+    timeout_s: 600                   # wall-time limit of one run
+    end_time_s: 0                    # > 0: every run is the first end_time_s of its scenario
+
+Every run is one (scenario, law, draw): the plant runs the truth perturbed by the draw, the
+controller the knowledge of the nominal scenario (ato_bringup.offline). The runs go to a Dask
+cluster: a LocalCluster of one single-threaded worker per core, or with ``--scheduler`` (or Dask's
+``scheduler-address`` configuration, e.g. DASK_SCHEDULER_ADDRESS) a running cluster whose
+workers run this project's environment; nothing else changes. ``--serial`` runs them in this
+process, in order. Each finished run is written at once as a row of the Parquet dataset
+``<out>/<name>/rows/``; a campaign started again with the same file runs only the rows that are
+missing (a row of an earlier version of the file, with another fingerprint, does not count).
+A run that raises is a row with status ``error`` and its reason; one whose state diverges
+``diverged``; one that exceeds ``timeout_s`` ``timeout``: the campaign goes on.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import json
+import math
+import os
+import sys
+import threading
+import time
+import traceback
+import uuid
+from dataclasses import dataclass, field
+from functools import partial
+from pathlib import Path
+from typing import Any, Callable, Iterable, Mapping
+
+import numpy as np
+import yaml
+
+from ato_common import uncertainty
+from ato_common.knowledge import knowledge_of
+from ato_common.scenario import Scenario, load_scenario
+from ato_common.validation import ConfigError, Fields
+from ato_controller_node.laws import LAWS
+from ato_controller_node.laws.base import setting_fields, validated_settings
+
+DEFAULT_OUT = Path('runs') / 'campaigns'
+#: the default campaign of `make campaign`, shipped beside this module
+DEFAULT_TIMEOUT_S = 600.0
+#: a run whose speed error ever exceeds this has diverged (km/h)
+DIVERGED_SPEED_ERROR_KMH = 50.0
+#: stop accuracy of a platform stop (m): outside it a stop counts as a failure
+STOP_ERROR_LIMIT_M = 0.5
+#: the key of a row: which run it is
+KEY = ('scenario', 'law', 'draw')
+STATUSES = ('ok', 'diverged', 'error', 'timeout')
+#: a row's field (not written) asking the engine to restart the worker a hung run is left on
+RESTART = '_restart_worker'
+#: the per-run metrics every row has (NaN when the run did not produce them)
+METRICS = ('rms_speed_error_kmh', 'max_speed_error_kmh', 'rms_position_error_m',
+           'max_position_error_m', 'stop_error_m', 'arrival_error_s', 'traction_energy_kwh',
+           'max_jerk_mps3', 'max_acceleration_mps2', 'saturated_fraction', 'atp_interventions',
+           'watchdog_events')
+
+
+@dataclass(frozen=True)
+class LawEntry:
+    label: str                      # the law's name in the rows (name, or name#k with settings)
+    law: str
+    settings: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Campaign:
+    name: str
+    origin: str
+    seed: int
+    draws: int
+    scenarios: tuple[str, ...]       # as load_scenario takes them (built-in name or abs path)
+    laws: tuple[LawEntry, ...]
+    spec: Mapping[str, uncertainty.Distribution]
+    baseline: str
+    timeout_s: float | None
+    end_time_s: float | None
+    rates_hz: Mapping[tuple[str, str], float] = field(default_factory=dict)
+    models: Mapping[str, str] = field(default_factory=dict)
+
+    @property
+    def fingerprint(self) -> str:
+        """What the rows depend on: a row with another fingerprint is from another campaign."""
+        text = json.dumps({'seed': self.seed, 'scenarios': self.scenarios,
+                           'laws': [(e.label, e.law, dict(e.settings)) for e in self.laws],
+                           'spec': {k: repr(v) for k, v in sorted(self.spec.items())},
+                           'end_time_s': self.end_time_s}, sort_keys=True, default=str)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    def tasks(self) -> list[dict]:
+        """Every run of the campaign, draw-major (a partial campaign has whole draws)."""
+        return [task_of(self, scenario, entry, index) for index in range(self.draws)
+                for scenario in self.scenarios for entry in self.laws]
+
+
+def task_of(campaign: Campaign, scenario: str, entry: LawEntry, index: int) -> dict:
+    values = uncertainty.draw(campaign.spec, campaign.seed, index)
+    return {'campaign': campaign.name, 'fingerprint': campaign.fingerprint,
+            'scenario': scenario, 'law': entry.label, 'law_name': entry.law,
+            'settings': dict(entry.settings), 'draw': index, 'values': values,
+            'model': campaign.models[scenario],
+            'rate_hz': campaign.rates_hz[(scenario, entry.label)],
+            'end_time_s': campaign.end_time_s, 'timeout_s': campaign.timeout_s}
+
+
+# --- what applies -------------------------------------------------------------------------------
+
+def plant_model_for(scenario: Scenario) -> str:
+    return 'multi_car' if scenario.train.cars else 'point_mass'
+
+
+def failed_measurement(law: str, scenario: Scenario, model: str) -> str:
+    """Why the scenario's plant fails a measurement the law requires ('' if it does not)."""
+    lead = scenario.train.cars[0].name if model == 'multi_car' else 'train'
+    for quantity in LAWS[law].requires:
+        sensor = getattr(scenario.plant.sensors, quantity.removeprefix('car_').rstrip('s'))
+        if math.isinf(sensor.failed_from_s) or math.isfinite(sensor.failed_until_s):
+            continue  # never fails, or only for a while (the run then shows the held steps)
+        if quantity.startswith('car_') or not sensor.failed_cars or lead in sensor.failed_cars:
+            return (f'{law} needs the measured {quantity.replace("_", " ")}, which the plant\'s '
+                    f'sensor fails from {sensor.failed_from_s:g} s')
+    return ''
+
+
+#: control rates tried, in order, for a law that refuses the scenario's rate
+FASTER_RATES_HZ = (200.0, 1000.0, 10000.0)
+
+
+def applicable_rate(law: str, scenario: Scenario) -> tuple[float | None, str]:
+    """(control rate, '') at which ``law`` runs on ``scenario``: the scenario's, else the first
+    of FASTER_RATES_HZ its sampled-time design accepts; (None, reason) if it does not apply."""
+    knowledge = knowledge_of(scenario)
+    model = plant_model_for(scenario)
+    cars = len(scenario.train.cars) if model == 'multi_car' else 1
+    rate = scenario.run.controller_rate_hz
+    failed = failed_measurement(law, scenario, model)
+    if failed:
+        return None, failed
+    reason = LAWS[law](knowledge, 1.0 / rate).fits(knowledge, cars)
+    if not reason:
+        return rate, ''
+    for faster in FASTER_RATES_HZ:
+        if faster > rate and not LAWS[law](knowledge, 1.0 / faster).fits(knowledge, cars):
+            return faster, ''
+    return None, reason
+
+
+# --- the campaign file --------------------------------------------------------------------------
+
+def parse_campaign(data: Any, origin: str, base: Path) -> Campaign:
+    """Validate a campaign; every error names ``origin`` and the field, before anything runs."""
+    try:
+        return _parse(data, origin, base)
+    except ConfigError as error:
+        raise ConfigError(f'{origin}: {error}') from None
+
+
+def _parse(data: Any, origin: str, base: Path) -> Campaign:
+    f = Fields(data, '')
+    name = f.text('name')
+    if not all(c.isalnum() or c in '-_.' for c in name):
+        raise ConfigError(f'name: only letters, digits, - _ . (a folder name), got {name!r}')
+    seed = int(f.number('seed', 0.0, minimum=0.0, maximum=2**31 - 1))
+    draws = int(f.number('draws', 1.0, minimum=1.0, maximum=1e6))
+    timeout = f.number('timeout_s', DEFAULT_TIMEOUT_S, minimum=0.0)
+    end = f.number('end_time_s', 0.0, minimum=0.0)
+    raw_scenarios = f.raw('scenarios', required=True)
+    if not isinstance(raw_scenarios, list) or not raw_scenarios:
+        raise ConfigError('scenarios: must be a non-empty list of scenario names or files')
+    scenarios, loaded = [], {}
+    for i, item in enumerate(raw_scenarios):
+        if not isinstance(item, str):
+            raise ConfigError(f'scenarios[{i}]: must be a scenario name or file, got {item!r}')
+        path = base / item
+        key = str(path.resolve()) if item.endswith(('.yaml', '.yml')) and path.is_file() else item
+        try:
+            loaded[key] = load_scenario(key)
+        except ConfigError as error:
+            raise ConfigError(f'scenarios[{i}]: {error}') from None
+        scenarios.append(key)
+    laws, labels = [], set()
+    raw_laws = f.raw('laws', required=True)
+    if raw_laws == 'all':
+        raw_laws = sorted(LAWS)
+    if not isinstance(raw_laws, list) or not raw_laws:
+        raise ConfigError("laws: must be 'all' or a non-empty list of laws")
+    for i, item in enumerate(raw_laws):
+        laws.append(_law_entry(item, i))
+    for i, entry in enumerate(laws):
+        if entry.label in labels:
+            raise ConfigError(f"laws[{i}]: the label '{entry.label}' is used twice")
+        labels.add(entry.label)
+    rates, models = {}, {}
+    for key, scenario in loaded.items():
+        models[key] = plant_model_for(scenario)
+        for i, entry in enumerate(laws):
+            rate, reason = applicable_rate(entry.law, scenario)
+            if rate is None:
+                raise ConfigError(f"laws[{i}]: {entry.law} does not fit scenario "
+                                  f"'{scenario.name}': {reason}")
+            rates[(key, entry.label)] = rate
+    baseline = f.text('baseline', laws[0].label)
+    if baseline not in labels:
+        raise ConfigError(f"baseline: '{baseline}' is not one of the campaign's laws "
+                          f"({', '.join(sorted(labels))})")
+    raw_spec = f.raw('uncertainty')
+    spec = uncertainty.parse_uncertainty('default' if raw_spec is None else raw_spec)
+    f.reject_unknown()
+    return Campaign(name, origin, seed, draws, tuple(scenarios), tuple(laws), spec, baseline,
+                    timeout or None, end or None, rates, models)
+
+
+def _law_entry(item: Any, i: int) -> LawEntry:
+    """``name`` or ``{law: name, settings: {gain: value}, label: text}``."""
+    if isinstance(item, str):
+        item = {'law': item}
+    law_fields = Fields(item, f'laws[{i}]')
+    law = law_fields.text('law')
+    if law not in LAWS:
+        raise ConfigError(f"laws[{i}].law: unknown law '{law}'; valid: {', '.join(LAWS)}")
+    settings = law_fields.raw('settings') or {}
+    if not isinstance(settings, Mapping):
+        raise ConfigError(f'laws[{i}].settings: must be a mapping of settings of {law}')
+    known = {s.name for s in setting_fields(LAWS[law].Settings)}
+    for key in settings:
+        if key not in known:
+            raise ConfigError(f"laws[{i}].settings.{key}: not a setting of {law}; valid: "
+                              f"{', '.join(sorted(known))}")
+    try:
+        validated_settings(LAWS[law].Settings, settings)
+    except (ValueError, TypeError) as error:
+        raise ConfigError(f'laws[{i}].settings: {error}') from None
+    label = law_fields.text('label', law if not settings else f'{law}#{i}')
+    law_fields.reject_unknown()
+    return LawEntry(label, law, dict(settings))
+
+
+def load_campaign(path: str | Path) -> Campaign:
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (OSError, UnicodeDecodeError) as error:
+        raise ConfigError(f'{path}: cannot read: {error}') from None
+    except yaml.YAMLError as error:
+        raise ConfigError(f'{path}: not valid YAML: {error}') from None
+    return parse_campaign(data, str(path), path.parent)
+
+
+# --- one run ------------------------------------------------------------------------------------
+
+class RunTimeout(BaseException):
+    """A run exceeded its wall-time limit (a BaseException: a law's own ``except Exception``
+    does not swallow it). ``lingering``: the run's thread did not stop (it is blocked in
+    compiled code); its worker should be restarted."""
+
+    def __init__(self, limit_s: float, lingering: bool = False):
+        super().__init__(f'exceeded the wall-time limit of {limit_s:g} s')
+        self.limit_s, self.lingering = limit_s, lingering
+
+
+#: after its time limit, a run's thread has this long to stop before it is left behind, s
+STOP_GRACE_S = 5.0
+
+
+def _raise_in(thread_id: int) -> None:
+    ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(thread_id),
+                                               ctypes.py_object(RunTimeout))
+
+
+def with_time_limit(function: Callable[[], Any], limit_s: float | None) -> Any:
+    """``function()`` in a thread of its own, waited for ``limit_s`` s of wall time; past it,
+    RunTimeout is raised in that thread (a law that loops in Python stops at its next
+    bytecode) and here. A thread blocked in compiled code cannot be stopped: RunTimeout then
+    says ``lingering`` and the caller restarts the worker."""
+    if not limit_s:
+        return function()
+    outcome: dict = {}
+
+    def body():
+        try:
+            outcome['value'] = function()
+        except BaseException as error:  # noqa: BLE001 -- handed to the waiting thread
+            outcome['error'] = error
+
+    thread = threading.Thread(target=body, daemon=True, name='campaign run')
+    thread.start()
+    thread.join(limit_s)
+    if thread.is_alive():
+        _raise_in(thread.ident)
+        thread.join(STOP_GRACE_S)
+        raise RunTimeout(limit_s, lingering=thread.is_alive())
+    if 'error' in outcome:
+        error = outcome['error']
+        if isinstance(error, RunTimeout):  # raised just as the run finished
+            raise RunTimeout(limit_s) from None
+        raise error
+    return outcome['value']
+
+
+def worker_address() -> str:
+    """The address of the Dask worker this runs on ('' outside a worker)."""
+    try:
+        from distributed import get_worker
+        return get_worker().address
+    except (ImportError, ValueError):
+        return ''
+
+
+def base_row(task: Mapping) -> dict:
+    row = {k: task[k] for k in ('campaign', 'fingerprint', 'scenario', 'law', 'law_name',
+                                'draw', 'model', 'rate_hz')}
+    row['settings'] = json.dumps(task['settings'], sort_keys=True)
+    row.update({f'p_{k}': v for k, v in task['values'].items()})
+    row.update({m: math.nan for m in METRICS})
+    row.update(status='ok', reason='', stop_errors_m='{}', wall_s=math.nan)
+    return row
+
+
+def run_task(task: Mapping, runner: Callable[[Mapping], dict] | None = None) -> dict:
+    """One run of a campaign as a row; never raises (a failure is the row's status)."""
+    row = base_row(task)
+    started = time.perf_counter()
+    try:
+        row.update(with_time_limit(lambda: (runner or offline_metrics)(task), task['timeout_s']))
+        if row['max_speed_error_kmh'] > DIVERGED_SPEED_ERROR_KMH:
+            row.update(status='diverged', reason=(
+                f'speed error reached {row["max_speed_error_kmh"]:.1f} km/h '
+                f'(> {DIVERGED_SPEED_ERROR_KMH:g})'))
+    except RunTimeout as timeout:
+        row.update(status='timeout', reason=f'exceeded the wall-time limit of '
+                                            f'{task["timeout_s"]:g} s (timeout_s)')
+        if timeout.lingering:
+            row[RESTART] = worker_address()
+    except Exception as error:  # noqa: BLE001 -- any failure of a law is a result to show
+        row.update(status='error', reason=f'{type(error).__name__}: {error} '
+                   f'[{traceback.format_exc(limit=-1).splitlines()[-3].strip()}]')
+    row['wall_s'] = time.perf_counter() - started
+    return row
+
+
+def offline_metrics(task: Mapping) -> dict:
+    """The offline closed loop of one task and its metrics (ato_bringup.offline)."""
+    from ato_bringup.offline import run_offline
+    scenario = load_scenario(task['scenario'])
+    settings = {task['law_name']: task['settings']} if task['settings'] else None
+    run = run_offline(scenario, task['law_name'], settings, model=task['model'],
+                      controller_rate_hz=task['rate_hz'], end_time_s=task['end_time_s'],
+                      uncertainty=task['values'])
+    return run_metrics(run, 1.0 / task['rate_hz'])
+
+
+def run_metrics(run, dt: float) -> dict:
+    """The per-run metrics of an OfflineRun (METRICS); status diverged if it is not finite."""
+    if not all(np.all(np.isfinite(a)) for a in (run.positions, run.speeds, run.forces)):
+        return {'status': 'diverged', 'reason': 'non-finite state or force'}
+    m = run.metrics()
+    v = run.speeds
+    acc = np.diff(v) / dt if v.size > 1 else np.zeros(1)
+    jerk = np.diff(acc) / dt if acc.size > 1 else np.zeros(1)
+    arrival = []
+    for stop in run.plan.stops:
+        if stop.arrival_s > run.times_s[-1]:
+            continue
+        mark = stop.station.position_m - STOP_ERROR_LIMIT_M  # first reach of the stop zone
+        truth = np.flatnonzero(run.positions >= mark)
+        ref = np.flatnonzero(run.ref_positions >= mark)
+        if ref.size and stop.station.position_m > run.positions[0] + 1.0:
+            arrival.append(run.times_s[truth[0]] - run.times_s[ref[0]] if truth.size
+                           else math.nan)  # not reached within the run: the stop error says it
+    stop_errors = m.stop_errors_m
+    return {
+        'rms_speed_error_kmh': m.rms_speed_error_kmh,
+        'max_speed_error_kmh': m.max_speed_error_kmh,
+        'rms_position_error_m': m.rms_position_error_m,
+        'max_position_error_m': m.max_position_error_m,
+        'stop_error_m': max((abs(e) for e in stop_errors.values()), default=math.nan),
+        'stop_errors_m': json.dumps(stop_errors),
+        'arrival_error_s': (math.nan if not arrival or any(map(math.isnan, arrival))
+                            else max(arrival, key=abs)),
+        'traction_energy_kwh': m.traction_energy_kwh,
+        'max_jerk_mps3': float(np.max(np.abs(jerk))),
+        'max_acceleration_mps2': float(np.max(np.abs(acc))),
+        'saturated_fraction': float(np.mean(run.saturated)) if run.saturated.size else 0.0,
+        'atp_interventions': float(run.atp_interventions),
+        'watchdog_events': float(run.watchdog_events),
+    }
+
+
+# --- the rows on disk ---------------------------------------------------------------------------
+
+def rows_folder(out: Path, name: str) -> Path:
+    return out / name / 'rows'
+
+
+def write_row(folder: Path, row: dict) -> Path:
+    """One finished row as a Parquet file of the dataset, written atomically (a temporary name,
+    then a rename): an interrupted campaign leaves whole rows only."""
+    import pandas as pd
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f'part-{row["draw"]:06d}-{uuid.uuid4().hex}.parquet'
+    tmp = path.with_suffix('.tmp')
+    pd.DataFrame([row]).to_parquet(tmp, index=False)
+    os.replace(tmp, path)
+    return path
+
+
+def read_rows(folder: Path, fingerprint: str | None = None):
+    """The dataset as a DataFrame (empty if none); only the rows of ``fingerprint`` if given,
+    one per key and fingerprint (the latest written if a row was written twice)."""
+    import pandas as pd
+    files = sorted(folder.glob('*.parquet'), key=lambda p: (p.stat().st_mtime_ns, p.name)) \
+        if folder.is_dir() else []
+    if not files:
+        return pd.DataFrame()
+    table = pd.concat([pd.read_parquet(p) for p in files], ignore_index=True)
+    if fingerprint is not None:
+        table = table[table['fingerprint'] == fingerprint]
+    return table.drop_duplicates([*KEY, 'fingerprint'], keep='last').sort_values(
+        ['scenario', 'law', 'draw']).reset_index(drop=True)
+
+
+def compact(folder: Path) -> None:
+    """Merge the files of the dataset into one (after a complete campaign; the rows of other
+    fingerprints are kept)."""
+    files = sorted(folder.glob('part-*.parquet'))
+    if len(files) < 2:
+        return
+    table = read_rows(folder)
+    merged = folder / f'rows-{uuid.uuid4().hex}.parquet'
+    tmp = merged.with_suffix('.tmp')
+    table.to_parquet(tmp, index=False)
+    os.replace(tmp, merged)
+    for p in folder.glob('*.parquet'):
+        if p != merged:
+            p.unlink()
+
+
+# --- the engine ---------------------------------------------------------------------------------
+
+def missing(campaign: Campaign, folder: Path) -> list[dict]:
+    done = read_rows(folder, campaign.fingerprint)
+    keys = set() if done.empty else set(zip(done['scenario'], done['law'], done['draw']))
+    return [t for t in campaign.tasks() if (t['scenario'], t['law'], t['draw']) not in keys]
+
+
+def run_serial(items: Iterable, function: Callable[[Any], dict],
+               finished: Callable[[dict], None]) -> None:
+    for item in items:
+        row = function(item)
+        row.pop(RESTART, None)
+        finished(row)
+
+
+def open_client(scheduler: str | None = None, workers: int | None = None,
+                allowed_failures: int | None = None):
+    """(client, cluster): a Dask client to ``scheduler`` (or Dask's ``scheduler-address``
+    configuration; cluster None), else to a new LocalCluster of ``workers`` single-threaded
+    worker processes (default: one per core). ``allowed_failures``: how often a run whose
+    worker died is tried again (Dask's default: 3)."""
+    import dask
+    from distributed import Client, LocalCluster
+    address = scheduler or dask.config.get('scheduler-address', None)
+    if address:
+        return Client(address, timeout='30s'), None
+    settings = {} if allowed_failures is None else {
+        'distributed.scheduler.allowed-failures': allowed_failures}
+    with dask.config.set(settings):
+        cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                               processes=True, dashboard_address=None, silence_logs=40)
+    return Client(cluster), cluster
+
+
+def run_dask(client, items: list, function: Callable[[Any], dict],
+             finished: Callable[[dict], None], lost: Callable[[Any, str], dict]) -> None:
+    """``function(item)`` for every item on the cluster of ``client``; ``finished`` gets each
+    row as it arrives. A run that the cluster itself loses (its worker died more often than
+    Dask's allowed-failures) is ``lost(item, reason)``; a worker where a hung run was left
+    behind is restarted."""
+    from distributed import as_completed
+    futures = {client.submit(function, item, key=f'run-{uuid.uuid4().hex}', pure=False): item
+               for item in items}
+    try:
+        for future in as_completed(futures):
+            try:
+                row = future.result()
+            except Exception as error:  # noqa: BLE001 -- the cluster lost the run
+                row = lost(futures[future], f'the cluster lost the run: '
+                                            f'{type(error).__name__}: {error}')
+            address = row.pop(RESTART, '')
+            if address:
+                client.restart_workers([address], raise_for_error=False)
+            finished(row)
+    finally:
+        for future in futures:
+            future.cancel()
+
+
+def execute(items: list, function: Callable[[Any], dict], finished: Callable[[dict], None],
+            lost: Callable[[Any, str], dict], *, serial: bool = False,
+            scheduler: str | None = None, workers: int | None = None, client=None,
+            allowed_failures: int | None = None) -> None:
+    """Run ``function`` (module level: the workers import it) on every item, in this process
+    (``serial``), on ``client``'s cluster, on a running scheduler or on a new LocalCluster."""
+    if not items:
+        return
+    if serial:
+        run_serial(items, function, finished)
+        return
+    own, cluster = (client, None) if client is not None else open_client(
+        scheduler, workers, allowed_failures)
+    try:
+        run_dask(own, items, function, finished, lost)
+    finally:
+        if client is None:
+            own.close()
+            if cluster is not None:
+                cluster.close()
+
+
+def _lost_row(task: Mapping, reason: str) -> dict:
+    return dict(base_row(task), status='error', reason=reason)
+
+
+def run_campaign(campaign: Campaign, out: Path = DEFAULT_OUT, *, serial: bool = False,
+                 scheduler: str | None = None, workers: int | None = None, client=None,
+                 runner: Callable | None = None, progress: bool = True):
+    """Run what is missing of ``campaign`` and return every row (a DataFrame)."""
+    from tqdm import tqdm
+    folder = rows_folder(out, campaign.name)
+    todo = missing(campaign, folder)
+    total = len(campaign.tasks())
+    bar = tqdm(total=total, initial=total - len(todo), unit='run', disable=not progress,
+               desc=campaign.name, dynamic_ncols=True, file=sys.stderr)
+
+    def finished(row: dict) -> None:
+        write_row(folder, row)
+        bar.set_postfix_str(f'{row["law"]} draw {row["draw"]}: {row["status"]}', refresh=False)
+        bar.update(1)
+
+    function = run_task if runner is None else partial(run_task, runner=runner)
+    try:
+        execute(todo, function, finished, _lost_row, serial=serial, scheduler=scheduler,
+                workers=workers, client=client)
+    finally:
+        bar.close()
+    rows = read_rows(folder, campaign.fingerprint)
+    if len(rows) == total:
+        compact(folder)
+    return rows
