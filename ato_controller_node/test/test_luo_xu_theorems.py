@@ -11,6 +11,7 @@ from ato_common.types import ReferencePoint
 from ato_controller_node.laws.base import Measurement, TrainKnowledge, validated_settings
 from ato_controller_node.laws.luo_xu import (
     GAIN_PRESETS,
+    PAPER_GAINS,
     TABLE2_SPANS,
     LuoXuLaw,
     LuoXuProjectionLaw,
@@ -142,4 +143,7 @@ def test_the_implicit_step_makes_the_paper_gains_usable_at_10_hz(train):
     # phi^T Gamma phi ~ 76 1/s^2 at 82 m/s: forward Euler at 10 Hz needs it below c2/dt = 1
     assert cruise_error(train, {'forward_euler': True}) > 1.0   # diverges
     assert cruise_error(train, {}) < 2e-3    # the implicit step converges (measured 3.6e-4 m/s)
+    # and at any gain: 20x Gamma_33 (phi^T Gamma phi ~ 1.5e3 1/s^2), where the same step without
+    # the a-posteriori normalisation diverges as well
+    assert cruise_error(train, {'gamma_ca': 20.0 * PAPER_GAINS[2]}) < 2e-3
     assert cruise_error(train, {**GAIN_PRESETS['tuned'], 'forward_euler': True}) < 0.05
