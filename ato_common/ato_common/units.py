@@ -69,3 +69,25 @@ def davis_kn_kmh_to_n(a_kn: float, b_kn_per_kmh: float,
     """
     return (kn_to_n(a_kn), kn_to_n(b_kn_per_kmh) * KMH_PER_MPS,
             kn_to_n(c_kn_per_kmh2) * KMH_PER_MPS ** 2)
+
+
+def davis_adaptation_gains_per_tonne_to_si(
+        gamma_a: float, gamma_b: float, gamma_c: float) -> tuple[float, float, float]:
+    """A diagonal adaptation gain Gamma of Davis coefficients per tonne with V in km/h (the
+    gradient law theta' = -Gamma phi e of e.g. Luo & Xu (16)) -> the same law in SI.
+
+    Derivation. The per-tonne coefficients theta_p = (a [N/t], b [N/(t km/h)], c [N/(t (km/h)^2)])
+    and the SI ones theta = (a [m/s^2], b [1/s], c [1/m]) are related by theta = D theta_p with
+    D = diag(1/1000, 3.6/1000, 3.6^2/1000) (:func:`davis_per_tonne_to_per_kg`). The regressor
+    multiplies theta into an acceleration, theta_p^T phi_p = theta^T phi, so phi_p = D phi
+    (phi = (1, v, v^2) with v in m/s, the errors e in SI, the mass in kg). Then
+
+        theta' = D theta_p' = -D Gamma_p phi_p e = -(D Gamma_p D) phi e,
+
+    i.e. Gamma = D Gamma_p D: each entry scales by D_ii^2 = (1e-6, 1.296e-5, 1.6796e-4). The
+    Lyapunov term theta_t^T Gamma^-1 theta_t / 2 is then the same number in both unit systems,
+    so the closed loop is the paper's, not a retuned one. Luo & Xu's diag(1e4, 1, 0.01) becomes
+    diag(1e-2, 1.296e-5, 1.6796e-6).
+    """
+    scale = davis_per_tonne_to_per_kg(1.0, 1.0, 1.0)   # the diagonal of D
+    return (gamma_a * scale[0] ** 2, gamma_b * scale[1] ** 2, gamma_c * scale[2] ** 2)

@@ -37,14 +37,17 @@ def test_luo_xu_fix_changes_the_law_and_printed_switch_runs_it(train):
     assert diff == pytest.approx(train.nominal_mass_kg * 10.0)
 
 
-def test_luo_xu_adaptation_freezes_under_saturation(train):
-    law = LuoXuLaw(train, 0.1)
+def test_luo_xu_adaptation_freezes_under_saturation_if_asked(train):
+    law = LuoXuLaw(train, 0.1, validated_settings(LuoXuLaw.Settings,
+                                                  {'freeze_under_saturation': True}))
     before = (law.mass_hat, list(law.theta_hat))
     out = law.step(Measurement(0.0, 0.0, 0.0), ReferencePoint(0.0, 500.0, 30.0, 0.3))
     law.after_saturation(out.force_n, 0.5 * out.force_n)
+    # the saturated period is not integrated at the next sample
+    out = law.step(Measurement(0.1, 0.0, 0.0), ReferencePoint(0.1, 5.0, 0.1, 0.0))
     assert (law.mass_hat, law.theta_hat) == before
-    out = law.step(Measurement(0.0, 0.0, 0.0), ReferencePoint(0.0, 5.0, 0.1, 0.0))
     law.after_saturation(out.force_n, out.force_n)
+    law.step(Measurement(0.2, 0.0, 0.0), ReferencePoint(0.2, 5.0, 0.1, 0.0))
     assert (law.mass_hat, law.theta_hat) != before
 
 
@@ -120,3 +123,24 @@ def test_pid_starts_without_a_preloaded_integral(train):
     host = ControllerHost(train, 0.1, 'pid')
     result = host.step(Measurement(0.0, 0.0, 0.0), ReferencePoint(0.0, 0.0, 0.0, 0.0))
     assert result.estimates['integral_action_mps2'] == 0.0
+
+
+def test_luo_xu_adapts_on_the_augmented_error_under_saturation(train):
+    """The part of z2 the limits caused is taken out: the auxiliary error is what the cut force
+    does over one period (z2 changes by about dt x cut / m_hat), and a law told its command was
+    cut adapts on z2 minus it, where one told it was applied adapts on z2."""
+    cut, applied = LuoXuLaw(train, 0.1), LuoXuLaw(train, 0.1)
+    reference = ReferencePoint(0.0, 0.0, 60.0, 0.0)
+    measured = Measurement(0.0, 0.0, 59.9)   # z2 = -0.1 m/s: the law wants more force
+    for law, share in ((cut, 0.5), (applied, 1.0)):
+        out = law.step(measured, reference)
+        law.after_saturation(out.force_n, share * out.force_n)
+    removed = 0.5 * out.force_n
+    assert cut._aux[1] == pytest.approx(-0.1 * removed / train.nominal_mass_kg, rel=0.02)
+    before = list(cut.theta_hat)
+    for law in (cut, applied):
+        law.step(Measurement(0.1, 6.0, 59.9), ReferencePoint(0.1, 6.0, 60.0, 0.0))
+    raised_cut = cut.theta_hat[0] - before[0]
+    raised_applied = applied.theta_hat[0] - before[0]
+    assert raised_applied > 0.0
+    assert raised_cut / raised_applied == pytest.approx((-0.1 - cut._aux[1]) / -0.1, rel=1e-6)

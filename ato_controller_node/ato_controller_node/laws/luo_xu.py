@@ -12,17 +12,43 @@ phi = (1, x2, x2^2). Both the mass m and theta are unknown and estimated.
 [FIX] The paper's varphi omits the "-1" in the z1 term; then V2' keeps a +z1 z2 cross term and
 is negative definite only if 4 c1 c2 > 1, which its own c1 = c2 = 0.1 violate. With the fix
 V2' = -c1 z1^2 - c2 z2^2 (docs/papers/luo_xu.md). ``paper_as_printed`` runs the
-printed law.
+printed law (``printed_varphi`` the printed varphi alone, with the corrected branches of (24)).
+
+Gains. Gamma and gamma are given in SI (theta per kg, m in kg). The default, preset ``paper``
+(:data:`GAIN_PRESETS`), is the paper's Gamma = diag(1e4, 1, 0.01), converted exactly by
+:func:`ato_common.units.davis_adaptation_gains_per_tonne_to_si` (Gamma_SI = D Gamma D with the
+per-tonne-to-SI factors D, which leaves the Lyapunov function (17) unchanged): about
+diag(1e-2, 1.296e-5, 1.68e-6); gamma keeps the paper's 1e5 (m in kg). The preset ``tuned`` is
+the suite's earlier retuning diag(1e-3, 3e-7, 3e-10) (Gamma_ii ~ theta_i / (phi_i z2 T_adapt),
+docs/papers/luo_xu.md).
 
 Deviations, all for a sampled, saturating implementation:
-- the adaptive laws (16) are integrated with forward Euler at the control period;
-- adaptation is frozen while the command is saturated (the error then no longer reflects the
-  parameter error, and integrating it winds the estimates up);
+- the adaptive laws (16)/(24) are integrated implicitly (backward Euler) over each control
+  period: at sample k the estimates are moved by the rate at the new sample, with the error z2
+  at the end of the period taken a posteriori, i.e. corrected for what the change of the
+  estimates does to it through the certainty-equivalence control (dz2'/dtheta_hat = phi,
+  dz2'/dm_hat = psi/m_hat, psi = theta_hat^T phi + varphi):
+
+      delta = -dt G r z2_k / (1 + dt^2 (phi^T Gamma phi + gamma psi^2 / m_hat))
+
+  with r = (phi, psi) and G = diag(Gamma, gamma); then the control of sample k uses the moved
+  estimates. Forward Euler of the same laws (the rate of sample k applied after its control)
+  makes the sampled adaptation loop unstable once dt phi^T Gamma phi > c2, which the paper's
+  gains exceed at any onboard rate (phi^T Gamma phi ~ 70 1/s^2 at 300 km/h); the implicit step
+  is stable for any gain and tends to the paper's law as dt -> 0. ``forward_euler`` runs the
+  earlier explicit step for comparison;
+- under saturation the adaptation runs on the augmented error (Karason & Annaswamy's
+  anti-windup for adaptive control): an auxiliary copy of the error dynamics (8), (15) without
+  the parameter errors, driven by the force the limits took away (commanded - wanted, over
+  m_hat) and stepped exactly (zero-order hold) each period, gives the part of (z1, z2) that the
+  saturation caused; the laws adapt on z2 minus that part, which only the parameter errors
+  drive. Freezing the adaptation instead (``freeze_under_saturation``, the earlier behaviour)
+  is enough at small gains, but at the paper's the adaptation loop swings the force onto the
+  traction limit and the frozen, then released, estimates go into a limit cycle of hundreds of
+  metres;
 - m_hat is projected onto [mass_min_ratio, mass_max_ratio] x nominal mass (the paper does not,
-  but a non-positive mass estimate would reverse the control direction).
-- Gamma and gamma are given in SI (theta per kg, m in kg); the paper's Gamma = diag(1e4, 1, 0.01)
-  is tied to its unit choice, so the defaults are retuned as docs/papers/luo_xu.md shows
-  (Gamma_ii ~ theta_i / (phi_i z2 T_adapt)); gamma keeps the paper's 1e5.
+  but a non-positive mass estimate would reverse the control direction); it starts at
+  initial_mass_ratio x nominal.
 
 Theorem 2 (Section 4) replaces the theta law by the projection (24) onto the prior set S of
 eq (20), g(theta) = (theta - theta*)^T (theta - theta*) <= M0^2, theta* = the nominal Table 2
@@ -43,7 +69,7 @@ Deviations of Theorem 2:
   (3.138 N/t against 0.014 and 0.00015) and would not constrain cv and ca at all. The default
   R = sqrt(3) circumscribes the Table 2 box, so the true time-varying theta(t) of eq (34) lies in S
   at all times (its three coefficients vary in phase and reach 1.46 in this norm).
-- Forward Euler can step a little past the boundary; the estimate is then scaled back onto it
+- A step of the period can end a little past the boundary; the estimate is then scaled back onto it
   along the ray from theta* (a projection in the ellipsoid's own coordinates), so that theta_hat
   stays in S at every sample, as the continuous law guarantees. Not done when
   ``paper_as_printed``, whose branches let theta_hat leave S anyway.
@@ -54,8 +80,22 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+from scipy.linalg import expm
+
 from ato_common import units
 from ato_controller_node.laws.base import ControlLaw, LawOutput, setting
+
+#: Luo & Xu Table 1: Gamma = diag(1e4, 1, 0.01) in the paper's units, exactly in SI
+PAPER_GAINS = units.davis_adaptation_gains_per_tonne_to_si(1e4, 1.0, 0.01)
+#: the gain presets: ``paper`` (the default of the settings), ``tuned`` (the suite's earlier
+#: retuning for forward Euler at 10 Hz); give one as the settings' values, e.g.
+#: ``run_offline(..., settings={'luo_xu': GAIN_PRESETS['tuned']})`` or three ``ros2 param set``
+GAIN_PRESETS = {
+    'paper': {'gamma_mass': 1e5, 'gamma_c0': PAPER_GAINS[0], 'gamma_cv': PAPER_GAINS[1],
+              'gamma_ca': PAPER_GAINS[2]},
+    'tuned': {'gamma_mass': 1e5, 'gamma_c0': 1e-3, 'gamma_cv': 3e-7, 'gamma_ca': 3e-10},
+}
 
 #: Luo & Xu Table 2: half-widths of the nominal prior, 3.138 N/t, 0.01417 N/t per km/h,
 #: 0.000152 N/t per (km/h)^2, here per kg in SI (m/s^2, 1/s, 1/m)
@@ -71,16 +111,32 @@ class LuoXuSettings:
     gamma_mass: float = setting(1e5, minimum=0.0, maximum=1e9, units='kg s^2/m^2',
                                 description='adaptation gain gamma of the mass estimate '
                                             '(paper: 1e5)')
-    gamma_c0: float = setting(1e-3, minimum=0.0, maximum=1.0, units='1/s^2',
-                              description='adaptation gain Gamma_11 of c0 (retuned for SI)')
-    gamma_cv: float = setting(3e-7, minimum=0.0, maximum=1.0, units='1/m^2',
-                              description='adaptation gain Gamma_22 of cv (retuned for SI)')
-    gamma_ca: float = setting(3e-10, minimum=0.0, maximum=1.0, units='s^2/m^4',
-                              description='adaptation gain Gamma_33 of ca (retuned for SI)')
+    gamma_c0: float = setting(PAPER_GAINS[0], minimum=0.0, maximum=1.0, units='1/s^2',
+                              description='adaptation gain Gamma_11 of c0 (paper: 1e4, in SI; '
+                                          'preset tuned: 1e-3)')
+    gamma_cv: float = setting(PAPER_GAINS[1], minimum=0.0, maximum=1.0, units='1/m^2',
+                              description='adaptation gain Gamma_22 of cv (paper: 1, in SI; '
+                                          'preset tuned: 3e-7)')
+    gamma_ca: float = setting(PAPER_GAINS[2], minimum=0.0, maximum=1.0, units='s^2/m^4',
+                              description='adaptation gain Gamma_33 of ca (paper: 0.01, in SI; '
+                                          'preset tuned: 3e-10)')
     mass_min_ratio: float = setting(0.7, minimum=0.1, maximum=1.0, units='-',
                                     description='lower bound of m_hat over the nominal mass')
     mass_max_ratio: float = setting(1.5, minimum=1.0, maximum=10.0, units='-',
                                     description='upper bound of m_hat over the nominal mass')
+    initial_mass_ratio: float = setting(1.0, minimum=0.1, maximum=10.0, units='-',
+                                        description='m_hat at the start over the nominal mass '
+                                                    '(clipped to its bounds)')
+    forward_euler: bool = setting(False, minimum=0, maximum=1, units='-',
+                                  description='integrate (16)/(24) by one explicit Euler step '
+                                              'per period instead of the implicit step')
+    freeze_under_saturation: bool = setting(False, minimum=0, maximum=1, units='-',
+                                            description='freeze the adaptation over a saturated '
+                                                        'period instead of adapting on the '
+                                                        'augmented error')
+    printed_varphi: bool = setting(False, minimum=0, maximum=1, units='-',
+                                   description='use the printed varphi without the -z1 fix '
+                                               '(and nothing else as printed)')
     paper_as_printed: bool = setting(False, minimum=0, maximum=1, units='-',
                                      description='use the printed varphi without the -z1 fix')
 
@@ -95,9 +151,30 @@ class LuoXuLaw(ControlLaw):
         super().__init__(train, dt, settings)
         self._start_from_prior()
         self._pending = None
+        self._free = False   # the period now ending is to be integrated at the next sample
+        self._aux = (0.0, 0.0)   # (z1, z2) caused by saturation alone (augmented error)
+        self._aux_matrices()
+
+    def update_settings(self, settings) -> None:
+        super().update_settings(settings)
+        self._aux_matrices()
+
+    def _aux_matrices(self) -> None:
+        """The exact zero-order-hold step of the error dynamics (8), (15) with the parameter
+        errors left out, z1' = -c1 z1 + z2, z2' = -z1 - c2 z2 + w (w: the force the saturation
+        took away, over m_hat): aux(k+1) = step aux(k) + input w(k)."""
+        c1, c2 = self.settings.c1, self.settings.c2
+        a = np.array([[-c1, 1.0, 0.0], [-1.0, -c2, 1.0], [0.0, 0.0, 0.0]])
+        zoh = expm(a * self.dt)
+        self._aux_step, self._aux_input = zoh[:2, :2], zoh[:2, 2]
+
+    def _clip_mass(self, mass: float) -> float:
+        s, nominal = self.settings, self.train.nominal_mass_kg
+        return min(max(mass, s.mass_min_ratio * nominal), s.mass_max_ratio * nominal)
 
     def _start_from_prior(self) -> None:
-        self.mass_hat = self.train.nominal_mass_kg
+        self.mass_hat = self._clip_mass(self.settings.initial_mass_ratio
+                                        * self.train.nominal_mass_kg)
         self.theta_hat = list(self.train.nominal_davis.per_kg(self.train.nominal_mass_kg))
 
     def reset(self, measurement, reference, last_force_n):
@@ -105,19 +182,30 @@ class LuoXuLaw(ControlLaw):
         # difference between the last command and this law's first one.
         self._start_from_prior()
         self._pending = None
+        self._free = False
+        self._aux = (0.0, 0.0)
+
+    def _specific(self, phi, varphi: float) -> float:
+        th = self.theta_hat
+        return th[0] * phi[0] + th[1] * phi[1] + th[2] * phi[2] + varphi
 
     def step(self, measurement, reference):
         s = self.settings
         v = measurement.speed
         z1 = measurement.position - reference.position
         z2 = v - reference.speed + s.c1 * z1
-        z1_gain = s.c1 * s.c1 if s.paper_as_printed else s.c1 * s.c1 - 1.0
+        printed = s.paper_as_printed or s.printed_varphi
+        z1_gain = s.c1 * s.c1 if printed else s.c1 * s.c1 - 1.0
         varphi = z1_gain * z1 - (s.c1 + s.c2) * z2 + reference.acceleration
         phi = (1.0, v, v * v)
-        th = self.theta_hat
-        specific = th[0] * phi[0] + th[1] * phi[1] + th[2] * phi[2] + varphi
+        if self._free and not s.forward_euler:
+            # implicit step over the period that ends now, before this sample's control
+            self._adapt(phi, z2 - self._aux[1], self._specific(phi, varphi), implicit=True)
+        self._free = False
+        specific = self._specific(phi, varphi)
         force = self.mass_hat * specific                                           # (12)
         self._pending = (phi, z2, specific)
+        th = self.theta_hat
         return LawOutput(force, {'mass_hat_kg': self.mass_hat, 'c0_hat_mps2': th[0],
                                  'cv_hat_per_s': th[1], 'ca_hat_per_m': th[2],
                                  'z1_m': z1, 'z2_mps': z2, **self._extra_estimates()})
@@ -127,21 +215,45 @@ class LuoXuLaw(ControlLaw):
             return
         phi, z2, specific = self._pending
         self._pending = None
-        if abs(wanted_n - commanded_n) > 1e-9 * max(1.0, abs(wanted_n)):
+        s = self.settings
+        excess = commanded_n - wanted_n
+        saturated = abs(excess) > 1e-9 * max(1.0, abs(wanted_n))
+        if s.freeze_under_saturation and saturated:
             return  # frozen under saturation
+        if not s.freeze_under_saturation:
+            # the augmented error: the part of (z1, z2) the saturation causes over the period,
+            # which the adaptation must not attribute to the parameters
+            z2 -= self._aux[1]
+            aux = self._aux_step @ np.array(self._aux) + self._aux_input * (excess / self.mass_hat)
+            self._aux = (float(aux[0]), float(aux[1])) if np.all(np.isfinite(aux)) else (0., 0.)
+        if s.forward_euler:
+            self._adapt(phi, z2, specific, implicit=False)
+        else:
+            self._free = True   # adapt over this period at the next sample
+
+    def _adapt(self, phi, z2: float, specific: float, implicit: bool) -> None:
+        """Move the estimates over one period by the rates (16) (or (24) for theta): forward
+        Euler, or the implicit step with the a-posteriori error (module docstring)."""
         s, dt = self.settings, self.dt
         gains = (s.gamma_c0, s.gamma_cv, s.gamma_ca)
         raw_rate = [-g * p * z2 for g, p in zip(gains, phi)]                          # (16)
+        mass_rate = -s.gamma_mass * specific * z2                                      # (16)
+        if implicit:
+            stiffness = (sum(g * p * p for g, p in zip(gains, phi))
+                         + s.gamma_mass * specific * specific / self.mass_hat)
+            weight = 1.0 + dt * dt * stiffness
+            if not math.isfinite(weight):
+                return   # overflow on absurd input: keep the estimates
+            raw_rate = [r / weight for r in raw_rate]
+            mass_rate /= weight
         self.theta_hat = self._next_theta(raw_rate, gains)
-        nominal = self.train.nominal_mass_kg
-        mass = self.mass_hat - dt * s.gamma_mass * specific * z2                              # (16)
-        self.mass_hat = min(max(mass, s.mass_min_ratio * nominal), s.mass_max_ratio * nominal)
+        self.mass_hat = self._clip_mass(self.mass_hat + dt * mass_rate)
 
     def _extra_estimates(self) -> dict[str, float]:
         return {}
 
     def _next_theta(self, raw_rate: list[float], gains: tuple[float, ...]) -> list[float]:
-        """theta_hat one period on, forward Euler of the rate (16)."""
+        """theta_hat one period on along the (already integrated) rate (16)."""
         return [th + self.dt * r for th, r in zip(self.theta_hat, raw_rate)]
 
 
