@@ -20,33 +20,11 @@ TRACKS = sorted((SAMPLES / 'tracks').glob('*.json'))
 TRAINS = sorted((SAMPLES / 'trains').glob('*.json'))
 assert TRACKS and TRAINS, f'the TTOBench samples are missing from {SAMPLES}'
 
-TRACK = {
-    'metadata': {'id': 'T_curvy', 'library version': 'TTOBench v1.5'},
-    'stops': {'unit': 'm', 'values': [0.0, 6000.0, 12000.0]},
-    'speed limits': {'units': {'position': 'm', 'velocity': 'km/h'},
-                     'values': [[0.0, 120], [4000.0, 80], [5000.0, 140]]},
-    'gradients': {'units': {'position': 'm', 'slope': 'permil'},
-                  'values': [[0.0, 0.0], [2000.0, 8.0], [3000.0, -4.0]]},
-    'curvatures': {'units': {'position': 'm', 'radius at start': 'm', 'radius at end': 'm'},
-                   'values': [[0.0, 'infinity', 'infinity'], [1000.0, 'infinity', 2000.0],
-                              [1200.0, 2000.0, 2000.0], [1700.0, -1000.0, 'infinity'],
-                              [1800.0, 'infinity', 'infinity']]},
-    'tunnels': {'units': {'position': 'm', 'length': 'm', 'cross section': 'm^2'},
-                'values': [[7000.0, 1000.0, 40.0]]},
-    'ETCS braking data': {'M_NVAVADH': {'unit': '-', 'value': 0.0},
-                          'Kt_int': {'unit': '-', 'value': 1.1}},
-}
+# A synthetic track and journey (tests/data/synthetic) for what the samples do not cover.
+SYNTHETIC = Path(__file__).resolve().parents[2] / 'tests' / 'data' / 'synthetic'
+TRACK = json.loads((SYNTHETIC / 'ttobench_track_T_curvy.json').read_text())
 
-JOURNEY = {
-    'metadata': {'id': 'T_curvy_J1', 'associated track': 'T_curvy',
-                 'library version': 'TTOBench v1.5'},
-    'timing points': {'units': {'position': 'm', 'lower time constraint': 's',
-                                'upper time constraint': 's', 'lower speed constraint': 'km/h',
-                                'upper speed constraint': 'km/h'},
-                      'values': [[0, 0, 0, 0, 0], [3500, None, None, 10, 60],
-                                 [6000, 300, 330, 0, 0], [6000, 360, 360, 0, 0],
-                                 [12000, 700, 800, 0, 0]]},
-}
+JOURNEY = json.loads((SYNTHETIC / 'ttobench_journey_T_curvy_J1.json').read_text())
 
 
 def write(tmp_path, name, data):
