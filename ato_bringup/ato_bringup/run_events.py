@@ -8,6 +8,7 @@ a run without any is clean. No ROS here: the lockstep runner and the offline com
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass, field
 from typing import Iterable, Sequence
 
@@ -218,6 +219,15 @@ def run_events(scenario: Scenario, metrics: RunMetrics, stations, times_s, posit
 def exit_code(events: RunEvents, fail_on_events: bool = True) -> int:
     """0 for a clean run or when the user asked not to fail on events, else EVENTS_EXIT_CODE."""
     return EVENTS_EXIT_CODE if fail_on_events and not events.clean else 0
+
+
+def final_exit_code(events: RunEvents, fail_on_events: bool = True) -> int:
+    """:func:`exit_code`, saying on stderr why a run that was not clean fails."""
+    code = exit_code(events, fail_on_events)
+    if code:
+        print(f'the run was not clean: exit code {code} (--no-fail-on-events: 0)',
+              file=sys.stderr)
+    return code
 
 
 #: the exit code of a run that completed but was not clean (1: the run failed, 2: bad input)

@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 from ato_bringup.offline import run_offline
-from ato_bringup.run_events import PLATFORM_TOLERANCE_M, exit_code, run_events, stations_of
+from ato_bringup.run_events import PLATFORM_TOLERANCE_M, final_exit_code, run_events, stations_of
 from ato_common.knowledge import knowledge_of
 from ato_common.metrics import format_summary
 from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
@@ -89,11 +89,7 @@ def main(argv=None) -> int:
             'metrics': dataclasses.asdict(metrics), 'clean': events.clean, 'counts': events.counts,
             'events': [{'kind': e.kind, 'time_s': None if math.isnan(e.time_s) else e.time_s,
                         'detail': e.detail} for e in events.events]}, indent=1))
-    code = exit_code(events, not args.no_fail_on_events)
-    if code:
-        print(f'the run was not clean: exit code {code} (--no-fail-on-events: 0)',
-              file=sys.stderr)
-    return code
+    return final_exit_code(events, not args.no_fail_on_events)
 
 
 if __name__ == '__main__':

@@ -23,7 +23,7 @@ from datetime import datetime
 from pathlib import Path
 
 from ato_bringup.compare import DEFAULT_DEMO_LAW, DEFAULT_OUT, ranked_demo_law
-from ato_bringup.run_events import PLATFORM_TOLERANCE_M, exit_code
+from ato_bringup.run_events import PLATFORM_TOLERANCE_M, final_exit_code
 from ato_bringup.runner import RunFailed, run_lockstep
 from ato_bringup.stack import StackConfig
 from ato_common.knowledge import knowledge_of
@@ -118,11 +118,7 @@ def main(argv=None) -> int:
             return 1
         print(f'recording             {record_to} (ros2 run recorder info {record_to})')
         print(f'report                {plots[0].parent} ({", ".join(p.name for p in plots)})')
-    code = exit_code(outcome.events, not args.no_fail_on_events)
-    if code:
-        print(f'the run was not clean: exit code {code} (--no-fail-on-events: 0)',
-              file=sys.stderr)
-    return code
+    return final_exit_code(outcome.events, not args.no_fail_on_events)
 
 
 if __name__ == '__main__':
