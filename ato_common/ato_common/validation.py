@@ -79,13 +79,15 @@ class Fields:
     def _missing(self, key: str, what: str) -> ConfigError:
         """A required field is missing: if a field not read so far looks like a typo of it,
         name that field ('unknown field per_mile; did you mean per_mille?')."""
-        # A close match only (difflib ratio >= 0.85: per_mile/per_mille 0.94), and not a longer
-        # name containing the key, which is more likely a valid field not read yet
-        # (end_radius_m beside a missing radius_m).
+        # A close match (difflib ratio >= 0.85: per_mile/per_mille 0.94) or the key without its
+        # unit suffix (max_jerk for max_jerk_mps3), and not a longer name containing the key,
+        # which is more likely a valid field not read yet (end_radius_m beside a missing
+        # radius_m).
         unread = [k for k in map(str, self._data)
                   if k not in self._used and k != key and key not in k]
         for typo in unread:
-            if difflib.get_close_matches(typo, [key], n=1, cutoff=TYPO_CUTOFF):
+            if (key.startswith(typo + '_')
+                    or difflib.get_close_matches(typo, [key], n=1, cutoff=TYPO_CUTOFF)):
                 return ConfigError(f'{self.where or "the file"}: unknown field {typo}; did you '
                                    f'mean {key}? (the required {what} {key} is missing)')
         return ConfigError(f'{self._path(key)}: required {what} is missing')

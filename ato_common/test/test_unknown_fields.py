@@ -173,3 +173,10 @@ def test_an_unknown_optional_key_of_the_suites_yaml_names_the_likely_one(tmp_pat
     with pytest.raises(ConfigError, match=r'unknown field\(s\) dwel_s; did you mean dwell_s\? '
                                           r'\(valid fields: dwell_s, name, position_m\)'):
         load_scenario(str(path))
+
+
+def test_a_required_key_written_without_its_unit_suffix_is_named_as_the_typo():
+    from ato_common.validation import ConfigError, Fields
+    fields = Fields({'max_jerk': 0.1}, 'planning')
+    with pytest.raises(ConfigError, match='unknown field max_jerk; did you mean max_jerk_mps3'):
+        fields.number('max_jerk_mps3')
