@@ -46,6 +46,7 @@ from typing import Any, Callable, Iterable, Mapping
 import numpy as np
 import yaml
 
+from ato_bringup.run_events import run_events, stations_of
 from ato_common import uncertainty
 from ato_common.knowledge import knowledge_of
 from ato_common.scenario import Scenario, load_scenario
@@ -328,7 +329,7 @@ def base_row(task: Mapping) -> dict:
     row['settings'] = json.dumps(task['settings'], sort_keys=True)
     row.update({f'p_{k}': v for k, v in task['values'].items()})
     row.update({m: math.nan for m in METRICS})
-    row.update(status='ok', reason='', stop_errors_m='{}', wall_s=math.nan)
+    row.update(status='ok', reason='', stop_errors_m='{}', events='', wall_s=math.nan)
     return row
 
 
@@ -399,6 +400,9 @@ def run_metrics(run, dt: float) -> dict:
         'saturated_fraction': float(np.mean(run.saturated)) if run.saturated.size else 0.0,
         'atp_interventions': float(run.atp_interventions),
         'watchdog_events': float(run.watchdog_events),
+        # what went wrong, with the first occurrence of each kind (ato_bringup.run_events)
+        'events': run_events(run.scenario, m, stations_of(run.plan), run.times_s,
+                             run.positions, run.speeds).brief(),
     }
 
 

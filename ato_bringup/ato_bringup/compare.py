@@ -298,7 +298,9 @@ def markdown(results: list[dict], skipped: list[dict], scenarios: list[str], sta
              'it).', '',
              'Columns: RMS/max speed error (km/h), RMS position error (m), worst stop error '
              '|x - station| (m), traction energy (kWh), max jerk max|dF|/(M dt) (m/s^3), host '
-             'step time p99 (us, measured while the runs share the cores). Best: lowest RMS '
+             'step time p99 (us, measured while the runs share the cores), events (ATP '
+             'interventions, missed journey windows and stop errors beyond the platform '
+             'tolerance, each with its first occurrence; ato_bringup.run_events). Best: lowest RMS '
              f'speed error among the `ok` runs over the whole scenario at its control rate with a '
              f'stop error <= {STOP_ERROR_LIMIT_M} m (a law that needs a faster rate is listed, not '
              'ranked).', '']
@@ -307,8 +309,8 @@ def markdown(results: list[dict], skipped: list[dict], scenarios: list[str], sta
         best = best_law(rows)
         lines += [f'## {scenario_label(name)}', '', f'Best: **{best or "none"}**', '',
                   '| law | plant, rate | status | RMS speed err | max speed err | RMS pos err | '
-                  'stop err | energy | max jerk | step p99 |',
-                  '|---|---|---|---|---|---|---|---|---|---|']
+                  'stop err | energy | max jerk | step p99 | events |',
+                  '|---|---|---|---|---|---|---|---|---|---|---|']
         for r in rows:
             status = r['status'] + (f' ({r["reason"]})' if r.get('reason') else '')
             run = f'{r["model"]}, {r.get("rate_hz", 0):g} Hz'
@@ -321,11 +323,12 @@ def markdown(results: list[dict], skipped: list[dict], scenarios: list[str], sta
                 f'{_number(r, "rms_position_error_m", ".3f")} | '
                 f'{_number(r, "stop_error_m", ".3f")} | '
                 f'{_number(r, "traction_energy_kwh", ".0f")} | '
-                f'{_number(r, "max_jerk_mps3", ".3f")} | {_number(r, "step_p99_us", ".0f")} |')
+                f'{_number(r, "max_jerk_mps3", ".3f")} | {_number(r, "step_p99_us", ".0f")} | '
+                f'{r.get("events") or "-"} |')
         for s in skipped:
             if s['scenario'] == name:
                 lines.append(f'| {s["law"]} | - | not applicable ({s["reason"]}) '
-                             '| - | - | - | - | - | - | - |')
+                             '| - | - | - | - | - | - | - | - |')
         lines.append('')
         if plots:
             links = ', '.join(f'[{kind}]({scenario_label(name)}_{kind}.png)'

@@ -52,6 +52,20 @@ class RunEvents:
     def first(self, kind: str) -> RunEvent | None:
         return next((e for e in self.events if e.kind == kind), None)
 
+    def brief(self) -> str:
+        """One line for a table: 'clean', or each kind that occurred with its count and its
+        first occurrence ('1 ATP interventions (first at 103.4 s)')."""
+        if self.clean:
+            return 'clean'
+        parts = []
+        for kind in KINDS:
+            if self.count(kind):
+                first = self.first(kind)
+                when = '' if first is None or math.isnan(first.time_s) else \
+                    f' (first at {first.time_s:.1f} s)'
+                parts.append(f'{self.count(kind)} {LABELS[kind]}{when}')
+        return '; '.join(parts)
+
     def format(self) -> str:
         """Summary lines: one per kind, with its count and its first occurrence."""
         lines = []
