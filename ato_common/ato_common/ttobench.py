@@ -400,7 +400,7 @@ def load_train(path: str | Path) -> TTOBenchTrain:
             max_traction_force_n=traction_force, max_traction_power_w=power,
             max_service_brake_force_n=service_force,
             max_emergency_brake_force_n=max(emergency_force, service_force)),
-        actuator_names=('traction',), length_m=length,
+        actuator_names=('traction',), length_m=length, max_speed_mps=max_speed,
         sources={'all': f'TTOBench train file {path} (BSD-2, Kouzoupis et al. 2023)',
                  'mass_kg': 'mass times (1 + rho)', 'length_m': length_source,
                  'max_service_brake_force_n': 'regenerative plus pneumatic braking force',
