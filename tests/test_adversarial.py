@@ -209,3 +209,36 @@ def test_the_profile_killed_in_real_time_stops_the_train(line, tmp_path, domain_
         check_supervised(stack, scenario)
         codes = stack.stop(['controller', 'plant'])
     assert codes == {'controller': 0, 'plant': 0}
+
+
+@pytest.mark.parametrize('offset_s', [1000.0, 'zero'])
+def test_wrongly_stamped_commands_in_real_time_are_dropped_and_counted(offset_s, tmp_path,
+                                                                        domain_id):
+    """A test node plays the ATO of a real-time plant: full traction, stamped 1000 s ahead of
+    now or at 0. Nothing is applied, every one is counted, the watchdog brakes."""
+    from sensor_msgs.msg import JointState
+
+    from ato_common.ros import to_time
+
+    config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path / 'logs',
+                         lockstep=False)
+    with Stack(config) as stack:
+        controller = ControllerStandIn(stack)
+        stack.start_process('plant', {'scenario': 'short_line', 'lockstep': False,
+                                      'wait_for_subscribers': 1})
+        monitor = stack.monitor
+        assert stack.spin_until(lambda: monitor.counts['state'] > 0, 120.0)
+        for _ in range(30):  # 3 s of commands at 10 Hz
+            now = stack.node.get_clock().now().nanoseconds
+            stamp = now + int(offset_s * 1e9) if offset_s != 'zero' else 0
+            msg = JointState(name=['traction'], effort=[300e3])
+            msg.header.stamp = to_time(stamp)
+            controller.publisher.publish(msg)
+            stack.spin_for(0.1)
+        stack.spin_for(1.5)
+        states = monitor.complete_samples()
+        assert all(s.speeds[0] == 0.0 for _, s in states)  # never applied: the train stands
+        status = plant_status(monitor)
+        assert int(status[-1][2]['wrong_stamp_commands']) >= 20
+        assert any('command watchdog: emergency brake' in m and 'command stamped' in m
+                   for _, m, _ in status)
