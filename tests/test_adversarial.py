@@ -242,3 +242,46 @@ def test_wrongly_stamped_commands_in_real_time_are_dropped_and_counted(offset_s,
         assert int(status[-1][2]['wrong_stamp_commands']) >= 20
         assert any('command watchdog: emergency brake' in m and 'command stamped' in m
                    for _, m, _ in status)
+
+
+def test_the_reference_resumes_after_a_safety_brake_and_a_plant_restart(tmp_path, domain_id):
+    """Real time: the controller killed, the watchdog stops the train; the reference, which ran
+    on, is planned again from where the train stands. Then the plant killed and started again:
+    the reference starts again from the start of the run, not from the dead plant's origin."""
+    from profile_node.planner import RESUME_GAP_M
+
+    config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path / 'logs',
+                         lockstep=False)
+    with Stack(config) as stack:
+        stack.start()
+        monitor = stack.monitor
+
+        def state():
+            samples = monitor.complete_samples()
+            return samples[-1][1] if samples else None
+
+        def reference():  # real time: the profile stamps with its own clock
+            stamps = [k for k, s in monitor.samples.items() if math.isfinite(s.ref_position)]
+            return monitor.samples[max(stamps)].ref_position if stamps else math.nan
+
+        assert stack.spin_until(lambda: state() is not None and state().speeds[0] > 5.0, 120.0)
+        stack.processes['controller'].send_signal(signal.SIGKILL)
+        stack.processes['controller'].wait()
+        assert stack.spin_until(lambda: state().speeds[0] == 0.0, 60.0)
+        assert stack.spin_until(lambda: 'planned again' in stack.log_tail('profile', 5), 60.0)
+        stack.spin_for(0.5)
+        assert reference() - state().positions[0] <= RESUME_GAP_M
+        stack.start_process('controller', stack.node_params()['controller'])
+        assert stack.spin_until(lambda: state().speeds[0] > 1.0, 120.0)
+        # the plant dies and starts again
+        stack.processes['plant'].send_signal(signal.SIGKILL)
+        stack.processes['plant'].wait()
+        stack.spin_for(1.0)
+        count = monitor.counts['state']
+        stack.start_process('plant', stack.node_params()['plant'])
+        assert stack.spin_until(lambda: monitor.counts['state'] > count + 20, 120.0)
+        assert stack.spin_until(
+            lambda: 'the plant started again' in stack.log_tail('profile', 20), 30.0)
+        stack.spin_for(0.5)
+        assert state().positions[0] < 50.0
+        assert reference() - state().positions[0] < RESUME_GAP_M

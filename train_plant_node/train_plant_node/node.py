@@ -88,7 +88,7 @@ PARAMS = (
           'braking', minimum=1, maximum=1000),
     Param('emergency_periods', 10, 'control periods without a valid command before emergency '
           'braking', minimum=1, maximum=10000),
-    Param('command_stamp_tolerance_s', 0.5, 'real time: a command stamped more than this before '
+    Param('command_stamp_tolerance_s', 1.0, 'real time: a command stamped more than this before '
           'or after now is dropped (counted, and the watchdog sees no valid command), s',
           minimum=0.001, maximum=60.0, read_only=False),
 )
@@ -348,6 +348,7 @@ class TrainPlantNode(RunNodeHooks, Node):
             if self.last_rejection:
                 self.get_logger().info('valid commands again')
                 self.last_rejection = ''
+            self.last_wrong_stamp = ''  # the count stays; the cause is no longer current
         except (MessageError, CommandRejected) as error:
             if isinstance(error, MessageError):  # CommandRejected is counted by the simulation
                 self.sim.rejected_commands += 1
