@@ -34,7 +34,8 @@ EOA stops the train before the SvL, the overlap's end), at most ``release_speed_
 
 Stops (:class:`RunSupervision`): the authority of a leg ends at its stop; it moves on to the
 next leg only once the train has stood still at the stop (from ``STOP_WINDOW_M`` before the
-stopping point to the SvL) for the station's dwell time. Until then the braking curves to the
+stopping point to the SvL) and the station's dwell time has passed since, the train staying
+within that zone. Until then the braking curves to the
 stop, its EOA and its SvL are supervised, wherever the train is.
 """
 
@@ -363,9 +364,10 @@ class RunSupervision:
     """One movement authority per leg of a run (station to station). The leg in force is the
     supervised train's state (``TrainSimulation`` keeps it): it moves on to the next leg only
     once the train has stood still at the leg's stop (``at_stop``: from ``STOP_WINDOW_M``
-    before the stopping point to the SvL, at most ``STANDSTILL_MPS``) for the stop's dwell
-    time. Look-ups without a leg take ``leg_at``: the leg of a train that stopped at every
-    earlier station (for plans and figures, not for supervising a train)."""
+    before the stopping point to the SvL, at most ``STANDSTILL_MPS``) and the stop's dwell
+    time has passed since, the train staying within that zone. Look-ups without a leg take
+    ``leg_at``: the leg of a train that stopped at every earlier station (for plans and
+    figures, not for supervising a train)."""
 
     STOP_WINDOW_M = 0.5
     STANDSTILL_MPS = 0.01

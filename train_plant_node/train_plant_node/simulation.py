@@ -150,8 +150,9 @@ class TrainSimulation:
       not the ceiling, is the EBI) holds until standstill, and beyond the EOA (a trip) until the
       authority moves on; a ceiling intervention ends once the train is at or under the
       permitted speed;
-    - the leg of the run under supervision moves on only after the train has stood at the
-      leg's stop for its dwell (``RunSupervision.at_stop``).
+    - the leg of the run under supervision moves on only once the train has stood still at the
+      leg's stop (``RunSupervision.at_stop``) and the stop's dwell has passed since, the train
+      staying within the stop's zone.
     A failed actuator keeps delivering its failure force whatever the ATO commands; a failure
     force beyond what a drive can physically exert (``failure_force_bound``) is refused
     (``FailureRejected``).
@@ -407,13 +408,20 @@ class TrainSimulation:
             self.lead_position() < self.supervision.legs[self.leg].end_of_authority_m
 
     def _track_stop(self) -> None:
-        """The leg moves on once the train has stood at its stop for the stop's dwell."""
+        """The leg moves on once the stop's dwell has passed since the train first stood still
+        at its stop (``RunSupervision.at_stop``), as long as it has stayed within the stop's
+        zone: a train that starts off with the reference a moment before its own dwell is over
+        (it arrived later than the reference) is still at the station."""
         run = self.supervision
-        if not run.at_stop(self.leg, self.lead_position(), self.lead_speed()):
+        low, high = run.stop_zone(self.leg)
+        position = self.lead_position()
+        if not low <= position <= high:
             self._standing_since_s = None
             return
         now = self.time_s
         if self._standing_since_s is None:
+            if abs(self.lead_speed()) > run.STANDSTILL_MPS:
+                return
             self._standing_since_s = now
         if now - self._standing_since_s >= run.dwell_s(self.leg) - EVENT_TOLERANCE_S:
             self.leg += 1
