@@ -219,10 +219,16 @@ class TrainPlantNode(RunNodeHooks, Node):
     def safety_message(self) -> str:
         sim = self.sim
         if sim.atp_intervention:
+            if not sim.atp_holds_to_standstill:
+                until = (f'until at or under the permitted '
+                         f'{units.mps_to_kmh(sim.permitted_speed()):.1f} km/h')
+            elif sim.lead_position() < sim.supervision.legs[sim.leg].end_of_authority_m:
+                until = 'until standstill (target-speed monitoring)'
+            else:
+                until = 'past the end of authority (trip): until the authority moves on'
             return ('ATP emergency brake intervention: '
                     f'{units.mps_to_kmh(sim.lead_speed()):.1f} km/h, intervention speed '
-                    f'{units.mps_to_kmh(sim.intervention_speed()):.1f} km/h, until at or under '
-                    f'the permitted {units.mps_to_kmh(sim.permitted_speed()):.1f} km/h')
+                    f'{units.mps_to_kmh(sim.intervention_speed()):.1f} km/h, {until}')
         if sim.watchdog != NORMAL:
             cause = self.last_rejection or self.last_wrong_stamp
             return (f'command watchdog: {sim.watchdog} after {sim.missed_periods} control '

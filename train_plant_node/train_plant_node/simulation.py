@@ -309,6 +309,11 @@ class TrainSimulation:
         return self.supervision.sampled_curve('permitted', self.lead_position(), self.leg)
 
     @property
+    def atp_holds_to_standstill(self) -> bool:
+        """The ATP's intervention is target-speed monitoring's: it holds until standstill."""
+        return self.atp_intervention and self._hold_to_standstill
+
+    @property
     def emergency_brake(self) -> bool:
         """The emergency brake is demanded (ATP intervention or the watchdog's last stage)."""
         return self.atp_intervention or self.missed_periods >= self.safety.emergency_periods
