@@ -23,8 +23,20 @@ What is modelled (all in SI, positions along the line, the front of the train):
 Simplified against SUBSET-026: the gradient is the one at the front of the train (not the
 lowest under the whole train); no speed-dependent brake build-up, no correction factors Kdry/Kwet
 or Kv/Kr/Kt (the deceleration tables are taken as already corrected), no speed measurement
-accuracy, no release speed, no guidance curve. ``permitted_speed(position)`` is the minimum of
-the MRSP and the permitted curves of every target: the speed an ATO target must stay below.
+accuracy, no guidance curve. ``permitted_speed(position)`` is the minimum of the MRSP and the
+permitted curves of every target: the speed an ATO target must stay below.
+
+Release speed (3.13.9.4, simplified): towards a zero-speed target (a stop, the end of the
+authority) the EBI, SBI, warning, permitted and indication curves are floored at the release
+speed V_release up to the EOA, and are zero beyond it (passing the EOA trips the emergency
+brake). V_release is the EBI's speed at the EOA (from it, an emergency brake triggered at the
+EOA stops the train before the SvL, the overlap's end), at most ``release_speed_max_mps``.
+
+Stops (:class:`RunSupervision`): the authority of a leg ends at its stop; it moves on to the
+next leg only once the train has stood still at the stop (from ``STOP_WINDOW_M`` before the
+stopping point to the SvL) and the station's dwell time has passed since, the train staying
+within that zone. Until then the braking curves to the
+stop, its EOA and its SvL are supervised, wherever the train is.
 """
 
 from __future__ import annotations
@@ -70,6 +82,7 @@ class SupervisionSettings:
     indication_s: float = 4.0             # T_indication
     eoa_beyond_stop_m: float = 50.0       # stopping point -> end of authority
     overlap_m: float = 50.0               # EOA -> supervised location
+    release_speed_max_mps: float = 40.0 / 3.6  # the highest release speed (V_release)
 
 
 def constant_deceleration(value: float) -> Callable[[float], float]:
@@ -208,16 +221,45 @@ def deceleration_curve(line: Line, location_m: float, speed_mps: float, top_spee
     return DecelerationCurve(np.array(positions), np.sqrt(np.array(squares)), location_m)
 
 
+class ReleasedCurve:
+    """A supervision curve to a zero-speed target with its release speed: the curve, floored at
+    ``release_mps`` before the EOA, and zero from the EOA on (see the module's docstring). It
+    has a kink where the curve meets the release speed (``end_m``) and a step at the EOA
+    (``target_m``), both sampled by :meth:`SpeedSupervision.sampled`."""
+
+    def __init__(self, curve: DecelerationCurve, release_mps: float, eoa_m: float):
+        self.curve = curve
+        self.release_mps = release_mps
+        self.positions = curve.positions
+        self.start_m = curve.start_m
+        # Where the curve comes down to the release speed (its speeds fall with position).
+        self.end_m = float(np.interp(release_mps, curve.speeds[::-1], curve.positions[::-1]))
+        self.target_m = eoa_m
+
+    def __call__(self, position: float) -> float:
+        if position >= self.target_m:
+            return 0.0
+        return max(self.curve(position), self.release_mps)
+
+    def at(self, positions: np.ndarray) -> np.ndarray:
+        return np.where(positions >= self.target_m, 0.0,
+                        np.maximum(self.curve.at(positions), self.release_mps))
+
+
 class SpeedSupervision:
     """The supervision of one movement authority: MRSP, targets, the braking curves of each."""
 
     def __init__(self, line: Line, settings: SupervisionSettings, train_length_m: float,
                  start_m: float, stopping_point_m: float, final: bool = True,
-                 stop_name: str = ''):
+                 stop_name: str = '', max_speed_mps: float = math.inf):
         self.settings = settings
         self.start_m = start_m
-        self.mrsp = most_restrictive_speed_profile(line.speed_limit_mps, line.length_m,
-                                                   train_length_m)
+        mrsp = most_restrictive_speed_profile(line.speed_limit_mps, line.length_m,
+                                              train_length_m)
+        # The train's design maximum speed bounds every limit (the ceiling of SUBSET-026 3.11).
+        self.max_speed_mps = max_speed_mps
+        self.mrsp = PiecewiseConstant(mrsp.starts, [min(v, max_speed_mps) for v in mrsp.values])
+        self.stopping_point_m = stopping_point_m
         # The authority ends beyond the stopping point (platform end, overrun), also at the
         # last station of a line: the track does not end where the line description does.
         eoa = stopping_point_m + settings.eoa_beyond_stop_m
@@ -232,7 +274,8 @@ class SpeedSupervision:
             previous = v
         self.targets.append(Target(kind, stopping_point_m, 0.0, stop_name))
         top = max(self.mrsp.values) + units.kmh_to_mps(DV_EBI_KMH[1]) + CURVE_HEADROOM_MPS
-        self.curves: dict[str, list[DecelerationCurve]] = {name: [] for name in CURVE_NAMES}
+        self.curves: dict[str, list] = {name: [] for name in CURVE_NAMES}
+        self.release_speed_mps = 0.0
         self._sampled: dict[str, SampledLimit] = {}
         for target in self.targets:
             if target.kind == 'speed_decrease':
@@ -247,11 +290,15 @@ class SpeedSupervision:
             ebi = ebd.shifted(settings.traction_cut_off_s + settings.emergency_brake_build_up_s)
             sbi = sbd.shifted(settings.service_brake_build_up_s)
             permitted = sbi.shifted(settings.driver_reaction_s)
-            for name, curve in (('ebd', ebd), ('ebi', ebi), ('sbd', sbd), ('sbi', sbi),
-                                ('warning', sbi.shifted(settings.warning_s)),
-                                ('permitted', permitted),
-                                ('indication', permitted.shifted(settings.indication_s))):
-                self.curves[name].append(curve)
+            curves = {'ebd': ebd, 'ebi': ebi, 'sbd': sbd, 'sbi': sbi,
+                      'warning': sbi.shifted(settings.warning_s), 'permitted': permitted,
+                      'indication': permitted.shifted(settings.indication_s)}
+            if target.kind != 'speed_decrease':
+                self.release_speed_mps = max(min(settings.release_speed_max_mps, ebi(eoa)), 0.0)
+                for name in ('ebi', 'sbi', 'warning', 'permitted', 'indication'):
+                    curves[name] = ReleasedCurve(curves[name], self.release_speed_mps, eoa)
+            for name in CURVE_NAMES:
+                self.curves[name].append(curves[name])
 
     def curve(self, name: str, position_m: float) -> float:
         """The named supervision limit at a position: the lowest of its curves and of the
@@ -336,31 +383,67 @@ class SampledLimit:
 
 
 class RunSupervision:
-    """One movement authority per leg of a run (station to station): a train standing at, or
-    past, a station within ``STOP_WINDOW_M`` is under the next leg's authority."""
+    """One movement authority per leg of a run (station to station). The leg in force is the
+    supervised train's state (``TrainSimulation`` keeps it): it moves on to the next leg only
+    once the train has stood still at the leg's stop (``at_stop``: from ``STOP_WINDOW_M``
+    before the stopping point to the SvL, at most ``STANDSTILL_MPS``) and the stop's dwell
+    time has passed since, the train staying within that zone. Look-ups without a leg take
+    ``leg_at``: the leg of a train that stopped at every earlier station (for plans and
+    figures, not for supervising a train)."""
 
     STOP_WINDOW_M = 0.5
+    STANDSTILL_MPS = 0.01
 
     def __init__(self, line: Line, settings: SupervisionSettings, train_length_m: float,
-                 stations_m: Sequence[float], names: Sequence[str] = ()):
+                 stations_m: Sequence[float], names: Sequence[str] = (),
+                 dwells_s: Sequence[float] = (), max_speed_mps: float = math.inf):
         self.stations_m = list(stations_m)
         names = list(names) or [''] * len(stations_m)
+        self.dwells_s = list(dwells_s) or [0.0] * len(stations_m)
         self.legs = [SpeedSupervision(line, settings, train_length_m, origin, destination,
-                                      final=i == len(stations_m) - 2, stop_name=names[i + 1])
+                                      final=i == len(stations_m) - 2, stop_name=names[i + 1],
+                                      max_speed_mps=max_speed_mps)
                      for i, (origin, destination) in enumerate(zip(stations_m, stations_m[1:]))]
 
     @classmethod
     def for_scenario(cls, scenario) -> 'RunSupervision':
         """The run of a scenario (:class:`ato_common.scenario.Scenario`): from its initial
-        station through every later one."""
+        station through every later one, bounded by the train's design maximum speed."""
         stations = [s for s in scenario.line.stations
                     if s.position_m >= scenario.run.initial_position_m - 1e-9]
         return cls(scenario.line, scenario.supervision, scenario.train.length_m,
-                   [s.position_m for s in stations], [s.name for s in stations])
+                   [s.position_m for s in stations], [s.name for s in stations],
+                   [s.dwell_s for s in stations],
+                   getattr(scenario.train, 'max_speed_mps', math.inf))
 
     def leg_at(self, position_m: float) -> int:
         passed = bisect_right(self.stations_m, position_m + self.STOP_WINDOW_M) - 1
         return min(max(passed, 0), len(self.legs) - 1)
+
+    def stop_zone(self, leg: int) -> tuple[float, float]:
+        """(from, to) m: where a train standing still has stopped at the leg's stop (up to the
+        SvL: a train that overran its EOA has stopped there too); empty (inf, -inf) on the last
+        leg, whose authority never moves on."""
+        if leg >= len(self.legs) - 1:
+            return math.inf, -math.inf
+        return (self.stations_m[leg + 1] - self.STOP_WINDOW_M,
+                self.legs[leg].supervised_location_m)
+
+    def at_stop(self, leg: int, position_m: float, speed_mps: float) -> bool:
+        low, high = self.stop_zone(leg)
+        return abs(speed_mps) <= self.STANDSTILL_MPS and low <= position_m <= high
+
+    def dwell_s(self, leg: int) -> float:
+        """How long the train stands at the leg's stop before the authority moves on."""
+        return self.dwells_s[leg + 1]
+
+    def target_monitoring(self, leg: int, position_m: float) -> bool:
+        """The EBI is that of the leg's stop (its braking curve or release speed), not the
+        ceiling: an intervention there holds until standstill (SUBSET-026 3.13.10.4)."""
+        supervision = self.legs[leg]
+        mrsp = supervision.mrsp(position_m)
+        return supervision.curves['ebi'][-1](position_m) < mrsp + ceiling_margin(mrsp,
+                                                                                  DV_EBI_KMH)
 
     def permitted_speed(self, position_m: float, leg: int | None = None) -> float:
         return self.legs[self.leg_at(position_m) if leg is None else leg].permitted_speed(
@@ -369,11 +452,11 @@ class RunSupervision:
     def curve(self, name: str, position_m: float, leg: int | None = None) -> float:
         return self.legs[self.leg_at(position_m) if leg is None else leg].curve(name, position_m)
 
-    def sampled_curve(self, name: str, position_m: float) -> float:
-        """``curve(name, position_m)`` from the tabulated limits (exact at the samples, never
-        above the exact limit between them); for supervision at every control period."""
-        return self.legs[self.leg_at(position_m)].sampled(name)(position_m)
-
+    def sampled_curve(self, name: str, position_m: float, leg: int | None = None) -> float:
+        """``curve(name, position_m, leg)`` from the tabulated limits (exact at the samples,
+        never above the exact limit between them); for supervision at every control period."""
+        leg = self.leg_at(position_m) if leg is None else leg
+        return self.legs[leg].sampled(name)(position_m)
     def packed_curve(self, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Every leg's ``sampled(name)`` table in flat arrays, for compiled look-ups: (offsets,
         positions, speeds), leg i's samples at ``offsets[i]:offsets[i + 1]``."""

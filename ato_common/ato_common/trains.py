@@ -166,6 +166,9 @@ class TrainParameters:
     cars: tuple[CarParameters, ...] = ()      # for multi-car models, lead car first
     couplers: tuple[Coupler, ...] = ()        # len(cars) - 1 of them
     car_length_m: float = 25.0
+    # Design maximum speed: bounds every speed limit the supervision applies (a train is never
+    # permitted faster, whatever the line allows). Every preset cites it in ``sources``.
+    max_speed_mps: float = math.inf
 
 
 def _crh3_luo_xu() -> TrainParameters:
@@ -186,7 +189,10 @@ def _crh3_luo_xu() -> TrainParameters:
         ),
         actuator_names=('traction',),
         length_m=200.0,
+        max_speed_mps=units.kmh_to_mps(350.0),
         sources={
+            'max_speed_mps': 'CRH3C (Velaro CN) design maximum speed 350 km/h '
+                             '(manufacturer figure)',
             'mass, davis, davis_nominal': 'Luo & Xu, Tables 1 and 2 (510 t; N/t, V in km/h)',
             'max_traction_force_n, max_traction_power_w':
                 'CRH3C (Velaro CN) data sheet figures: starting tractive effort 300 kN, '
@@ -215,7 +221,10 @@ def _crh380a_tan() -> TrainParameters:
         ),
         actuator_names=('traction',),
         length_m=203.0,
+        max_speed_mps=units.kmh_to_mps(380.0),
         sources={
+            'max_speed_mps': 'CRH380A design maximum operating speed 380 km/h '
+                             '(manufacturer figure)',
             'mass, davis': 'Tan, Jiang & Chen, Table 1 (442 t; 5.6 + 0.036 V + 0.00121 V^2 N/t)',
             'max_traction_power_w': 'CRH380A 8-car traction power 9.6 MW (manufacturer figure)',
             'max_traction_force_n': 'suite assumption: 0.6 m/s^2 starting acceleration',
@@ -254,7 +263,9 @@ def _crh2_4car_mao() -> TrainParameters:
             max_service_brake_force_n=mass * 0.9, max_emergency_brake_force_n=mass * 1.2),
         actuator_names=('car_2', 'car_3'), length_m=100.0, cars=cars,
         couplers=couplers, car_length_m=25.0,
+        max_speed_mps=units.kmh_to_mps(250.0),
         sources={
+            'max_speed_mps': 'CRH2A design maximum speed 250 km/h (manufacturer figure)',
             'masses, resistance, couplers': 'Mao, Tao, Jiang & Yan, Table II (units corrected '
                                             'as in docs/papers/mao_multibody.md)',
             'max_traction_power_w': 'half of the 4.8 MW of an 8-car CRH2A (two such units)',
@@ -278,7 +289,9 @@ def _crh5_4car_mao() -> TrainParameters:
             max_service_brake_force_n=mass * 0.9, max_emergency_brake_force_n=mass * 1.2),
         actuator_names=('car_2', 'car_3'), length_m=100.0, cars=cars,
         couplers=couplers, car_length_m=25.0,
+        max_speed_mps=units.kmh_to_mps(250.0),
         sources={
+            'max_speed_mps': 'CRH5A design maximum speed 250 km/h (manufacturer figure)',
             'masses, resistance, couplers': 'Mao, Tao, Jiang & Yan, Table I (CRH5: 50/48/51/53 t; '
                                             'a 6.63/5.43 N/t, b 0.06382/0.07041 N/(t km/h), '
                                             'c 0.00107 N/(t (km/h)^2), k 500e6/650e6 N/m, '
@@ -305,7 +318,10 @@ def _crh380al_liu_li() -> TrainParameters:
             max_service_brake_force_n=mass * 0.9,
             max_emergency_brake_force_n=mass * 1.2),
         actuator_names=('traction',), length_m=399.0,
+        max_speed_mps=units.kmh_to_mps(380.0),
         sources={
+            'max_speed_mps': 'CRH380AL design maximum operating speed 380 km/h '
+                             '(manufacturer figure)',
             'mass': 'Liu & Li, Section 5 (M = 890 t; g = 9.8 m/s^2 in the paper, the suite uses '
                     'standard gravity)',
             'davis': 'Liu & Li formula lost; docs/papers/liu_li.md takes '
@@ -336,7 +352,10 @@ def _mao_2017_500t() -> TrainParameters:
             max_service_brake_force_n=mass * 0.9,
             max_emergency_brake_force_n=mass * 1.2),
         actuator_names=('motor_1', 'motor_2', 'motor_3', 'motor_4'), length_m=200.0,
+        max_speed_mps=units.kmh_to_mps(350.0),
         sources={
+            'max_speed_mps': 'the CRH3C of max_traction_force_n: 350 km/h '
+                             '(manufacturer figure)',
             'mass, 4 motors': 'Mao et al. 2017, Section 4 (M = 500 t, n = 4)',
             'davis': 'Mao et al. 2017 mode (i): a = 2.25, b = -1.9e-3, c = 3.2e-4, read as kN '
                      'with V in km/h (reading (A) of docs/papers/mao_2017.md)',

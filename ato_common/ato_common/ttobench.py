@@ -492,7 +492,7 @@ def load_train(path: str | Path, rail: str = 'dry') -> TTOBenchTrain:
         description=f'TTOBench train {identifier} ({path.name})',
         mass_kg=equivalent_mass, davis=davis, davis_nominal=davis,
         traction=bounded.traction,
-        actuator_names=('traction',), length_m=length,
+        actuator_names=('traction',), length_m=length, max_speed_mps=max_speed,
         sources={'all': f'TTOBench train file {path} (BSD-2, Kouzoupis et al. 2023)',
                  'mass_kg': 'mass times (1 + rho)', 'length_m': length_source,
                  'max_service_brake_force_n':

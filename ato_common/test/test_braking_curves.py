@@ -102,8 +102,9 @@ def test_the_curves_are_ordered_as_etcs_orders_them(supervision):
     for x in np.arange(0.0, 38200.0, 37.0):
         values = [supervision.curve(name, x) for name in order]
         assert all(a >= b - 1e-9 for a, b in zip(values, values[1:])), (x, values)
-        assert supervision.curve('ebd', x) >= supervision.curve('ebi', x) - 1e-9
-        assert supervision.curve('sbd', x) >= supervision.curve('sbi', x) - 1e-9
+        if supervision.curve('sbi', x) > supervision.release_speed_mps:  # not the floor
+            assert supervision.curve('ebd', x) >= supervision.curve('ebi', x) - 1e-9
+            assert supervision.curve('sbd', x) >= supervision.curve('sbi', x) - 1e-9
         assert supervision.permitted_speed(x) <= supervision.mrsp(x)
 
 
@@ -114,7 +115,13 @@ def test_the_permitted_curve_is_the_service_curve_shifted_by_the_reaction_times(
     for v in (5.0, 20.0, 40.0):
         d_sbd = v * v / (2 * 0.9)
         x = eoa - d_sbd - v * shift
-        assert supervision.permitted_speed(x) == pytest.approx(v, rel=1e-3)
+        expected = max(v, supervision.release_speed_mps)  # floored at the release speed
+        assert supervision.permitted_speed(x) == pytest.approx(expected, rel=1e-3)
+    # the release speed: the EBI's at the EOA; zero from the EOA on
+    assert 5.0 < supervision.release_speed_mps <= SETTINGS.release_speed_max_mps
+    assert supervision.curve('ebi', eoa - 1e-3) == pytest.approx(supervision.release_speed_mps,
+                                                                 rel=1e-4)
+    assert supervision.curve('ebi', eoa) == 0.0
     # the EBD ends at the SvL; the speed target's EBD at V_target + dV_ebi
     assert supervision.curve('ebd', supervision.supervised_location_m - 1e-6) < 0.1
     v_ebd = units.kmh_to_mps(160.0) + ceiling_margin(units.kmh_to_mps(160.0), DV_EBI_KMH)

@@ -3,7 +3,9 @@
 Lockstep: a step is taken when the measured state and the reference of the same stamp have both
 arrived; the command carries that stamp. A state re-sent by the plant gets the same command
 again (the law is stepped once per stamp). Real time: a wall-clock timer at ``rate_hz`` steps on
-the latest state and reference.
+the latest state and reference; a measurement or a reference older than ``stale_after_s`` (a
+dead plant or a dead profile) is stale: the controller commands nothing, says which in its
+diagnostics, and the plant's watchdog brakes.
 
 Parameters: ``controller`` selects the law and may change at run time (``ros2 param set
 /ato_controller_node controller luo_xu``; bumpless); an unknown name or a law that does not fit
@@ -53,8 +55,9 @@ NODE_PARAMS = (
           '(false: on a wall-clock timer)'),
     Param('wait_for_subscribers', 0, 'lockstep: command nothing before ato/command has this '
           'many subscribers (so a monitor or recorder misses nothing)', minimum=0, maximum=100),
-    Param('stale_after_s', 0.5, 'real time: a measurement older than this is stale; the '
-          'controller then commands nothing (and the plant watchdog brakes), s', minimum=0.01,
+    Param('stale_after_s', 0.5, 'real time: a measurement or a reference older than this is '
+          'stale; the controller then commands nothing (and the plant watchdog brakes), s',
+          minimum=0.01,
           maximum=60.0, read_only=False),
     Param('bumpless_time_constant_s', 3.0, 'decay time of the command step on a law switch, s',
           minimum=0.01, maximum=600.0, read_only=False),
@@ -124,6 +127,8 @@ class AtoControllerNode(RunNodeHooks, Node):
         self.input_fault = ''
         self.last_fault_logged = ''
         self.state_received_wall = 0.0
+        self.reference_received_wall = 0.0
+        self.stale_steps = 0  # real-time periods without a command for a stale input
         self.stale_reported_wall = 0.0
 
         self.command_pub = self.create_publisher(JointState, topic('command').name,
@@ -200,6 +205,7 @@ class AtoControllerNode(RunNodeHooks, Node):
             self.try_step(reference.stamp_ns)
         else:
             self.references = {0: reference}
+            self.reference_received_wall = time.monotonic()
 
     def try_step(self, stamp_ns: int) -> None:
         if stamp_ns == self.last_stamp_ns:
@@ -231,13 +237,17 @@ class AtoControllerNode(RunNodeHooks, Node):
         state, reference = self.states.get(0), self.references.get(0)
         if state is None or reference is None:
             return
-        age = time.monotonic() - self.state_received_wall
-        if age > self.params['stale_after_s']:
-            # No command on an old measurement: the plant's watchdog takes the train to a stop.
-            if time.monotonic() - self.stale_reported_wall >= 1.0:
-                self.stale_reported_wall = time.monotonic()
-                self.report_stale(age)
-            return
+        now = time.monotonic()
+        for what, received in (('measurement', self.state_received_wall),
+                               ('reference', self.reference_received_wall)):
+            age = now - received
+            if age > self.params['stale_after_s']:
+                # No command on an old input: the plant's watchdog takes the train to a stop.
+                self.stale_steps += 1
+                if now - self.stale_reported_wall >= 1.0:
+                    self.stale_reported_wall = now
+                    self.report_stale(age, what)
+                return
         now_ns = self.get_clock().now().nanoseconds
         target = reference_now(reference, now_ns)
         # The laws and the mode schedule work in run time (the curve's time), not clock time.
@@ -263,13 +273,14 @@ class AtoControllerNode(RunNodeHooks, Node):
             self.publish_diagnostics(stamp_ns)
             self.next_diagnostic_ns = stamp_ns + int(self.params['diagnostics_period_s'] * 1e9)
 
-    def report_stale(self, age_s: float) -> None:
-        message = (f'measurement stale for {age_s:.1f} s (limit {self.params["stale_after_s"]:g} '
+    def report_stale(self, age_s: float, what: str = 'measurement') -> None:
+        message = (f'{what} stale for {age_s:.1f} s (limit {self.params["stale_after_s"]:g} '
                    's): commanding nothing')
         self.get_logger().warning(message)
         status = diagnostic_status('ato_controller_node: law', self.host.law.name,
                                    DiagnosticStatus.ERROR, message,
-                                   {'law': self.host.law.name, 'measurement_age_s': age_s})
+                                   {'law': self.host.law.name, f'{what}_age_s': age_s,
+                                    'stale_input': what, 'stale_periods': self.stale_steps})
         self.diag_pub.publish(DiagnosticArray(
             header=Header(stamp=self.get_clock().now().to_msg()), status=[status]))
 

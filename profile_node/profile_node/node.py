@@ -14,17 +14,28 @@ takes the profile off the loop's critical path. A tick whose reference was not s
 first ones, a changed period, a re-sent tick) gets it at once. Real time: the same on a
 wall-clock timer, with the curve's time origin taken from the plant's first state message
 (its stamp minus its run time). The whole curve is latched once at start-up.
+
+Resume (real time): a plant that starts again (its run time goes back) gives the curve its time
+origin again, so the reference starts from the start of the run, not the dead plant's origin.
+A measured train standing still more than ``RESUME_GAP_M`` behind the reference (after an
+emergency or watchdog brake) gets the rest of its leg planned again from where it stands
+(``planner.resume_plan``), so the law does not chase a reference far ahead. The latched curve
+stays the original plan.
 """
 
 from __future__ import annotations
+
+import math
 
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 from trajectory_msgs.msg import JointTrajectory
 
+from ato_common.braking_curves import RunSupervision
 from ato_common.params import Param, ParameterTable
 from ato_common.ros import (
+    MessageError,
     RunNodeHooks,
     freeze_startup_objects,
     from_duration,
@@ -32,11 +43,12 @@ from ato_common.ros import (
     qos_profile,
     reference_to_msg,
     run_node,
+    state_from_msg,
     topic,
 )
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import Reference, nanoseconds, seconds
-from profile_node.planner import plan_reference
+from profile_node.planner import RESUME_GAP_M, plan_reference, resume_plan
 
 PARAMS = (
     Param('scenario', DEFAULT_SCENARIO, 'built-in scenario name or path to a scenario YAML file'),
@@ -65,6 +77,8 @@ class ProfileNode(RunNodeHooks, Node):
         self.time_origin_ns: int | None = 0 if self.lockstep else None
         self.last_tick_ns: int | None = None
         self.sent_ahead_ns: int | None = None
+        self.last_run_time_ns = -1
+        self.resumes = 0
 
         self.reference_pub = self.create_publisher(JointTrajectory, topic('reference').name,
                                                    qos_profile(topic('reference').qos))
@@ -82,6 +96,8 @@ class ProfileNode(RunNodeHooks, Node):
         else:
             self.create_subscription(JointTrajectory, topic('state').name, self.on_state,
                                      qos_profile(topic('state').qos))
+            self.create_subscription(JointTrajectory, topic('state_measured').name,
+                                     self.on_measured, qos_profile(topic('state_measured').qos))
             self.create_timer(1.0 / self.params['rate_hz'], self.on_timer)
         self.get_logger().info(
             f'scenario {self.scenario.name}: {len(self.plan.stops)} stops, '
@@ -137,10 +153,44 @@ class ProfileNode(RunNodeHooks, Node):
         self.last_tick_ns = tick
 
     def on_state(self, msg: JointTrajectory) -> None:
-        if self.time_origin_ns is None and msg.points:
-            run_time_ns = nanoseconds(from_duration(msg.points[0].time_from_start))
+        if not msg.points:
+            return
+        run_time_ns = nanoseconds(from_duration(msg.points[0].time_from_start))
+        restarted = run_time_ns < self.last_run_time_ns
+        self.last_run_time_ns = run_time_ns
+        if self.time_origin_ns is None or restarted:
             self.time_origin_ns = from_time(msg.header.stamp) - run_time_ns
-            self.get_logger().info('real time: curve origin taken from the plant')
+            if restarted:  # a new plant: its run starts again, and so does the curve
+                self.plan = plan_reference(self.scenario)
+                self.trajectory = self.plan.trajectory
+                self.get_logger().warning('real time: the plant started again; the curve '
+                                          'restarts from its origin')
+            else:
+                self.get_logger().info('real time: curve origin taken from the plant')
+
+    def on_measured(self, msg: JointTrajectory) -> None:
+        """Real time: resume the curve from a train that stands far behind it."""
+        if self.time_origin_ns is None:
+            return
+        try:
+            state = state_from_msg(msg)
+        except MessageError:
+            return  # the controller reports a bad measurement
+        position, speed = state.positions[0], state.speeds[0]
+        if not (math.isfinite(position) and math.isfinite(speed)) \
+                or abs(speed) > RunSupervision.STANDSTILL_MPS:
+            return
+        time_s = seconds(self.get_clock().now().nanoseconds - self.time_origin_ns)
+        if self.trajectory.at(time_s).position - position <= RESUME_GAP_M:
+            return
+        plan = resume_plan(self.scenario, position, time_s)
+        if plan is None:
+            return
+        self.plan, self.trajectory = plan, plan.trajectory
+        self.resumes += 1
+        self.get_logger().warning(
+            f'the train stands at {position:.1f} m, behind the reference by more than '
+            f'{RESUME_GAP_M:g} m: the leg is planned again from there ({self.resumes} resumes)')
 
     def on_timer(self) -> None:
         if self.time_origin_ns is not None:

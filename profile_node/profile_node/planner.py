@@ -27,7 +27,7 @@ supervision times), the braking into that target is planned further ahead and th
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -276,8 +276,9 @@ def plan_leg(builder: TrajectoryBuilder, scenario: Scenario, sections: list[Sect
 
 
 def _build(scenario: Scenario, supervision: RunSupervision, stations: list[Station],
-           anticipation_s: float, extra_m: dict[float, float], deceleration_factors: list[float]):
-    builder = TrajectoryBuilder(x0=stations[0].position_m)
+           anticipation_s: float, extra_m: dict[float, float], deceleration_factors: list[float],
+           start_s: float = 0.0):
+    builder = TrajectoryBuilder(x0=stations[0].position_m, t0=start_s)
     builder.add(stations[0].dwell_s)
     stops = []
     for leg, (origin, destination) in enumerate(zip(stations, stations[1:])):
@@ -359,7 +360,9 @@ def first_violation(trajectory: Trajectory, plan_stops, supervision: RunSupervis
     return None
 
 
-def plan_reference(scenario: Scenario) -> Plan:
+def plan_reference(scenario: Scenario, start_s: float = 0.0) -> Plan:
+    """The target curve of a scenario, from its initial position at rest at run time
+    ``start_s`` (0: the start of the run)."""
     stations = [s for s in scenario.line.stations
                 if s.position_m >= scenario.run.initial_position_m - 1e-9]
     supervision = RunSupervision.for_scenario(scenario)
@@ -368,7 +371,8 @@ def plan_reference(scenario: Scenario) -> Plan:
     extra_m: dict[float, float] = {}
     factors = [1.0] * (len(stations) - 1)
     for _ in range(30):
-        trajectory, stops = _build(scenario, supervision, stations, anticipation, extra_m, factors)
+        trajectory, stops = _build(scenario, supervision, stations, anticipation, extra_m, factors,
+                                   start_s)
         violation = first_violation(trajectory, stops, supervision)
         if violation is None:
             targets = tuple(sorted({t for leg in supervision.legs for t in leg.targets},
@@ -387,3 +391,24 @@ def plan_reference(scenario: Scenario) -> Plan:
     raise PlanningError(f'{scenario.origin}: no target curve stays under the permitted speed '
                         f'near {position:.0f} m (leg {leg}): lower planning.'
                         'service_deceleration_mps2 or the supervision times')
+
+
+# A reference this far ahead of a train standing still has lost it (an emergency or watchdog
+# brake, a restart): the leg is planned again from where the train stands, m.
+RESUME_GAP_M = 50.0
+
+
+def resume_plan(scenario: Scenario, position_m: float, time_s: float) -> Plan | None:
+    """The rest of the run planned again from a train standing at ``position_m`` at run time
+    ``time_s``: the current leg restarted from there (a departure without dwell), then every
+    later station as planned. None where no station is left ahead (beyond the stop window of
+    the last one)."""
+    ahead = [s for s in scenario.line.stations
+             if s.position_m > position_m + RunSupervision.STOP_WINDOW_M]
+    if not ahead:
+        return None
+    here = Station('resume', position_m, 0.0)
+    line = replace(scenario.line, stations=(here, *ahead))
+    resumed = replace(scenario, line=line, run=replace(scenario.run,
+                                                       initial_position_m=position_m))
+    return plan_reference(resumed, start_s=time_s)

@@ -43,7 +43,11 @@ def test_watchdog_service_then_emergency_braking_and_recovery():
     assert [s for s, _ in states] == [NORMAL, NORMAL, SERVICE_BRAKE, SERVICE_BRAKE,
                                       SERVICE_BRAKE, EMERGENCY_BRAKE, EMERGENCY_BRAKE]
     assert states[2][1] == -brakes.max_service_brake_force_n
-    assert states[-1][1] == -brakes.max_emergency_brake_force_n
+    assert states[-2][1] == 0.0  # the emergency brake's demand: traction cut, brake building up
+    for _ in range(20):  # T_be = 2 s
+        sim.command_missed()
+        sim.advance(PERIOD_NS)
+    assert sim.applied[0] == -brakes.max_emergency_brake_force_n
     v = sim.truth().speeds[0]
     sim.advance(PERIOD_NS)
     assert sim.truth().speeds[0] < v
@@ -72,8 +76,8 @@ def test_atp_intervenes_above_the_ebi_until_back_under_the_permitted_speed():
     assert max(speeds) <= (37.5 + 0.5) / 3.6  # caught within a control period of the EBI
     assert sim.atp_interventions >= 1
     during = [a for v, on, a in trace if on]
-    assert during and all(a == -sim.scenario.train.traction.max_emergency_brake_force_n
-                          for a in during)
+    assert during and all(a <= 0.0 for a in during)  # traction cut, the brake building up
+    assert min(during) == -sim.scenario.train.traction.max_emergency_brake_force_n
     released = [v for (v, on, _), (_, was_on, _) in zip(trace[1:], trace) if was_on and not on]
     assert released and all(v <= 30.0 / 3.6 + 1e-9 for v in released)
 

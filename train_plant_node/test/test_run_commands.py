@@ -92,7 +92,8 @@ def assert_same_run(scenario_, model='point_mass', periods=4000, seed=1, compile
 
 def test_compiled_run_equals_the_period_interface_with_atp_interventions_and_stops():
     sim, calls = assert_same_run(load_scenario('short_line'), periods=6000, compiled=True)
-    assert sum(calls) == 6000 and len(calls) == 1
+    # the kernel runs up to an intervention or a stop; the braking and dwell run period by period
+    assert 0 < sum(calls) < 6000 and len(calls) > 1
     assert sim.atp_interventions >= 1  # the commands overspeed: the ATP's branch ran
 
 
@@ -181,6 +182,7 @@ def test_compiled_atp_look_up_is_the_sampled_curve():
     for name in ('ebi', 'permitted'):
         offsets, xs, vs = run.packed_curve(name)
         positions_ = np.concatenate([positions, xs, xs[offsets[1:] - 1] + 1e-7])
-        for x in positions_:
-            assert limit_at(stations, offsets, xs, vs, run.STOP_WINDOW_M, x) == \
-                run.sampled_curve(name, x), (name, x)
+        for leg in range(len(run.legs)):
+            for x in positions_:
+                assert limit_at(leg, offsets, xs, vs, x) == \
+                    run.sampled_curve(name, x, leg), (name, leg, x)

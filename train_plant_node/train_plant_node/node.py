@@ -43,9 +43,11 @@ from train_plant_node.models import MODELS
 from train_plant_node.simulation import (
     NORMAL,
     CommandRejected,
+    FailureRejected,
     SafetySettings,
     SensorSettings,
     TrainSimulation,
+    check_failure,
     control_period_ns,
 )
 
@@ -86,6 +88,9 @@ PARAMS = (
           'braking', minimum=1, maximum=1000),
     Param('emergency_periods', 10, 'control periods without a valid command before emergency '
           'braking', minimum=1, maximum=10000),
+    Param('command_stamp_tolerance_s', 1.0, 'real time: a command stamped more than this before '
+          'or after now is dropped (counted, and the watchdog sees no valid command), s',
+          minimum=0.001, maximum=60.0, read_only=False),
 )
 
 DIAGNOSTIC_PERIOD_S = 1.0
@@ -115,6 +120,8 @@ class TrainPlantNode(RunNodeHooks, Node):
                 max_substep_s=p['max_substep_s'])
         except ConfigError:
             raise  # names the scenario's field already (plant.sensors...)
+        except FailureRejected as error:
+            raise ConfigError(f'plant.failures: {error}') from None
         except ValueError as error:  # e.g. multi_car with a train that has no car description
             raise ConfigError(f"model {p['model']}: {error}") from None
         self.last_valid_command_wall = time.monotonic()
@@ -128,6 +135,8 @@ class TrainPlantNode(RunNodeHooks, Node):
         self.step_messages = None
         self.steps_published = 0  # re-sent steps included: what a recording must hold
         self.ready_since: float | None = None
+        self.wrong_stamp_commands = 0   # dropped for their stamp (lockstep and real time)
+        self.last_wrong_stamp = ''      # why the last one was dropped
 
         self.truth_pub = self.create_publisher(JointTrajectory, topic('state').name,
                                                qos_profile(topic('state').qos))
@@ -210,13 +219,20 @@ class TrainPlantNode(RunNodeHooks, Node):
     def safety_message(self) -> str:
         sim = self.sim
         if sim.atp_intervention:
+            if not sim.atp_holds_to_standstill:
+                until = (f'until at or under the permitted '
+                         f'{units.mps_to_kmh(sim.permitted_speed()):.1f} km/h')
+            elif sim.lead_position() < sim.supervision.legs[sim.leg].end_of_authority_m:
+                until = 'until standstill (target-speed monitoring)'
+            else:
+                until = 'past the end of authority (trip): until the authority moves on'
             return ('ATP emergency brake intervention: '
                     f'{units.mps_to_kmh(sim.lead_speed()):.1f} km/h, intervention speed '
-                    f'{units.mps_to_kmh(sim.intervention_speed()):.1f} km/h, until at or under '
-                    f'the permitted {units.mps_to_kmh(sim.permitted_speed()):.1f} km/h')
+                    f'{units.mps_to_kmh(sim.intervention_speed()):.1f} km/h, {until}')
         if sim.watchdog != NORMAL:
+            cause = self.last_rejection or self.last_wrong_stamp
             return (f'command watchdog: {sim.watchdog} after {sim.missed_periods} control '
-                    'periods without a valid command')
+                    'periods without a valid command' + (f' (last: {cause})' if cause else ''))
         return ''
 
     def log_safety(self) -> None:
@@ -236,6 +252,10 @@ class TrainPlantNode(RunNodeHooks, Node):
             {'time_s': self.sim.time_s, 'commanded_n': list(self.sim.commanded),
              'applied_n': list(self.sim.applied),
              'rejected_commands': self.sim.rejected_commands,
+             'wrong_stamp_commands': self.wrong_stamp_commands,
+             'last_wrong_stamp': self.last_wrong_stamp or 'none',
+             'supervised_leg': self.sim.leg,
+             'emergency_brake': self.sim.emergency_brake,
              'steps_published': self.steps_published,
              'watchdog': self.sim.watchdog, 'missed_periods': self.sim.missed_periods,
              'atp_intervention': self.sim.atp_intervention,
@@ -257,10 +277,13 @@ class TrainPlantNode(RunNodeHooks, Node):
         if 'inject_failure' not in changes:
             return None
         try:
-            parse_failure_injection(changes['inject_failure'], self.sim.actuator_names,
-                                    self.sim.time_s)
-        except ConfigError as error:
-            return str(error)
+            failures, _ = parse_failure_injection(changes['inject_failure'],
+                                                  self.sim.actuator_names, self.sim.time_s)
+            for failure in failures:
+                check_failure(failure, self.scenario.train)
+        except (ConfigError, FailureRejected) as error:
+            return f'inject_failure: {error}' if isinstance(error, FailureRejected) \
+                else str(error)
         return None
 
     def apply_parameters(self, parameters) -> None:
@@ -315,13 +338,23 @@ class TrainPlantNode(RunNodeHooks, Node):
             return
         try:
             command = command_from_msg(msg, self.sim.actuator_names)
-            if self.lockstep and command.stamp_ns != self.stamp_ns():
-                return  # a re-sent or late command for another step
+            if self.lockstep and command.stamp_ns == self.stamp_ns() - self.period_ns:
+                return  # the previous step's command again (it answered a re-sent step)
+            wrong = self.wrong_stamp(command.stamp_ns)
+            if wrong:
+                self.wrong_stamp_commands += 1
+                self.last_wrong_stamp = wrong
+                self.get_logger().warning(wrong, throttle_duration_sec=1.0)
+                if self.lockstep:  # this step's command was not valid: the watchdog counts it
+                    self.sim.command_missed()
+                    self.advance()
+                return
             self.sim.apply_command(command.forces)
             self.last_valid_command_wall = time.monotonic()
             if self.last_rejection:
                 self.get_logger().info('valid commands again')
                 self.last_rejection = ''
+            self.last_wrong_stamp = ''  # the count stays; the cause is no longer current
         except (MessageError, CommandRejected) as error:
             if isinstance(error, MessageError):  # CommandRejected is counted by the simulation
                 self.sim.rejected_commands += 1
@@ -334,6 +367,21 @@ class TrainPlantNode(RunNodeHooks, Node):
                 self.sim.command_missed()  # this step's command was not valid
         if self.lockstep:
             self.advance()
+
+    def wrong_stamp(self, stamp_ns: int) -> str:
+        """Why a command's stamp rules it out ('' if it does not): in lockstep a stamp other
+        than the current step's (the previous step's, a reply to a re-sent step, is ignored
+        before); in real time one further than ``command_stamp_tolerance_s`` from now."""
+        now_ns = self.stamp_ns() if self.lockstep else self.get_clock().now().nanoseconds
+        offset = seconds(stamp_ns - now_ns)
+        if self.lockstep:
+            if stamp_ns == now_ns:
+                return ''
+        elif abs(offset) <= self.params['command_stamp_tolerance_s']:
+            return ''
+        where = 'ahead of' if offset > 0 else 'behind'
+        return (f'command stamped {abs(offset):.3f} s {where} '
+                f"{'the step' if self.lockstep else 'now'} ({seconds(now_ns):.3f} s): dropped")
 
     def advance(self) -> None:
         self.sim.advance(self.period_ns)

@@ -70,11 +70,9 @@ def exact_sum(values, count, partials):
 
 
 @kernel
-def limit_at(stations, offsets, positions, speeds, stop_window_m, position):
+def limit_at(leg, offsets, positions, speeds, position):
     """``RunSupervision.sampled_curve`` on one curve's tables packed by
-    ``RunSupervision.packed_curve``: the leg (``leg_at``), then its ``SampledLimit``."""
-    passed = np.searchsorted(stations, position + stop_window_m, side='right') - 1
-    leg = min(max(passed, 0), offsets.size - 2)
+    ``RunSupervision.packed_curve``: the leg's ``SampledLimit``."""
     first, end = offsets[leg], offsets[leg + 1]
     i = np.searchsorted(positions[first:end], position, side='right')
     if i == 0:
@@ -90,13 +88,15 @@ def limit_at(stations, offsets, positions, speeds, stop_window_m, position):
 def actuator_targets(out, commanded, speed, intervention, max_force_n, max_power_w,
                      emergency_brake_n):
     """``TrainSimulation.targets`` with the watchdog quiet (every period has a command): each
-    unit's share of the traction characteristic and of the emergency brake."""
+    unit's share of the traction characteristic and of the emergency brake; under an
+    intervention traction is cut (the kernels stop at its first period, where the emergency
+    brake has not built up yet)."""
     count = commanded.size
     share = 1.0 / count
     lowest = -emergency_brake_n * share
     if intervention:
         for i in range(count):
-            out[i] = lowest
+            out[i] = 0.0
         return
     v = abs(speed)
     highest = (max_force_n if v <= 0.0 else min(max_force_n, max_power_w / v)) * share
@@ -107,16 +107,21 @@ def actuator_targets(out, commanded, speed, intervention, max_force_n, max_power
 
 @kernel
 def supervise(atp, position, speed, intervention):
-    """``TrainSimulation._supervise``: (intervention after this period, 1 if one began)."""
-    stations, stop_window_m, ebi_offsets, ebi_positions, ebi_speeds, permitted_offsets, \
-        permitted_positions, permitted_speeds = atp
-    if not intervention and speed > limit_at(stations, ebi_offsets, ebi_positions, ebi_speeds,
-                                             stop_window_m, position):
+    """``TrainSimulation._supervise`` from a period without an intervention (the kernels stop
+    at the first period of one): (intervention after this period, 1 if one began)."""
+    leg, _low, _high, _standstill, ebi_offsets, ebi_positions, ebi_speeds, _po, _pp, _ps = atp
+    if not intervention and speed > limit_at(leg, ebi_offsets, ebi_positions, ebi_speeds,
+                                             position):
         return True, 1
-    if intervention and speed <= limit_at(stations, permitted_offsets, permitted_positions,
-                                          permitted_speeds, stop_window_m, position):
-        return False, 0
     return intervention, 0
+
+
+@kernel
+def at_stop(atp, position, speed):
+    """``RunSupervision.at_stop`` for the leg: the kernels stop there (the dwell is counted
+    period by period)."""
+    _leg, low, high, standstill = atp[0], atp[1], atp[2], atp[3]
+    return abs(speed) <= standstill and low <= position <= high
 
 
 # The kernels below share one signature: the state (updated in place), the time, the commands
@@ -158,6 +163,9 @@ def run_point_mass_periods(state, stamp_ns, period_ns, commands, traction, atp, 
                                                       stamp_ns / 1_000_000_000)
         out_forces[k, 0] = force
         out_intervention[k] = intervention
+        if intervention or at_stop(atp, position, speed):
+            state[0], state[1] = position, speed
+            return k + 1, intervention, began
     state[0], state[1] = position, speed
     return commands.shape[0], intervention, began
 
@@ -203,6 +211,8 @@ def run_multi_car_periods(state, stamp_ns, period_ns, commands, traction, atp, i
             actuator = int(cars[CAR_ACTUATOR, q])
             out_forces[k, q] = forces[actuator] if actuator >= 0 else 0.0
         out_intervention[k] = intervention
+        if intervention or at_stop(atp, state[0], state[n]):
+            return k + 1, intervention, began
     return commands.shape[0], intervention, began
 
 

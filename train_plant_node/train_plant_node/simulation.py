@@ -27,12 +27,49 @@ from ato_common.braking_curves import RunSupervision
 from ato_common.plant_setup import ActuatorFailure, PlantSetup, QuantitySensor, SensorSetup
 from ato_common.scenario import Scenario
 from ato_common.types import NS_PER_S, TrainState, nanoseconds
+from ato_common.units import STANDARD_GRAVITY
 from train_plant_node.models import PlantModel, make_model
 from train_plant_node.surroundings import Surroundings, surroundings_at
 
 
 class CommandRejected(ValueError):
     """A command that must not reach the actuators; the message says why."""
+
+
+class FailureRejected(ValueError):
+    """A failure no drive could physically produce; the message names the field and bound."""
+
+
+# The highest wheel-rail adhesion coefficient of dry rail: no drive, however it fails, pushes
+# or brakes the train harder than the train's whole weight times it (the wheels slip).
+PEAK_ADHESION = 0.4
+
+
+def failure_force_bound(train) -> float:
+    """The largest force a failed drive can physically exert on the train, N: the train's
+    weight (its mass, ``mass_kg``) times ``PEAK_ADHESION`` of dry rail."""
+    return PEAK_ADHESION * train.mass_kg * STANDARD_GRAVITY
+
+
+def check_failure(failure: ActuatorFailure, train) -> None:
+    """Refuse a failure whose force no drive can exert: beyond ``failure_force_bound`` (the
+    whole train's adhesion). A drive's rated share of the traction characteristic is lower, but
+    the papers' failures exceed it (Mao et al. 2017: 2e5 (1 + sin) N on one of four 75 kN
+    motors), so a fault up to adhesion is accepted as the scenario gives it."""
+    fields = []
+    if failure.kind in ('stuck', 'stuck_signal'):
+        fields.append(('force_n', abs(failure.force_n)))
+    if failure.kind == 'stuck_signal':
+        fields.append(('force_n + amplitude_n', abs(failure.force_n) + abs(failure.amplitude_n)))
+    bound = failure_force_bound(train)
+    for name, reach in fields:
+        if not math.isfinite(reach):
+            raise FailureRejected(f'{failure.actuator} {failure.kind}: {name} must be finite')
+        if reach > bound:
+            raise FailureRejected(
+                f'{failure.actuator} {failure.kind}: |{name}| = {reach:g} N exceeds what a drive '
+                f'can physically exert on this train ({bound:g} N: weight times the peak '
+                f'adhesion {PEAK_ADHESION:g} of dry rail)')
 
 
 @dataclass(frozen=True)
@@ -103,7 +140,22 @@ class TrainSimulation:
       intervention curve EBI (the static limits plus dV_ebi, and the braking curves to the
       run's targets) an emergency brake intervention that the ATO cannot override until the
       train is back at or under the permitted speed.
-    A failed actuator keeps delivering its failure force whatever the safety functions ask.
+    - the emergency brake (of the ATP, and of the watchdog after ``emergency_periods``) is a
+      brake system of its own: it cuts every drive's traction (each drive, healthy or failed,
+      delivers at most zero) and applies the train's ``max_emergency_brake_force_n``, shared
+      equally over the actuated units, building up linearly from the demand over the
+      supervision's emergency brake build-up time T_be; no drive failure cancels it. The
+      watchdog's service brake also cuts traction, and the healthy drives brake;
+    - an ATP intervention in target-speed monitoring (the stop's curve or its release speed,
+      not the ceiling, is the EBI) holds until standstill, and beyond the EOA (a trip) until the
+      authority moves on; a ceiling intervention ends once the train is at or under the
+      permitted speed;
+    - the leg of the run under supervision moves on only once the train has stood still at the
+      leg's stop (``RunSupervision.at_stop``) and the stop's dwell has passed since, the train
+      staying within the stop's zone.
+    A failed actuator keeps delivering its failure force whatever the ATO commands; a failure
+    force beyond what a drive can physically exert (``failure_force_bound``) is refused
+    (``FailureRejected``).
     """
 
     def __init__(self, scenario: Scenario, model_name: str = 'point_mass',
@@ -124,11 +176,20 @@ class TrainSimulation:
         self._drive = [0.0] * n          # what each healthy drive delivers (after lag, limits)
         self.applied = (0.0,) * n        # what acts on the train (failures included)
         self.failures: list[ActuatorFailure] = list(self.setup.failures)
+        for failure in self.failures:
+            check_failure(failure, scenario.train)
         self.rejected_commands = 0
         self.safety = safety
         self.missed_periods = 0
         self.atp_intervention = False
         self.atp_interventions = 0
+        self._hold_to_standstill = False  # the intervention is target-speed monitoring's
+        self.leg = 0                     # the run's leg under supervision
+        self._standing_since_s = None    # since when the train stands at the leg's stop
+        self.brake_since_s = None        # since when the emergency brake is demanded
+        self._build_up_s = scenario.supervision.emergency_brake_build_up_s
+        self._eb_share = scenario.train.traction.max_emergency_brake_force_n / \
+            len(self.model.actuator_names)
         self._events = self._schedule()
         self._env_key = None
         self._env: Surroundings | None = None
@@ -215,6 +276,8 @@ class TrainSimulation:
         the actuators in ``repaired`` become healthy now."""
         now = self.time_s
         for failure in failures:
+            check_failure(failure, self.scenario.train)
+        for failure in failures:
             self.failures = [f if f.actuator != failure.actuator or f.end_s <= failure.start_s
                              else replace(f, end_s=failure.start_s)
                              for f in self.failures if not (f.actuator == failure.actuator
@@ -243,7 +306,27 @@ class TrainSimulation:
 
     def permitted_speed(self) -> float:
         """The ATP's permitted speed at the lead car (static limits and braking curves), m/s."""
-        return self.supervision.sampled_curve('permitted', self.lead_position())
+        return self.supervision.sampled_curve('permitted', self.lead_position(), self.leg)
+
+    @property
+    def atp_holds_to_standstill(self) -> bool:
+        """The ATP's intervention is target-speed monitoring's: it holds until standstill."""
+        return self.atp_intervention and self._hold_to_standstill
+
+    @property
+    def emergency_brake(self) -> bool:
+        """The emergency brake is demanded (ATP intervention or the watchdog's last stage)."""
+        return self.atp_intervention or self.missed_periods >= self.safety.emergency_periods
+
+    def emergency_brake_share(self, time_s: float) -> float:
+        """The emergency brake's force per actuated unit at a time, N (<= 0): linear from the
+        demand to full over T_be, zero without a demand."""
+        since = self.brake_since_s
+        if since is None:
+            return 0.0
+        if self._build_up_s <= 0.0 or time_s - since >= self._build_up_s:
+            return -self._eb_share
+        return -self._eb_share * max(time_s - since, 0.0) / self._build_up_s
 
     def targets(self) -> list[float]:
         """What each healthy drive is asked for: the command within the unit's share of the
@@ -254,7 +337,7 @@ class TrainSimulation:
         share = 1.0 / n
         missed, safety = self.missed_periods, self.safety  # ``watchdog``, inlined: per step
         if self.atp_intervention or missed >= safety.emergency_periods:
-            return [-traction.max_emergency_brake_force_n * share] * n
+            return [0.0] * n  # traction cut; the emergency brake is added in ``_failed``
         if missed >= safety.watchdog_periods:
             return [-traction.max_service_brake_force_n * share] * n
         highest = traction.max_traction_at(self.lead_speed()) * share
@@ -262,14 +345,24 @@ class TrainSimulation:
         return [lowest if f < lowest else highest if f > highest else f for f in self.commanded]
 
     def _failed(self, drive: Sequence[float], time_s: float, h: float = 0.0) -> tuple:
+        """What acts on the train: the drives (failures included), traction cut under a
+        brake demand, plus the emergency brake (sampled at the middle of the step)."""
         failures = self.active_failures(time_s) if self.failures else {}
-        if not failures:
+        if failures:
+            names = self.model.actuator_names
+            drive = [failures[name].force(time_s + 0.5 * h, f) if name in failures else f
+                     for name, f in zip(names, drive)]
+        if self.brake_since_s is None and self.missed_periods < self.safety.watchdog_periods:
             return tuple(drive)
-        names = self.model.actuator_names
-        return tuple(failures[name].force(time_s + 0.5 * h, f) if name in failures else f
-                     for name, f in zip(names, drive))
+        brake = self.emergency_brake_share(time_s + 0.5 * h)
+        return tuple((f if f < 0.0 else 0.0) + brake for f in drive)
 
     def _update_applied(self) -> None:
+        if self.emergency_brake:
+            if self.brake_since_s is None:
+                self.brake_since_s = self.time_s
+        else:
+            self.brake_since_s = None
         if self._instant_actuators:
             self._drive = self.targets()
         self.applied = self._failed(self._drive, self.time_s)
@@ -298,16 +391,46 @@ class TrainSimulation:
 
     def intervention_speed(self) -> float:
         """The ATP's emergency brake intervention speed (EBI) at the lead car, m/s."""
-        return self.supervision.sampled_curve('ebi', self.lead_position())
+        return self.supervision.sampled_curve('ebi', self.lead_position(), self.leg)
 
     def _supervise(self) -> None:
         speed = self.lead_speed()
         if not self.atp_intervention and speed > self.intervention_speed():
             self.atp_intervention = True
             self.atp_interventions += 1
-        elif self.atp_intervention and speed <= self.permitted_speed():
+            self._hold_to_standstill = self.supervision.target_monitoring(
+                self.leg, self.lead_position())
+        elif self.atp_intervention and (self._standstill_release() if self._hold_to_standstill
+                                        else speed <= self.permitted_speed()):
             self.atp_intervention = False
+        self._track_stop()
         self._update_applied()
+
+    def _standstill_release(self) -> bool:
+        """Target-speed monitoring's brake ends at standstill short of the EOA; beyond it (a
+        trip) it holds until the authority moves on."""
+        return self.lead_speed() <= self.supervision.STANDSTILL_MPS and \
+            self.lead_position() < self.supervision.legs[self.leg].end_of_authority_m
+
+    def _track_stop(self) -> None:
+        """The leg moves on once the stop's dwell has passed since the train first stood still
+        at its stop (``RunSupervision.at_stop``), as long as it has stayed within the stop's
+        zone: a train that starts off with the reference a moment before its own dwell is over
+        (it arrived later than the reference) is still at the station."""
+        run = self.supervision
+        low, high = run.stop_zone(self.leg)
+        position = self.lead_position()
+        if not low <= position <= high:
+            self._standing_since_s = None
+            return
+        now = self.time_s
+        if self._standing_since_s is None:
+            if abs(self.lead_speed()) > run.STANDSTILL_MPS:
+                return
+            self._standing_since_s = now
+        if now - self._standing_since_s >= run.dwell_s(self.leg) - EVENT_TOLERANCE_S:
+            self.leg += 1
+            self._standing_since_s = None
 
     def advance(self, duration_ns: int) -> None:
         """Integrate one period: steps of at most the model's ``max_substep_s``, split at every
@@ -321,7 +444,7 @@ class TrainSimulation:
             # without its bookkeeping. Instant actuators deliver what ``_update_applied`` last
             # computed, if for this state (and no failure samples its force within the step).
             forces = (self.applied if self._applied_for is self.state and not self.failures
-                      else self._actuate(t, duration))
+                      and self.brake_since_s is None else self._actuate(t, duration))
             env = self._env if self._constant_env and self._env is not None \
                 else self.surroundings(t)
             self.state = self.model.step(self.state, duration, forces, t, env)
@@ -418,6 +541,8 @@ class TrainSimulation:
             return 0
         if self.failures and self.active_failures():
             return 0
+        if self.emergency_brake or self.missed_periods or self._standing_since_s is not None:
+            return 0  # braking, or dwelling at a stop: period by period
         i = bisect_right(self._events, self.time_s + EVENT_TOLERANCE_S)
         if i == len(self._events):
             return wanted
@@ -433,17 +558,17 @@ class TrainSimulation:
                       interventions: np.ndarray) -> int:
         """Up to ``len(forces)`` periods in ``periods``' kernel; returns how many ran."""
         from train_plant_node.periods import period_kernel
+        run = self.supervision
         if self._packed_supervision is None:
-            run = self.supervision
-            self._packed_supervision = (np.array(run.stations_m, dtype=float),
-                                        run.STOP_WINDOW_M, *run.packed_curve('ebi'),
-                                        *run.packed_curve('permitted'))
+            self._packed_supervision = (*run.packed_curve('ebi'), *run.packed_curve('permitted'))
+        low, high = run.stop_zone(self.leg)
+        atp = (np.int64(self.leg), low, high, run.STANDSTILL_MPS, *self._packed_supervision)
         traction = self.scenario.train.traction
         state = np.array(self.state, dtype=float)
         done, intervention, began = period_kernel(self.model)(
             state, self.stamp_ns, period_ns, forces,
             (traction.max_traction_force_n, traction.max_traction_power_w,
-             traction.max_emergency_brake_force_n), self._packed_supervision,
+             traction.max_emergency_brake_force_n), atp,
             self.atp_intervention, *out, interventions,
             self.model.kernel_inputs(self.surroundings(), period_ns / NS_PER_S))
         if done:
@@ -451,6 +576,9 @@ class TrainSimulation:
             self.stamp_ns += period_ns * done
             self.atp_intervention = bool(intervention)
             self.atp_interventions += began
+            if began:
+                self._hold_to_standstill = run.target_monitoring(self.leg, self.lead_position())
+            self._track_stop()
             self._hold(tuple(forces[done - 1].tolist()))
         return done
 

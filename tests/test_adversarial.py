@@ -1,0 +1,287 @@
+"""Issue 13 over rclpy: a test node plays a faulty ATO against the real plant (and, in real
+time, the real profile and controller). For each fault, on ``short_line`` and on the train,
+modes and failures of ``mao_2017_modes`` (on a 20 km line with a stop, so that the run reaches
+a stop in a test's time): the train never exceeds the emergency brake deceleration curve (EBD)
+nor the ceiling's EBI by more than the intervention margin (one control period at the train's
+highest acceleration), never passes the stop's supervised location, and stops; the diagnostics
+name the cause."""
+
+import math
+import signal
+
+import pytest
+from plant_driver import ControllerStandIn, plant_status
+
+from ato_bringup.stack import Stack, StackConfig
+from ato_common.braking_curves import DV_EBI_KMH, RunSupervision, ceiling_margin
+from ato_common.scenario import load_scenario
+
+PERIOD_NS = 100_000_000
+
+MAO_SHORT = """name: mao_2017_short
+description: the mao_2017_modes train, modes and failures on a 20 km line with a stop
+source: suite (test)
+train: {preset: mao_2017_500t}
+line:
+  name: mao_short
+  length_m: 30000
+  stations:
+    - {name: Start, position_m: 0}
+    - {name: Stop, position_m: 20000, dwell_s: 30}
+    - {name: End, position_m: 29000}
+  speed_limits:
+    - {start_m: 0, speed_kmh: 205}
+planning: {max_acceleration_mps2: 0.14, service_deceleration_mps2: 0.093, max_jerk_mps3: 0.05}
+run: {controller_rate_hz: 10}
+plant:
+  modes:
+    - {name: open air, from_s: 0, davis_kn_kmh: {a: 2.25, b: -1.9e-3, c: 3.2e-4}}
+    - {name: tunnel, from_s: 400, davis_kn_kmh: {a: 2.25, b: -1.9e-3, c: 9.2e-4}}
+  failures:
+    - {actuator: motor_1, kind: stuck, start_s: 600, end_s: 1000, force_n: 200000}
+"""
+
+
+@pytest.fixture(params=['short_line', 'mao'])
+def line(request, tmp_path):
+    if request.param == 'short_line':
+        return 'short_line'
+    path = tmp_path / 'mao_short.yaml'
+    path.write_text(MAO_SHORT)
+    return str(path)
+
+
+def drive_until_standing(stack, controller, scenario, efforts, first_step=0,
+                         max_steps=12000):
+    """Answer every step with ``efforts`` until the train has moved and stands still again
+    (or beyond the first stop's SvL). Returns the last step answered."""
+    run = RunSupervision.for_scenario(scenario)
+    names = scenario.train.actuator_names
+    svl = run.legs[0].supervised_location_m
+    monitor = stack.monitor
+    moved = False
+    for k in range(first_step, first_step + max_steps):
+        controller.answer(k * PERIOD_NS, efforts, names)
+        latest = monitor.samples[(k + 1) * PERIOD_NS]
+        x, v = latest.positions[0], latest.speeds[0]
+        moved = moved or v > 1.0
+        if (moved and v <= run.STANDSTILL_MPS) or x > svl:
+            return k
+    pytest.fail('the train never stopped')
+
+
+def check_supervised(stack, scenario):
+    """The bounds of the module's docstring, over every state the monitor received."""
+    run = RunSupervision.for_scenario(scenario)
+    leg = run.legs[0]
+    traction = scenario.train.traction
+    margin = traction.max_traction_force_n / scenario.train.mass_kg * PERIOD_NS / 1e9
+    states = stack.monitor.complete_samples()
+    for _, s in states:
+        x, v = s.positions[0], s.speeds[0]
+        assert math.isfinite(x) and math.isfinite(v)
+        assert v <= leg.curve('ebd', x) + 1e-6, (x, v)
+        mrsp = leg.mrsp(x)
+        assert v <= mrsp + ceiling_margin(mrsp, DV_EBI_KMH) + margin, (x, v)
+    final = states[-1][1]
+    assert final.positions[0] < leg.supervised_location_m
+    assert final.speeds[0] <= run.STANDSTILL_MPS
+    return final
+
+
+def start_plant(stack, scenario_path, **params):
+    stack.start_process('plant', {'scenario': scenario_path, 'wait_for_subscribers': 1,
+                                  **params})
+
+
+def test_full_traction_every_step_is_stopped_before_the_svl(line, tmp_path, domain_id):
+    scenario = load_scenario(line)
+    config = StackConfig(scenario=line, domain_id=domain_id, log_dir=tmp_path / 'logs')
+    with Stack(config) as stack:
+        controller = ControllerStandIn(stack)
+        start_plant(stack, line)
+        n = len(scenario.train.actuator_names)
+        drive_until_standing(stack, controller, scenario, [1e9] * n)
+        check_supervised(stack, scenario)
+        status = plant_status(stack.monitor)
+        assert any(m.startswith('ATP emergency brake intervention') for _, m, _ in status)
+        assert not stack.exited('plant')
+
+
+def test_a_drive_stuck_at_its_maximum_from_the_start_is_stopped(line, tmp_path, domain_id):
+    scenario = load_scenario(line)
+    names = scenario.train.actuator_names
+    share = scenario.train.traction.max_traction_force_n / len(names)
+    config = StackConfig(scenario=line, domain_id=domain_id, log_dir=tmp_path / 'logs')
+    with Stack(config) as stack:
+        controller = ControllerStandIn(stack)
+        # (quoted: a ``-p name:=value`` is YAML, and the parameter is a text)
+        start_plant(stack, line, inject_failure=f"'{{actuator: {names[0]}, kind: stuck, "
+                                                f"force_n: {share}, start_s: 0}}'")
+        drive_until_standing(stack, controller, scenario, [share] * len(names))
+        check_supervised(stack, scenario)
+        status = plant_status(stack.monitor)
+        assert any(m.startswith('ATP emergency brake intervention') for _, m, _ in status)
+        assert any(names[0] in v.get('active_failures', '') for _, _, v in status)
+
+
+def test_a_drive_stuck_at_an_absurd_force_is_refused(line, tmp_path, domain_id):
+    scenario = load_scenario(line)
+    names = scenario.train.actuator_names
+    config = StackConfig(scenario=line, domain_id=domain_id, log_dir=tmp_path / 'logs')
+    with Stack(config) as stack:
+        controller = ControllerStandIn(stack)
+        start_plant(stack, line)
+        controller.answer(0, [0.0] * len(names), names)
+        result = stack.set_parameters('train_plant_node', {
+            'inject_failure': f'{{actuator: {names[0]}, kind: stuck, force_n: 1.0e+12}}'})[0]
+        assert not result.successful
+        assert 'force_n' in result.reason and 'exceeds' in result.reason
+        controller.answer(PERIOD_NS, [0.0] * len(names), names)
+        assert not stack.exited('plant')
+        assert stack.stop(['plant'])['plant'] == 0
+        # at start-up, the same failure stops the plant with a clear message
+        start = stack.start_process('plant', {'scenario': line, 'inject_failure':
+                                              f"'{{actuator: {names[0]}, kind: stuck, "
+                                              "force_n: 1.0e+12}'"})
+        assert start.wait(timeout=60) != 0
+        assert 'exceeds what a drive can physically exert' in stack.log_tail('plant')
+
+
+def test_wrongly_stamped_commands_are_counted_and_the_watchdog_stops_the_train(
+        line, tmp_path, domain_id):
+    scenario = load_scenario(line)
+    names = scenario.train.actuator_names
+    config = StackConfig(scenario=line, domain_id=domain_id, log_dir=tmp_path / 'logs')
+    with Stack(config) as stack:
+        controller = ControllerStandIn(stack)
+        start_plant(stack, line)
+        monitor = stack.monitor
+        n = len(names)
+        for k in range(300):  # get moving with valid commands
+            controller.answer(k * PERIOD_NS, [1e9] * n, names)
+        # then every command stamped 1000 s ahead of its step
+        from sensor_msgs.msg import JointState
+
+        from ato_common.ros import to_time
+        moving = monitor.samples[300 * PERIOD_NS].speeds[0]
+        assert moving > 1.0
+        for k in range(300, 1500):
+            stamp = k * PERIOD_NS
+            assert stack.spin_until(lambda s=stamp: monitor.last_stamp_ns == s, 60.0)
+            msg = JointState(name=list(names), effort=[1e9] * n)
+            msg.header.stamp = to_time(stamp + 1000 * 10**9)
+            controller.publisher.publish(msg)
+            assert stack.spin_until(lambda s=stamp: monitor.last_stamp_ns > s, 30.0)
+            if monitor.samples[stamp + PERIOD_NS].speeds[0] <= 0.01:
+                break
+        final = check_supervised(stack, scenario)
+        assert final.speeds[0] == 0.0
+        stack.spin_for(1.5)
+        status = plant_status(monitor)
+        assert int(status[-1][2]['wrong_stamp_commands']) >= 10
+        assert any('command stamped 1000.000 s ahead of the step' in m for _, m, _ in status)
+
+
+def test_the_profile_killed_in_real_time_stops_the_train(line, tmp_path, domain_id):
+    scenario = load_scenario(line)
+    config = StackConfig(scenario=line, domain_id=domain_id, log_dir=tmp_path / 'logs',
+                         lockstep=False)
+    with Stack(config) as stack:
+        stack.start()
+        monitor = stack.monitor
+        assert stack.spin_until(
+            lambda: monitor.complete_samples() and
+            monitor.complete_samples()[-1][1].speeds[0] > 3.0, 120.0)
+        stack.processes['profile'].send_signal(signal.SIGKILL)
+        stack.processes['profile'].wait()
+
+        def stale_reference():
+            return any(name == 'ato_controller_node: law' and 'reference stale' in message
+                       for _, name, _, message in monitor.diagnostics)
+        assert stack.spin_until(stale_reference, 30.0)
+        assert stack.spin_until(lambda: monitor.complete_samples()[-1][1].speeds[0] == 0.0,
+                                120.0)
+        commands = monitor.counts['command']
+        stack.spin_for(1.0)
+        assert monitor.counts['command'] == commands  # nothing commanded on a dead profile
+        assert any('watchdog: emergency brake' in m for _, m, _ in plant_status(monitor))
+        check_supervised(stack, scenario)
+        codes = stack.stop(['controller', 'plant'])
+    assert codes == {'controller': 0, 'plant': 0}
+
+
+@pytest.mark.parametrize('offset_s', [1000.0, 'zero'])
+def test_wrongly_stamped_commands_in_real_time_are_dropped_and_counted(offset_s, tmp_path,
+                                                                        domain_id):
+    """A test node plays the ATO of a real-time plant: full traction, stamped 1000 s ahead of
+    now or at 0. Nothing is applied, every one is counted, the watchdog brakes."""
+    from sensor_msgs.msg import JointState
+
+    from ato_common.ros import to_time
+
+    config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path / 'logs',
+                         lockstep=False)
+    with Stack(config) as stack:
+        controller = ControllerStandIn(stack)
+        stack.start_process('plant', {'scenario': 'short_line', 'lockstep': False,
+                                      'wait_for_subscribers': 1})
+        monitor = stack.monitor
+        assert stack.spin_until(lambda: monitor.counts['state'] > 0, 120.0)
+        for _ in range(30):  # 3 s of commands at 10 Hz
+            now = stack.node.get_clock().now().nanoseconds
+            stamp = now + int(offset_s * 1e9) if offset_s != 'zero' else 0
+            msg = JointState(name=['traction'], effort=[300e3])
+            msg.header.stamp = to_time(stamp)
+            controller.publisher.publish(msg)
+            stack.spin_for(0.1)
+        stack.spin_for(1.5)
+        states = monitor.complete_samples()
+        assert all(s.speeds[0] == 0.0 for _, s in states)  # never applied: the train stands
+        status = plant_status(monitor)
+        assert int(status[-1][2]['wrong_stamp_commands']) >= 20
+        assert any('command watchdog: emergency brake' in m and 'command stamped' in m
+                   for _, m, _ in status)
+
+
+def test_the_reference_resumes_after_a_safety_brake_and_a_plant_restart(tmp_path, domain_id):
+    """Real time: the controller killed, the watchdog stops the train; the reference, which ran
+    on, is planned again from where the train stands. Then the plant killed and started again:
+    the reference starts again from the start of the run, not from the dead plant's origin."""
+    from profile_node.planner import RESUME_GAP_M
+
+    config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path / 'logs',
+                         lockstep=False)
+    with Stack(config) as stack:
+        stack.start()
+        monitor = stack.monitor
+
+        def state():
+            samples = monitor.complete_samples()
+            return samples[-1][1] if samples else None
+
+        def reference():  # real time: the profile stamps with its own clock
+            stamps = [k for k, s in monitor.samples.items() if math.isfinite(s.ref_position)]
+            return monitor.samples[max(stamps)].ref_position if stamps else math.nan
+
+        assert stack.spin_until(lambda: state() is not None and state().speeds[0] > 5.0, 120.0)
+        stack.processes['controller'].send_signal(signal.SIGKILL)
+        stack.processes['controller'].wait()
+        assert stack.spin_until(lambda: state().speeds[0] == 0.0, 60.0)
+        assert stack.spin_until(lambda: 'planned again' in stack.log_tail('profile', 5), 60.0)
+        stack.spin_for(0.5)
+        assert reference() - state().positions[0] <= RESUME_GAP_M
+        stack.start_process('controller', stack.node_params()['controller'])
+        assert stack.spin_until(lambda: state().speeds[0] > 1.0, 120.0)
+        # the plant dies and starts again
+        stack.processes['plant'].send_signal(signal.SIGKILL)
+        stack.processes['plant'].wait()
+        stack.spin_for(1.0)
+        count = monitor.counts['state']
+        stack.start_process('plant', stack.node_params()['plant'])
+        assert stack.spin_until(lambda: monitor.counts['state'] > count + 20, 120.0)
+        assert stack.spin_until(
+            lambda: 'the plant started again' in stack.log_tail('profile', 20), 30.0)
+        stack.spin_for(0.5)
+        assert state().positions[0] < 50.0
+        assert reference() - state().positions[0] < RESUME_GAP_M
