@@ -402,7 +402,7 @@ def run_metrics(run, dt: float) -> dict:
         'watchdog_events': float(run.watchdog_events),
         # what went wrong, with the first occurrence of each kind (ato_bringup.run_events)
         'events': run_events(run.scenario, m, stations_of(run.plan), run.times_s,
-                             run.positions, run.speeds).brief(),
+                             run.positions, atp_times_s=run.atp_times_s).brief(),
     }
 
 

@@ -54,6 +54,8 @@ class OfflineRun:
     watchdog_events: int = 0
     #: per control instant: the host limited the law's wanted force (StepResult.saturated)
     saturated: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    #: the end of each control period in which the plant's ATP began an intervention, s
+    atp_times_s: tuple[float, ...] = ()
 
     def metrics(self) -> RunMetrics:
         return compute_metrics(self.times_s, self.positions, self.speeds, self.forces,
@@ -95,6 +97,7 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
     laws, estimates, faults = [], [], []
     watchdog_events = 0
     saturated = []
+    atp_times = []
     for _ in range(steps + 1):
         t = sim.time_s
         while pending and pending[0][0] <= t:
@@ -117,8 +120,12 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
         faults.append(result.fault)
         saturated.append(result.saturated)
         watchdog_events += sim.watchdog != NORMAL
+        interventions = sim.atp_interventions
         sim.advance(period_ns)
+        if sim.atp_interventions > interventions:
+            atp_times.append(sim.time_s)
     data = np.array(rows)
     return OfflineRun(scenario, plan, *data.T, np.array(car_positions), np.array(car_speeds),
                       np.array(actuator_forces), np.array(step_times), laws, estimates, faults,
-                      sim.atp_interventions, watchdog_events, np.array(saturated, dtype=bool))
+                      sim.atp_interventions, watchdog_events, np.array(saturated, dtype=bool),
+                      tuple(atp_times))

@@ -12,7 +12,6 @@ import sys
 from dataclasses import dataclass, field
 from typing import Iterable, Sequence
 
-from ato_common import units
 from ato_common.metrics import RunMetrics
 from ato_common.scenario import Scenario
 
@@ -120,25 +119,13 @@ def safety_events(diagnostics: Iterable[tuple[int, str, dict, str]]) -> RunEvent
     return RunEvents(tuple(events), {ATP: max(atp_onsets, counter), WATCHDOG: watchdog_onsets})
 
 
-def replayed_atp_events(scenario: Scenario, times_s: Sequence[float],
-                        positions: Sequence[float], speeds: Sequence[float]) -> RunEvents:
-    """The plant's ATP rule (train_plant_node.simulation.TrainSimulation._supervise) replayed on
-    the lead car's truth at every control instant after the first: an intervention begins above
-    the EBI curve and ends at or under the permitted speed. The plant applies the rule at the
-    same instants to the same values, so the replay is exact."""
-    from ato_common.braking_curves import RunSupervision
-    supervision = RunSupervision.for_scenario(scenario)
-    events, active = [], False
-    for t, x, v in zip(times_s[1:], positions[1:], speeds[1:]):
-        if not active and v > supervision.sampled_curve('ebi', x):
-            active = True
-            events.append(RunEvent(ATP, float(t), (
-                f'ATP emergency brake intervention: {units.mps_to_kmh(v):.1f} km/h, intervention '
-                f'speed {units.mps_to_kmh(supervision.sampled_curve("ebi", x)):.1f} km/h at '
-                f'{x:.0f} m')))
-        elif active and v <= supervision.sampled_curve('permitted', x):
-            active = False
-    return RunEvents(tuple(events), {ATP: len(events)})
+def plant_atp_events(atp_times_s: Sequence[float]) -> RunEvents:
+    """The ATP interventions an offline run's plant made (``OfflineRun.atp_times_s``: the end of
+    each control period in which one began)."""
+    events = tuple(RunEvent(ATP, float(t), 'ATP emergency brake intervention of the plant, in '
+                                           f'the control period ending at {t:.1f} s')
+                   for t in atp_times_s)
+    return RunEvents(events, {ATP: len(events)})
 
 
 def stop_events(metrics: RunMetrics, stations: Sequence[tuple[str, float, float]],
@@ -216,16 +203,15 @@ def _bound(value: float | None) -> str:
 
 
 def run_events(scenario: Scenario, metrics: RunMetrics, stations, times_s, positions,
-               speeds=None, diagnostics=None,
+               diagnostics=None, atp_times_s: Sequence[float] = (),
                tolerance_m: float = PLATFORM_TOLERANCE_M) -> RunEvents:
-    """Every kind: from the plant's diagnostics when given (a run through the graph), else the
-    ATP rule replayed on the truth (an offline run, which has no watchdog: its controller
-    answers every period)."""
+    """Every kind: the safety events from the plant's diagnostics when given (a run through the
+    graph), else from the interventions the offline run's plant made (``atp_times_s``; an
+    offline run has no watchdog: its controller answers every period)."""
     if diagnostics is not None:
         safety = safety_events(diagnostics)
     else:
-        safety = merge(replayed_atp_events(scenario, times_s, positions, speeds),
-                       RunEvents((), {WATCHDOG: 0}))
+        safety = merge(plant_atp_events(atp_times_s), RunEvents((), {WATCHDOG: 0}))
     return merge(safety, journey_events(scenario, times_s, positions, tolerance_m),
                  stop_events(metrics, stations, tolerance_m), tolerance_m=tolerance_m)
 

@@ -79,7 +79,7 @@ def main(argv=None) -> int:
         return 1
     metrics = run.metrics()
     events = run_events(scenario, metrics, stations_of(run.plan), run.times_s, run.positions,
-                        run.speeds, tolerance_m=args.stop_tolerance)
+                        atp_times_s=run.atp_times_s, tolerance_m=args.stop_tolerance)
     print(format_summary(metrics, scenario.name, ', '.join(sorted(set(run.laws))), wall))
     print(events.format())
     if args.json is not None:

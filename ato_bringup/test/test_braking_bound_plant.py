@@ -4,6 +4,7 @@ braking capability of the train, and no train from any sample file or preset dec
 its documented bound (adhesion mu g on the static mass, the file's ETCS decelerations)."""
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -88,11 +89,16 @@ def test_no_train_brakes_beyond_its_bound_in_the_plant_planner_and_supervision(t
     for v in (0.0, 20.0, 40.0, 60.0):
         assert s.supervision.emergency_deceleration(v) <= bound * (1 + 1e-12)
         assert s.supervision.service_deceleration(v) <= bound * (1 + 1e-12)
-    # the plant: an ATP emergency intervention
-    sim = at_speed(s)
-    sim.atp_intervention = True
-    sim.apply_command((0.0,) * len(sim.actuator_names))
-    assert sum(sim.applied) == pytest.approx(-traction.max_emergency_brake_force_n, rel=1e-12)
+    # the plant's emergency brake (the ATP's and the watchdog's: one brake), once built up (T_be)
+    sim = at_speed(s, SafetySettings(watchdog_periods=1, emergency_periods=1))
+    build_up = math.ceil(s.supervision.emergency_brake_build_up_s * 1e9 / PERIOD_NS)
+    for _ in range(build_up):
+        sim.command_missed()
+        sim.advance(PERIOD_NS)
+    sim.command_missed()
+    assert sim.emergency_brake
+    assert sim.emergency_brake_share(sim.time_s) * len(sim.actuator_names) == pytest.approx(
+        -traction.max_emergency_brake_force_n, rel=1e-12)
     deceleration, lost = braking_deceleration_measured(sim)
     assert 0.0 < deceleration <= bound * (1 + 1e-9), (deceleration, bound)
     assert units.mps_to_kmh(lost) < 7.6  # issue 14: 7.6 km/h off in 0.2 s
@@ -136,5 +142,5 @@ def test_every_sample_track_with_every_sample_train_brakes_within_the_bound(trai
         excess = (deceleration - resistance - line_force)[moving]
         assert excess.max() <= bound + 1e-6, (track.name, excess.max(), bound)
         events = run_events(s, run.metrics(), stations_of(run.plan), run.times_s,
-                            run.positions, run.speeds)
+                            run.positions, atp_times_s=run.atp_times_s)
         assert events.clean, (track.name, events.format())

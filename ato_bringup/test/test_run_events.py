@@ -8,8 +8,10 @@ import math
 from pathlib import Path
 
 import pytest
+import yaml
 
 from ato_bringup import run_offline, run_scenario
+from ato_bringup.offline import run_offline as run_offline_loop
 from ato_bringup.run_events import (
     ATP,
     EVENTS_EXIT_CODE,
@@ -19,13 +21,12 @@ from ato_bringup.run_events import (
     WATCHDOG,
     exit_code,
     journey_events,
-    replayed_atp_events,
+    plant_atp_events,
     safety_events,
     stop_events,
 )
 from ato_common.metrics import RunMetrics
 from ato_common.scenario import parse_scenario
-from train_plant_node.simulation import TrainSimulation
 
 SAMPLES = Path(__file__).resolve().parents[2] / 'tests' / 'data' / 'ttobench'
 PERIOD_NS = 100_000_000
@@ -113,27 +114,18 @@ def test_journey_windows_missed_by_the_run_are_events(tmp_path):
     assert journey_events(early, times, positions).count(JOURNEY) == 1
 
 
-def test_the_replayed_atp_rule_counts_what_the_plant_counted():
-    line = {'name': 'slow', 'length_m': 20000,
-            'stations': [{'name': 'A', 'position_m': 0}, {'name': 'B', 'position_m': 19000}],
-            'speed_limits': [{'start_m': 0, 'speed_kmh': 30}, {'start_m': 3000, 'speed_kmh': 80},
-                             {'start_m': 5000, 'speed_kmh': 30}]}
-    scenario = parse_scenario({'name': 's', 'train': {'preset': 'crh3_luo_xu'}, 'line': line,
-                               'planning': {'max_acceleration_mps2': 0.3,
-                                            'service_deceleration_mps2': 0.5,
-                                            'max_jerk_mps3': 0.3}})
-    sim = TrainSimulation(scenario)
-    times, positions, speeds = [], [], []
-    for _ in range(3000):  # full traction: the ATP intervenes again and again
-        truth = sim.truth()
-        times.append(sim.time_s)
-        positions.append(truth.positions[0])
-        speeds.append(truth.speeds[0])
-        sim.apply_command((300e3,))
-        sim.advance(PERIOD_NS)
-    replayed = replayed_atp_events(scenario, times, positions, speeds)
-    assert sim.atp_interventions >= 2
-    assert replayed.count(ATP) == sim.atp_interventions
+def test_the_offline_events_are_the_interventions_the_plant_made():
+    """A drive stuck at full traction from 60 to 200 s: the plant's ATP brakes, releases at the
+    permitted speed and brakes again; the offline run's events are exactly those."""
+    run = run_offline_loop(parse_scenario(yaml.safe_load(STUCK), 'stuck.yaml'), 'pid',
+                           end_time_s=300.0)
+    assert run.atp_interventions >= 2
+    assert len(run.atp_times_s) == run.atp_interventions
+    assert list(run.atp_times_s) == sorted(run.atp_times_s)
+    assert 60.0 < run.atp_times_s[0] < 200.0
+    events = plant_atp_events(run.atp_times_s)
+    assert events.count(ATP) == run.atp_interventions
+    assert events.first(ATP).time_s == run.atp_times_s[0]
 
 
 def test_the_exit_code_is_zero_only_when_clean_or_asked():
@@ -162,11 +154,12 @@ def test_the_offline_command_runs_a_file_and_reports_what_went_wrong(tmp_path, c
     assert run_offline.main(['--scenario', str(tmp_path / 'stuck.yaml'), '--json',
                              str(out)]) == EVENTS_EXIT_CODE
     printed = capsys.readouterr().out
-    assert 'ATP interventions     1, first at ' in printed
-    assert 'stop errors           1, first at ' in printed and 'B: stopped +' in printed
+    assert 'ATP interventions     ' in printed and ', first at ' in printed
+    # the ATP's stop supervision holds the train at B, so the stop itself may be in tolerance
+    assert '\nstop errors           ' in printed
     assert 'NOT CLEAN' in printed
     saved = json.loads(out.read_text())
-    assert saved['clean'] is False and saved['counts'][ATP] == 1 and saved['counts'][STOP] == 1
+    assert saved['clean'] is False and saved['counts'][ATP] >= 1 and STOP in saved['counts']
     assert run_offline.main(['--scenario', str(tmp_path / 'stuck.yaml'),
                              '--no-fail-on-events']) == 0
 
