@@ -432,8 +432,33 @@ def plot(data: RunData, folder: Path) -> list[Path]:
     return written
 
 
-def summary_rows(metrics: RunMetrics, laws: list[str]) -> list[tuple[str, str]]:
-    """The summary table: quantity (with its unit) and value."""
+#: the platform-stop tolerance (m) beyond which a stopping error is an event to report (the
+#: runner's, ato_bringup.run_events.PLATFORM_TOLERANCE_M, is the same figure)
+STOP_TOLERANCE_M = 0.5
+
+
+def event_rows(metrics: RunMetrics, events) -> list[tuple[str, str]]:
+    """What went wrong, each kind with its count and its first occurrence: ATP interventions
+    and command-watchdog brakes (from the plant's diagnostics) and stopping errors beyond the
+    platform tolerance. (Missed journey windows need the scenario's journey, which a recording
+    does not carry: `run_scenario` and `run_offline` report them.)"""
+    def row(label, times, detail=''):
+        if not times:
+            return (label, '0')
+        return (label, f'{len(times)}, first at {min(times):.1f} s{detail}')
+    atp = [t for t, kind, _ in events if kind == 'ATP intervention']
+    dog = [t for t, kind, _ in events
+           if kind.startswith('watchdog: ') and kind != 'watchdog: normal']
+    beyond = {name: e for name, e in metrics.stop_errors_m.items()
+              if abs(e) > STOP_TOLERANCE_M}
+    stops = [('stop errors beyond 0.5 m', '0')] if not beyond else [
+        ('stop errors beyond 0.5 m', f'{len(beyond)}: '
+         + ', '.join(f'{name} {e:+.2f} m' for name, e in beyond.items()))]
+    return [row('ATP interventions', atp), row('watchdog brakes', dog), *stops]
+
+
+def summary_rows(metrics: RunMetrics, laws: list[str], events=()) -> list[tuple[str, str]]:
+    """The summary table: quantity (with its unit) and value, then what went wrong."""
     rows = [('controller', ', '.join(laws)),
             ('speed error, RMS (km/h)', f'{metrics.rms_speed_error_kmh:.4f}'),
             ('speed error, max (km/h)', f'{metrics.max_speed_error_kmh:.4f}'),
@@ -444,7 +469,7 @@ def summary_rows(metrics: RunMetrics, laws: list[str]) -> list[tuple[str, str]]:
     rows += [('traction energy (kWh)', f'{metrics.traction_energy_kwh:.2f}'),
              ('simulated time (s)', f'{metrics.simulated_time_s:.1f}'),
              ('samples', str(metrics.samples))]
-    return rows
+    return rows + event_rows(metrics, events)
 
 
 def write_html(path: Path, title: str, metrics: RunMetrics, data: RunData,
@@ -454,7 +479,7 @@ def write_html(path: Path, title: str, metrics: RunMetrics, data: RunData,
     import base64
     from html import escape
     rows = ''.join(f'<tr><th scope="row">{escape(k)}</th><td>{escape(v)}</td></tr>'
-                   for k, v in summary_rows(metrics, data.laws))
+                   for k, v in summary_rows(metrics, data.laws, data.events))
     events = ''.join(f'<tr><td>{t:.2f}</td><td>{escape(kind)}</td><td>{escape(message)}</td>'
                      '</tr>' for t, kind, message in data.events)
     figures = ''.join(
@@ -491,6 +516,8 @@ def main(argv=None) -> int:
         return 2
     metrics = run_metrics(data)
     print(format_summary(metrics, str(options.bag), ', '.join(data.laws)))
+    for label, value in event_rows(metrics, data.events):
+        print(f'{label:22s}{value}')
     for t, kind, message in data.events:
         print(f'event at {t:9.2f} s: {kind}: {message}')
     folder = options.output or Path(options.bag) / 'report'

@@ -201,3 +201,23 @@ def test_a_multi_car_run_is_plotted_per_car(tmp_path):
     assert data.car_forces[0].tolist() == [1000.0, -500.0]
     assert main([str(tmp_path / 'run'), '--output', str(tmp_path / 'plots')]) == 0
     assert (tmp_path / 'plots' / 'cars.png').exists()
+
+
+def test_the_summary_counts_what_went_wrong_with_the_first_occurrence():
+    from dataclasses import replace
+
+    from ato_common.metrics import RunMetrics
+    from recorder.report import event_rows, summary_rows
+    metrics = RunMetrics(rms_speed_error_kmh=0.1, max_speed_error_kmh=0.2,
+                         rms_position_error_m=0.1, max_position_error_m=0.2,
+                         stop_errors_m={'A': 0.01, 'B': -0.8}, traction_energy_kwh=1.0,
+                         simulated_time_s=100.0, samples=1000)
+    events = [(12.5, 'ATP intervention', 'overspeed'), (20.0, 'ATP released', ''),
+              (31.0, 'ATP intervention', 'overspeed'), (40.0, 'watchdog: service_brake', ''),
+              (41.0, 'watchdog: normal', '')]
+    rows = dict(event_rows(metrics, events))
+    assert rows['ATP interventions'] == '2, first at 12.5 s'
+    assert rows['watchdog brakes'] == '1, first at 40.0 s'
+    assert rows['stop errors beyond 0.5 m'] == '1: B -0.80 m'
+    clean = dict(summary_rows(replace(metrics, stop_errors_m={'A': 0.01}), ['pid']))
+    assert clean['ATP interventions'] == '0' and clean['stop errors beyond 0.5 m'] == '0'
