@@ -135,15 +135,9 @@ def test_the_exit_code_is_zero_only_when_clean_or_asked():
     assert exit_code(dirty) == EVENTS_EXIT_CODE and exit_code(dirty, False) == 0
 
 
-STUCK = '''name: stuck
-train: {preset: crh3_luo_xu}
-line: {name: stuck, length_m: 20000, stations: [{name: A, position_m: 0},
-       {name: B, position_m: 12000}], speed_limits: [{start_m: 0, speed_kmh: 160}]}
-planning: {max_acceleration_mps2: 0.4, service_deceleration_mps2: 0.5, max_jerk_mps3: 0.3}
-plant:
-  failures:
-    - {actuator: traction, kind: stuck, start_s: 60, end_s: 200, force_n: 3.0e+5}
-'''
+#: a traction drive stuck at 300 kN from 60 to 200 s (tests/data/synthetic)
+STUCK = (Path(__file__).resolve().parents[2] / 'tests' / 'data' / 'synthetic'
+         / 'stuck_traction.yaml').read_text()
 
 CLEAN = STUCK.split('plant:')[0]
 
