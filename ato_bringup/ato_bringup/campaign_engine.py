@@ -547,9 +547,9 @@ def run_campaign(campaign: Campaign, out: Path = DEFAULT_OUT, *, serial: bool = 
     """Run what is missing of ``campaign`` and return every row (a DataFrame)."""
     from tqdm import tqdm
     folder = rows_folder(out, campaign.name)
-    todo = missing(campaign, folder)
+    pending_tasks = missing(campaign, folder)
     total = len(campaign.tasks())
-    bar = tqdm(total=total, initial=total - len(todo), unit='run', disable=not progress,
+    bar = tqdm(total=total, initial=total - len(pending_tasks), unit='run', disable=not progress,
                desc=campaign.name, dynamic_ncols=True, file=sys.stderr)
 
     def finished(row: dict) -> None:
@@ -559,7 +559,7 @@ def run_campaign(campaign: Campaign, out: Path = DEFAULT_OUT, *, serial: bool = 
 
     function = run_task if runner is None else partial(run_task, runner=runner)
     try:
-        execute(todo, function, finished, _lost_row, serial=serial, scheduler=scheduler,
+        execute(pending_tasks, function, finished, _lost_row, serial=serial, scheduler=scheduler,
                 workers=workers, client=client)
     finally:
         bar.close()
