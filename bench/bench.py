@@ -183,7 +183,7 @@ def campaign_throughput(scenario: str) -> list[str]:
     for workers in (1, 2):
         with tempfile.TemporaryDirectory() as out, \
                 LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                             dashboard_address=None, silence_logs=40) as cluster, \
+                             dashboard_address=':0', silence_logs=40) as cluster, \
                 Client(cluster) as client:
             client.run(_warm_up)
             before, cpu = client.run(_cpu_s), _cpu_s()

@@ -484,9 +484,11 @@ def open_client(scheduler: str | None = None, workers: int | None = None,
         return Client(address, timeout='30s'), None
     settings = {} if allowed_failures is None else {
         'distributed.scheduler.allowed-failures': allowed_failures}
+    # The scheduler serves HTTP even without a dashboard; ':0' takes a free port rather than
+    # 8787, which another cluster on the machine may hold.
     with dask.config.set(settings):
         cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
-                               processes=True, dashboard_address=None, silence_logs=40)
+                               processes=True, dashboard_address=':0', silence_logs=40)
     return Client(cluster), cluster
 
 

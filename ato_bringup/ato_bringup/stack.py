@@ -154,6 +154,7 @@ class Stack:
         rclpy.init(context=self.context, domain_id=config.domain_id)
         self.node = Node('ato_run_monitor', context=self.context)
         self.monitor = Monitor(self.node)
+        self.parameter_clients: dict[str, object] = {}
         self.executor = make_executor(self.context)
         self.executor.add_node(self.node)
 
@@ -217,21 +218,33 @@ class Stack:
         return self.processes[name].poll() is not None
 
     def set_parameters(self, node_name: str, values: dict[str, object],
-                       timeout_s: float = 10.0):
-        """ros2 param set, over the node's SetParameters service; returns the results."""
-        client = self.node.create_client(SetParameters, f'/{node_name}/set_parameters')
-        try:
-            if not self.spin_until(lambda: client.service_is_ready(), timeout_s):
-                raise TimeoutError(f'/{node_name}/set_parameters is not available')
-            request = SetParameters.Request()
-            request.parameters = [Parameter(name=k, value=parameter_value(v))
-                                  for k, v in values.items()]
+                       timeout_s: float = 10.0, attempt_s: float = 2.0):
+        """ros2 param set, over the node's SetParameters service; returns the results.
+
+        A service client is ready once its request reaches the server, which can be before the
+        server's reply reaches the client (with Fast DDS, a reply sent before the client's reply
+        reader is matched is lost for good). So the client is kept for the stack's life, and a
+        request unanswered after ``attempt_s`` is sent again: setting the same values twice is
+        the same as setting them once.
+        """
+        client = self.parameter_clients.get(node_name)
+        if client is None:
+            client = self.node.create_client(SetParameters, f'/{node_name}/set_parameters')
+            self.parameter_clients[node_name] = client
+        deadline = time.monotonic() + timeout_s
+        if not self.spin_until(lambda: client.service_is_ready(), timeout_s):
+            raise TimeoutError(f'/{node_name}/set_parameters is not available')
+        request = SetParameters.Request()
+        request.parameters = [Parameter(name=k, value=parameter_value(v))
+                              for k, v in values.items()]
+        while True:
             future = client.call_async(request)
-            if not self.spin_until(future.done, timeout_s):
-                raise TimeoutError(f'/{node_name}/set_parameters did not answer')
-            return future.result().results
-        finally:
-            self.node.destroy_client(client)
+            left = deadline - time.monotonic()
+            if self.spin_until(future.done, max(0.0, min(attempt_s, left))):
+                return future.result().results
+            client.remove_pending_request(future)
+            if time.monotonic() >= deadline:
+                raise TimeoutError(f'/{node_name}/set_parameters did not answer in {timeout_s} s')
 
     # Fast DDS 2.14 (Jazzy's rmw_fastrtps_cpp) can deadlock while deleting a participant if, at
     # that moment, discovery reports a remote endpoint going away: seen with gdb, the main thread

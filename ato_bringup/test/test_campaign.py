@@ -219,7 +219,7 @@ def test_a_hanging_run_times_out_a_failing_one_is_reported_and_the_campaign_comp
     if engine == 'dask':
         from distributed import Client, LocalCluster
         client = Client(LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
-                                     dashboard_address=None))
+                                     dashboard_address=':0'))
     try:
         rows = run_campaign(campaign, tmp_path / 'out', serial=engine == 'serial',
                             client=client, runner=hang_or_fail, progress=False)
