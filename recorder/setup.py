@@ -20,8 +20,8 @@ setup(
     description=(
         "Records the ATO emulator's topics to MCAP in the rosbag2 conventions (raw CDR, full "
         'ros2msg schemas, offered QoS, metadata.yaml), replays recordings with their timing and '
-        "/clock, recovers killed recordings, and reports a run's metrics and plots from its "
-        'recording.'
+        "/clock, recovers killed recordings, reports a run's metrics and plots from its "
+        'recording, and serves the running graph to Foxglove live.'
     ),
     license='Apache-2.0',
     tests_require=['pytest', 'PyYAML', 'mcap', 'mcap-ros2-support', 'rosbags'],
@@ -32,6 +32,7 @@ setup(
             'info = recorder.cli:info_main',
             'recover = recorder.cli:recover_main',
             'report = recorder.report:main',
+            'live = recorder.live:main',
         ],
     },
 )

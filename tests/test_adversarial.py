@@ -3,7 +3,7 @@ time, the real profile and controller). For each fault, on ``short_line`` and on
 modes and failures of ``mao_2017_modes`` (on a 20 km line with a stop, so that the run reaches
 a stop in a test's time): the train never exceeds the emergency brake deceleration curve (EBD)
 nor the ceiling's EBI by more than the intervention margin (one control period at the train's
-highest acceleration), never passes the stop's supervised location, and stops; the diagnostics
+highest acceleration), never passes the stop's end of authority, and stops; the diagnostics
 name the cause."""
 
 import math
@@ -54,10 +54,10 @@ def line(request, tmp_path):
 def drive_until_standing(stack, controller, scenario, efforts, first_step=0,
                          max_steps=12000):
     """Answer every step with ``efforts`` until the train has moved and stands still again
-    (or beyond the first stop's SvL). Returns the last step answered."""
+    (or beyond the first stop's EOA). Returns the last step answered."""
     run = RunSupervision.for_scenario(scenario)
     names = scenario.train.actuator_names
-    svl = run.legs[0].supervised_location_m
+    eoa = run.legs[0].end_of_authority_m
     monitor = stack.monitor
     moved = False
     for k in range(first_step, first_step + max_steps):
@@ -65,7 +65,7 @@ def drive_until_standing(stack, controller, scenario, efforts, first_step=0,
         latest = monitor.samples[(k + 1) * PERIOD_NS]
         x, v = latest.positions[0], latest.speeds[0]
         moved = moved or v > 1.0
-        if (moved and v <= run.STANDSTILL_MPS) or x > svl:
+        if (moved and v <= run.STANDSTILL_MPS) or x > eoa:
             return k
     pytest.fail('the train never stopped')
 
@@ -80,11 +80,11 @@ def check_supervised(stack, scenario):
     for _, s in states:
         x, v = s.positions[0], s.speeds[0]
         assert math.isfinite(x) and math.isfinite(v)
-        assert v <= leg.curve('ebd', x) + 1e-6, (x, v)
+        assert v <= leg.curve('ebd', x) + margin, (x, v)
         mrsp = leg.mrsp(x)
         assert v <= mrsp + ceiling_margin(mrsp, DV_EBI_KMH) + margin, (x, v)
     final = states[-1][1]
-    assert final.positions[0] < leg.supervised_location_m
+    assert final.positions[0] < leg.end_of_authority_m
     assert final.speeds[0] <= run.STANDSTILL_MPS
     return final
 
@@ -94,7 +94,7 @@ def start_plant(stack, scenario_path, **params):
                                   **params})
 
 
-def test_full_traction_every_step_is_stopped_before_the_svl(line, tmp_path, domain_id):
+def test_full_traction_every_step_is_stopped_before_the_end_of_authority(line, tmp_path, domain_id):
     scenario = load_scenario(line)
     config = StackConfig(scenario=line, domain_id=domain_id, log_dir=tmp_path / 'logs')
     with Stack(config) as stack:

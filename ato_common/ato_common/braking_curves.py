@@ -7,9 +7,10 @@ What is modelled (all in SI, positions along the line, the front of the train):
   effect only once the whole train (its length) has left the lower one (SUBSET-026 3.13.7).
 * Targets: the start of every lower MRSP section (a speed target), and the end of the movement
   authority (EOA, a zero-speed target) with its supervised location SvL = EOA + overlap.
-* EBD, the emergency brake deceleration curve: from the SvL (speed 0) or from a speed target at
-  V_target + dV_ebi(V_target) (3.13.8.3), integrated backwards with the train's emergency
-  deceleration plus the gradient (g sin(theta), uphill helps, downhill hinders; 3.13.4).
+* EBD, the emergency brake deceleration curve: from the EOA (speed 0; see the deviation below) or
+  from a speed target at V_target + dV_ebi(V_target) (3.13.8.3), integrated backwards with the
+  train's emergency deceleration plus the gradient (g sin(theta), uphill helps, downhill
+  hinders; 3.13.4).
 * SBD, the service brake deceleration curve: from the EOA or the speed target, with the service
   deceleration plus the gradient (3.13.8.4).
 * Curves derived from them by shifting each point earlier by the distance run at that speed
@@ -26,11 +27,18 @@ or Kv/Kr/Kt (the deceleration tables are taken as already corrected), no speed m
 accuracy, no guidance curve. ``permitted_speed(position)`` is the minimum of the MRSP and the
 permitted curves of every target: the speed an ATO target must stay below.
 
+Deviation from SUBSET-026, on the safe side: the EBD of a zero-speed target ends at the EOA,
+not at the SvL (3.13.8.3). An emergency brake triggered on the EBI therefore stops the train
+before the EOA, whatever the ATO commands and whatever fault a traction drive has; the overlap
+from the EOA to the SvL is never used by the supervision and is left as the margin for a brake
+that performs below its nominal data (a wet rail, a late build-up).
+
 Release speed (3.13.9.4, simplified): towards a zero-speed target (a stop, the end of the
 authority) the EBI, SBI, warning, permitted and indication curves are floored at the release
-speed V_release up to the EOA, and are zero beyond it (passing the EOA trips the emergency
-brake). V_release is the EBI's speed at the EOA (from it, an emergency brake triggered at the
-EOA stops the train before the SvL, the overlap's end), at most ``release_speed_max_mps``.
+speed V_release up to the stopping point, follow their curve from there to the EOA and are zero
+beyond it (passing the EOA trips the emergency brake). V_release is the EBI's speed at the
+stopping point (from it, an emergency brake triggered at the stopping point stops the train
+before the EOA), at most ``release_speed_max_mps``.
 
 Stops (:class:`RunSupervision`): the authority of a leg ends at its stop; it moves on to the
 next leg only once the train has stood still at the stop (from ``STOP_WINDOW_M`` before the
@@ -187,6 +195,10 @@ class DecelerationCurve:
         speeds = np.where(positions > self.end_m, beyond, speeds)
         return np.where(positions < self.start_m, math.inf, speeds)
 
+    def edges(self) -> tuple[float, ...]:
+        """The positions where the curve has a kink or a step."""
+        return self.start_m, self.end_m, self.target_m
+
     def shifted(self, time_s: float) -> 'DecelerationCurve':
         """The curve a train must be on ``time_s`` earlier (SUBSET-026 3.13.9.3: each point moves
         back by the distance run at its speed in that time)."""
@@ -223,27 +235,39 @@ def deceleration_curve(line: Line, location_m: float, speed_mps: float, top_spee
 
 class ReleasedCurve:
     """A supervision curve to a zero-speed target with its release speed: the curve, floored at
-    ``release_mps`` before the EOA, and zero from the EOA on (see the module's docstring). It
-    has a kink where the curve meets the release speed (``end_m``) and a step at the EOA
-    (``target_m``), both sampled by :meth:`SpeedSupervision.sampled`."""
+    ``release_mps`` before the stopping point, the curve itself from there to the EOA, and zero
+    from the EOA on (see the module's docstring). It has a kink where the curve meets the release
+    speed (``end_m``), a step at the stopping point (``release_end_m``) for the curves below the
+    EBI there, and a step at the EOA (``target_m``), all sampled by
+    :meth:`SpeedSupervision.sampled`."""
 
-    def __init__(self, curve: DecelerationCurve, release_mps: float, eoa_m: float):
+    def __init__(self, curve: DecelerationCurve, release_mps: float, release_end_m: float,
+                 eoa_m: float):
         self.curve = curve
         self.release_mps = release_mps
         self.positions = curve.positions
         self.start_m = curve.start_m
         # Where the curve comes down to the release speed (its speeds fall with position).
         self.end_m = float(np.interp(release_mps, curve.speeds[::-1], curve.positions[::-1]))
+        self.release_end_m = release_end_m
         self.target_m = eoa_m
+
+    def edges(self) -> tuple[float, ...]:
+        """The positions where the curve has a kink or a step."""
+        return self.start_m, self.end_m, self.release_end_m, self.target_m
 
     def __call__(self, position: float) -> float:
         if position >= self.target_m:
             return 0.0
+        if position >= self.release_end_m:
+            return self.curve(position)
         return max(self.curve(position), self.release_mps)
 
     def at(self, positions: np.ndarray) -> np.ndarray:
-        return np.where(positions >= self.target_m, 0.0,
-                        np.maximum(self.curve.at(positions), self.release_mps))
+        speeds = self.curve.at(positions)
+        floored = np.where(positions >= self.release_end_m, speeds,
+                           np.maximum(speeds, self.release_mps))
+        return np.where(positions >= self.target_m, 0.0, floored)
 
 
 class SpeedSupervision:
@@ -283,7 +307,7 @@ class SpeedSupervision:
                             target.speed_mps + ceiling_margin(target.speed_mps, DV_EBI_KMH))
                 sbd_from = (target.location_m, target.speed_mps)
             else:
-                ebd_from = (self.supervised_location_m, 0.0)
+                ebd_from = (eoa, 0.0)  # not the SvL: the deviation of the module's docstring
                 sbd_from = (eoa, 0.0)
             ebd = deceleration_curve(line, *ebd_from, top, settings.emergency_deceleration)
             sbd = deceleration_curve(line, *sbd_from, top, settings.service_deceleration)
@@ -294,9 +318,11 @@ class SpeedSupervision:
                       'warning': sbi.shifted(settings.warning_s), 'permitted': permitted,
                       'indication': permitted.shifted(settings.indication_s)}
             if target.kind != 'speed_decrease':
-                self.release_speed_mps = max(min(settings.release_speed_max_mps, ebi(eoa)), 0.0)
+                self.release_speed_mps = max(min(settings.release_speed_max_mps,
+                                                 ebi(stopping_point_m)), 0.0)
                 for name in ('ebi', 'sbi', 'warning', 'permitted', 'indication'):
-                    curves[name] = ReleasedCurve(curves[name], self.release_speed_mps, eoa)
+                    curves[name] = ReleasedCurve(curves[name], self.release_speed_mps,
+                                                 stopping_point_m, eoa)
             for name in CURVE_NAMES:
                 self.curves[name].append(curves[name])
 
@@ -334,7 +360,7 @@ class SpeedSupervision:
             boundaries += [self.start_m, self.supervised_location_m]
             samples = []
             for curve in self.curves[name]:
-                boundaries += [curve.start_m, curve.end_m, curve.target_m]
+                boundaries += curve.edges()
                 samples.append(curve.positions)
             edges = np.array(boundaries)
             xs = np.unique(np.concatenate(samples + [edges, edges - SAMPLE_EDGE_M]))

@@ -111,19 +111,25 @@ def test_the_curves_are_ordered_as_etcs_orders_them(supervision):
 def test_the_permitted_curve_is_the_service_curve_shifted_by_the_reaction_times(supervision):
     # at speed v the permitted curve is where the SBD is, v (T_bs + T_driver) further on
     eoa = supervision.end_of_authority_m
+    stop = supervision.stopping_point_m
     shift = SETTINGS.service_brake_build_up_s + SETTINGS.driver_reaction_s
     for v in (5.0, 20.0, 40.0):
         d_sbd = v * v / (2 * 0.9)
         x = eoa - d_sbd - v * shift
-        expected = max(v, supervision.release_speed_mps)  # floored at the release speed
+        # floored at the release speed up to the stopping point
+        expected = max(v, supervision.release_speed_mps) if x < stop else v
         assert supervision.permitted_speed(x) == pytest.approx(expected, rel=1e-3)
-    # the release speed: the EBI's at the EOA; zero from the EOA on
+    # the release speed: the EBI's at the stopping point; the curve from there to the EOA,
+    # zero from the EOA on
     assert 5.0 < supervision.release_speed_mps <= SETTINGS.release_speed_max_mps
-    assert supervision.curve('ebi', eoa - 1e-3) == pytest.approx(supervision.release_speed_mps,
-                                                                 rel=1e-4)
+    assert supervision.curve('ebi', stop - 1e-3) == pytest.approx(supervision.release_speed_mps,
+                                                                  rel=1e-4)
+    assert 0.0 < supervision.curve('ebi', stop + 25.0) < supervision.release_speed_mps
     assert supervision.curve('ebi', eoa) == 0.0
-    # the EBD ends at the SvL; the speed target's EBD at V_target + dV_ebi
-    assert supervision.curve('ebd', supervision.supervised_location_m - 1e-6) < 0.1
+    # the EBD ends at the EOA (not the SvL: the overlap is left as a margin); the speed
+    # target's EBD at V_target + dV_ebi
+    assert supervision.curve('ebd', eoa - 1e-6) < 0.1
+    assert supervision.curve('ebd', eoa - 1.0) < math.sqrt(2 * 1.2 * 1.0) + 1e-6
     v_ebd = units.kmh_to_mps(160.0) + ceiling_margin(units.kmh_to_mps(160.0), DV_EBI_KMH)
     assert supervision.curves['ebd'][0](20000.0) == pytest.approx(v_ebd, rel=1e-9)
 

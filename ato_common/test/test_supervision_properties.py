@@ -2,7 +2,8 @@
 that obeys the braking curves stays within its authority. Obeying the EBI means the worst the
 supervision allows: at any position, at the EBI's speed, the train keeps that speed for the
 traction cut-off and emergency brake build-up times, then brakes with its emergency
-deceleration (plus the gradient). It must stand still before the stop's SvL, and pass every
+deceleration (plus the gradient). It must stand still before the stop's EOA (the overlap to the
+SvL is left unused, see ``ato_common.braking_curves``), and pass every
 lower limit's start at most at that limit plus dV_ebi. The braking is integrated exactly
 (constant deceleration within each gradient section)."""
 
@@ -78,11 +79,11 @@ def test_a_train_that_obeys_the_ebi_stops_within_its_authority(case, data):
     delay = supervision.traction_cut_off_s + supervision.emergency_brake_build_up_s
     leg = data.draw(st.integers(0, len(run.legs) - 1))
     authority = run.legs[leg]
-    svl = authority.supervised_location_m
+    eoa = authority.end_of_authority_m
     lower = [(t.location_m, t.speed_mps + ceiling_margin(t.speed_mps, DV_EBI_KMH))
              for t in authority.targets if t.kind == 'speed_decrease']
     for _ in range(20):
-        x = data.draw(st.floats(authority.start_m, svl))
+        x = data.draw(st.floats(authority.start_m, eoa))
         for speed in (run.curve('ebi', x, leg), run.sampled_curve('ebi', x, leg)):
             assert speed <= authority.max_speed_mps + ceiling_margin(authority.max_speed_mps,
                                                                      DV_EBI_KMH) + 1e-9
@@ -92,19 +93,20 @@ def test_a_train_that_obeys_the_ebi_stops_within_its_authority(case, data):
                 if x <= location <= reached:
                     assert speed <= limit * (1 + 1e-9) + 1e-6
             stop = brake_to_stop(line, deceleration, reached, speed, lower)
-            assert stop <= svl + 1e-6 * max(1.0, svl), (x, speed, stop, svl)
+            assert stop <= eoa + 1e-6 * max(1.0, eoa), (x, speed, stop, eoa)
 
 
 @settings(max_examples=100, deadline=None)
 @given(runs())
 def test_the_sampled_limits_never_exceed_the_exact_ones(case):
     """The tables the plant supervises with are on the safe side between their samples, the
-    release speed's kink and the EOA's step included."""
+    release speed's kink, its step at the stopping point and the EOA's step included."""
     _line, _supervision, run = case
     for leg, authority in enumerate(run.legs):
         xs = [authority.start_m + k * (authority.supervised_location_m - authority.start_m)
               / 997.0 for k in range(998)]
-        xs += [authority.end_of_authority_m - 1e-4, authority.end_of_authority_m]
+        xs += [authority.end_of_authority_m - 1e-4, authority.end_of_authority_m,
+               authority.stopping_point_m - 1e-4, authority.stopping_point_m]
         for name in ('ebi', 'permitted'):
             for x in xs:
                 assert run.sampled_curve(name, x, leg) <= run.curve(name, x, leg) + 1e-9

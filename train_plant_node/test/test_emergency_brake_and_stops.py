@@ -27,29 +27,43 @@ def run_full_traction(sim, seconds, command=None):
     return rows
 
 
-def stopped_before_supervised_location(rows, run, stop_leg):
-    """The train stood still short of the stop's SvL before its leg moved on."""
-    svl = run.legs[stop_leg].supervised_location_m
+def stopped_before_end_of_authority(rows, run, stop_leg):
+    """The train never passed the stop's EOA before its leg moved on."""
+    eoa = run.legs[stop_leg].end_of_authority_m
     on_leg = [r for r in rows if r[2] == stop_leg]
-    assert max(x for x, *_ in on_leg) < svl
+    assert max(x for x, *_ in on_leg) < eoa
     return on_leg
+
+
+def intervention_margin(scenario):
+    """One control period at the train's highest acceleration: how far above a curve the
+    speed can be when the ATP sees it (it intervenes after the period)."""
+    return scenario.train.traction.max_traction_force_n / scenario.train.mass_kg * \
+        PERIOD_NS / 1e9
 
 
 def test_full_traction_on_short_line_stops_at_midway_and_dwells():
     """Defect 1: with full traction every period the train used to pass Midway at 28 km/h and
-    its SvL at 49 km/h. Now it stops before the SvL and the authority moves on only after the
-    30 s dwell."""
-    sim = TrainSimulation(load_scenario('short_line'))
+    its SvL at 49 km/h. Now it never passes the stop's EOA, and the authority moves on only
+    once the 30 s dwell has passed since the train first stood still at the stop. (After each
+    emergency brake to standstill, the faulty ATO's traction moves the train on again, in ever
+    shorter hops towards the EOA, each stopped by the brake.)"""
+    s = load_scenario('short_line')
+    sim = TrainSimulation(s)
     run = sim.supervision
     rows = run_full_traction(sim, 900)
-    on_leg = stopped_before_supervised_location(rows, run, 0)
+    on_leg = stopped_before_end_of_authority(rows, run, 0)
     assert sim.atp_interventions >= 1
     moved_on = len(on_leg)  # the first period of leg 1
     assert moved_on < len(rows), 'the authority never moved on'
-    standing = [r for r in on_leg if r[1] <= run.STANDSTILL_MPS]
-    assert len(standing) >= 300  # 30 s dwell at 10 Hz
-    # and the speed never exceeded the emergency brake deceleration curve
-    assert all(v <= ebd + 1e-6 for _x, v, _leg, ebd in rows)
+    low, high = run.stop_zone(0)
+    first_at_stop = next(k for k, (x, v, *_) in enumerate(on_leg)
+                         if v <= run.STANDSTILL_MPS and low <= x <= high)
+    assert (moved_on - first_at_stop) / 10 >= run.dwell_s(0) - 0.1
+    # and the speed never exceeded the emergency brake deceleration curve by more than the
+    # intervention margin
+    margin = intervention_margin(s)
+    assert all(v <= ebd + margin for _x, v, _leg, ebd in rows)
 
 
 def test_stuck_drive_cannot_cancel_the_emergency_brake():
@@ -60,11 +74,11 @@ def test_stuck_drive_cannot_cancel_the_emergency_brake():
     sim.inject_failures([ActuatorFailure('traction', 'stuck', 0.0,
                                          force_n=s.train.traction.max_traction_force_n)])
     rows = run_full_traction(sim, 600)
-    on_leg = stopped_before_supervised_location(rows, sim.supervision, 0)
-    # the EBI ceiling plus the intervention margin: one control period at the highest acceleration
-    margin = s.train.traction.max_traction_force_n / s.train.mass_kg * PERIOD_NS / 1e9
+    on_leg = stopped_before_end_of_authority(rows, sim.supervision, 0)
+    # the EBI ceiling plus the intervention margin
+    margin = intervention_margin(s)
     assert max(v for _x, v, *_ in on_leg) <= (250.0 + 15.0) / 3.6 + margin
-    assert all(v <= ebd + 1e-6 for _x, v, _leg, ebd in rows)
+    assert all(v <= ebd + margin for _x, v, _leg, ebd in rows)
     # the published force shows the brake, not the stuck 300 kN, once the brake is applied
     assert sim.applied[0] <= 0.0 or not sim.emergency_brake
 

@@ -1,0 +1,201 @@
+"""live: watch a running stack in Foxglove, over the Foxglove WebSocket protocol.
+
+    ros2 run recorder live                          # every topic, on ws://127.0.0.1:8765
+    ros2 run recorder live --port 8766 /train/state /ato/reference
+    ros2 run recorder live --ros-args -p use_sim_time:=true   # Foxglove's clock = /clock
+
+Open Foxglove (the desktop app or app.foxglove.dev), "Open connection", "Foxglove WebSocket",
+``ws://127.0.0.1:8765``. Every topic of the graph (or those named) is offered as a channel with
+its ROS 2 message definition (``ros2msg`` schema, CDR messages, as in the suite's MCAP
+recordings), so Foxglove decodes and plots them as it does a recording.
+
+Free while nobody watches: the view subscribes to a ROS topic only while a Foxglove client is
+subscribed to its channel (a panel shows it), and forwards the raw CDR bytes without decoding
+them. Each watched per-step topic costs the lockstep loop about one rclpy take per step, so a
+panel on every topic slows a lockstep run (see the benchmark page); watch what you need.
+
+Messages are logged at their own stamp where the suite's conventions give one (as the
+recorder's default ``--log-time stamp``), else at the node's ROS time on receipt; with
+``use_sim_time`` the node also sends its ROS time to Foxglove as the server's time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+
+import foxglove
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.utilities import remove_ros_args
+
+from ato_common.ros import RunNodeHooks, freeze_startup_objects, run_node
+from ato_common.validation import ConfigError
+from recorder.definitions import DefinitionNotFound, full_definition
+from recorder.node import logs_at_stamp
+from recorder.ros_io import message_class, subscription_qos
+from recorder.rosbag2_format import cdr_stamp_ns
+
+DEFAULT_PORT = 8765
+# How often the view looks for new topics and for what Foxglove clients have asked for, s.
+POLL_PERIOD_S = 0.2
+
+
+def ros2msg_schema(type_name: str) -> foxglove.Schema:
+    """A Foxglove schema for a ROS 2 message type: its full ``.msg`` definition (with every
+    nested type, as rosbag2's MCAP storage writes it), encoding ``ros2msg``."""
+    return foxglove.Schema(name=type_name, encoding='ros2msg',
+                           data=full_definition(type_name).encode())
+
+
+class Watched(foxglove.ServerListener):
+    """Which channels Foxglove clients are subscribed to (the server calls this from its own
+    threads; the node reads it from the executor's)."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._clients: dict[int, set[int]] = {}  # channel id -> ids of subscribed clients
+
+    def on_subscribe(self, client, channel) -> None:
+        with self._lock:
+            self._clients.setdefault(channel.id, set()).add(client.id)
+
+    def on_unsubscribe(self, client, channel) -> None:
+        with self._lock:
+            clients = self._clients.get(channel.id, set())
+            clients.discard(client.id)
+            if not clients:
+                self._clients.pop(channel.id, None)
+
+    def channel_ids(self) -> set[int]:
+        with self._lock:
+            return set(self._clients)
+
+
+class LiveViewNode(RunNodeHooks, Node):
+    outputs_closed = False
+
+    def __init__(self, topics: list[str] | None, host: str, port: int,
+                 poll_period_s: float = POLL_PERIOD_S):
+        super().__init__('live_view')
+        self.wanted = set(topics) if topics else None
+        self.watched = Watched()
+        self.channels: dict[str, foxglove.Channel] = {}   # topic -> channel
+        self.types: dict[str, str] = {}
+        self.offered: dict[str, list] = {}
+        self.skipped: set[str] = set()
+        self.subscriptions_by_topic: dict[str, object] = {}
+        self.forwarded = 0
+        self.sim_time = self.get_parameter('use_sim_time').value
+        try:
+            self.server = foxglove.start_server(
+                name='ato live view', host=host, port=port, server_listener=self.watched,
+                capabilities=[foxglove.Capability.Time] if self.sim_time else [])
+        except Exception as error:  # the SDK's errors carry the reason (e.g. the port is taken)
+            raise ConfigError(f'cannot serve Foxglove on {host}:{port}: {error}') from None
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(poll_period_s, self.poll, clock=steady)
+        self.get_logger().info(f'Foxglove WebSocket on ws://{host}:{self.server.port} '
+                               f'({"every topic" if self.wanted is None else sorted(self.wanted)})')
+        freeze_startup_objects()
+        self.poll()
+
+    def poll(self) -> None:
+        """Offer new topics as channels; subscribe to the watched ones, unsubscribe from the
+        others; send the ROS time."""
+        self.discover()
+        watched = self.watched.channel_ids()
+        for topic, channel in self.channels.items():
+            subscribed = topic in self.subscriptions_by_topic
+            if channel.id() in watched and not subscribed:
+                self.subscriptions_by_topic[topic] = self.create_subscription(
+                    message_class(self.types[topic]), topic, self._forward(topic),
+                    subscription_qos(self.offered[topic]), raw=True)
+                self.get_logger().info(f'watched: {topic}')
+            elif channel.id() not in watched and subscribed:
+                self.destroy_subscription(self.subscriptions_by_topic.pop(topic))
+                self.get_logger().info(f'no longer watched: {topic}')
+        if self.sim_time:
+            now = self.get_clock().now().nanoseconds
+            if now > 0:
+                self.server.broadcast_time(now)
+
+    def discover(self) -> None:
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self.channels or topic in self.skipped or (
+                    self.wanted is not None and topic not in self.wanted):
+                continue
+            offered = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
+            if not offered:
+                continue  # subscribers only so far: wait for a publisher to learn its QoS
+            if len(types) != 1:
+                self._skip(topic, f'has several types {types}')
+                continue
+            try:
+                message_class(types[0])
+                schema = ros2msg_schema(types[0])
+            except (LookupError, DefinitionNotFound) as error:
+                self._skip(topic, str(error))
+                continue
+            self.types[topic] = types[0]
+            self.offered[topic] = offered
+            self.channels[topic] = foxglove.Channel(topic, schema=schema,
+                                                    message_encoding='cdr')
+
+    def _skip(self, topic: str, reason: str) -> None:
+        self.skipped.add(topic)
+        self.get_logger().warning(f'{topic}: {reason}; not offered')
+
+    def _forward(self, topic: str):
+        channel, clock = self.channels[topic], self.get_clock()
+        stamped = logs_at_stamp(topic, self.types[topic], 'stamp')
+
+        def on_message(data: bytes) -> None:
+            log_time_ns = cdr_stamp_ns(data) if stamped else None
+            channel.log(data, log_time=log_time_ns if log_time_ns is not None
+                        else clock.now().nanoseconds)
+            self.forwarded += 1
+        return on_message
+
+    def close_outputs(self) -> None:
+        if self.outputs_closed:
+            return
+        self.outputs_closed = True
+        self.server.stop()
+
+    def destroy_node(self) -> None:
+        self.close_outputs()
+        super().destroy_node()
+
+
+def port_number(text: str) -> int:
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a port number') from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f'{port} is not a port number (0..65535; 0: any free)')
+    return port
+
+
+def parse_args(argv: list[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog='live', description=__doc__.split('\n\n')[0])
+    parser.add_argument('topics', nargs='*', help='topics to offer (default: all)')
+    parser.add_argument('--host', default='127.0.0.1',
+                        help='address to serve on (default: this machine only; 0.0.0.0: every '
+                             'interface)')
+    parser.add_argument('--port', type=port_number, default=DEFAULT_PORT,
+                        help=f'WebSocket port (default {DEFAULT_PORT}, as Foxglove expects)')
+    return parser.parse_args(argv)
+
+
+def main(args=None) -> int:
+    argv = remove_ros_args(args if args is not None else sys.argv)[1:]
+    options = parse_args(argv)
+    foxglove.set_log_level('WARNING')
+    return run_node(lambda: LiveViewNode(options.topics, options.host, options.port), args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
