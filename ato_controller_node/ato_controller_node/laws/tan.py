@@ -37,7 +37,7 @@ Laws (one class each, registry names in brackets):
   each weight kept above weight_floor so a model can come back after a change.
 
 Options of the comparison (Section 4.3), all settings:
-- ``initial_alpha_1..4``: alpha(0) (paper: 0.2 each). With ``alpha_gain`` 0 and alpha(0) the
+- ``initial_alpha_1..4``: alpha at t = 0 (paper: 0.2 each). With ``alpha_gain`` 0 and those the
   barycentric coordinates of a parameter vector in the simplex, tan_second_level is law (24)
   with that vector, never updated (the reproduction's "no adaptation" reference).
 - ``adaptive_models`` of methods (3) and (4): the paper says all four methods start their models
@@ -109,8 +109,9 @@ class TanSettings:
 
 def _initial_alpha(k: int):
     return setting(ALPHA_INITIAL, minimum=-10.0, maximum=10.0, units='-',
-                   description=f'alpha_{k}(0), initial convex-combination coefficient of model '
-                               f'{k} (paper: 0.2; alpha_5(0) = 1 - the sum of the four)')
+                   description=f'alpha_{k} at t = 0, initial convex-combination '
+                               f'coefficient of model {k} (paper: 0.2; alpha_5 = 1 - the sum '
+                               'of the four)')
 
 
 def _identification_gain():
@@ -123,8 +124,8 @@ def _identification_gain():
 class SecondLevelSettings(TanSettings):
     alpha_gain: float = setting(1.0, minimum=0.0, maximum=1e6, units='1/(m^2 s)',
                                 description='Gamma_a of the convex-combination law (23) '
-                                            '(paper: identity; 0 keeps alpha(0): law (24) with '
-                                            'fixed parameters)')
+                                            '(paper: identity; 0 keeps the initial alpha: '
+                                            'law (24) with fixed parameters)')
     initial_alpha_1: float = _initial_alpha(1)
     initial_alpha_2: float = _initial_alpha(2)
     initial_alpha_3: float = _initial_alpha(3)
