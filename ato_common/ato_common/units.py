@@ -91,3 +91,19 @@ def davis_adaptation_gains_per_tonne_to_si(
     """
     scale = davis_per_tonne_to_per_kg(1.0, 1.0, 1.0)   # the diagonal of D
     return (gamma_a * scale[0] ** 2, gamma_b * scale[1] ** 2, gamma_c * scale[2] ** 2)
+
+
+def curvature_term_to_curve_radius_m(curvature_d: float, coefficient: float = 0.004,
+                                     gravity: float = STANDARD_GRAVITY) -> float:
+    """A curvature term written as a specific force ``coefficient * D`` [m/s^2] (Tan, Jiang &
+    Chen (5)-(6): f_c = 0.004 D M, Table 1: D = 0.35) -> the radius R [m] of the constant curve
+    that the suite's line model (curve resistance 600/R N/kN, ``ato_common.line``) turns into
+    the same force.
+
+    Derivation. The line model's curve force per kg is g w_c / 1000 with w_c = 600/R N/kN, so
+    g 600 / (1000 R) = coefficient D, i.e. R = 0.6 g / (coefficient D). For D = 0.35:
+    0.004 D = 1.4e-3 m/s^2 and R = 0.6 * 9.80665 / 1.4e-3 = 4202.85 m.
+    """
+    if not curvature_d > 0.0:
+        raise ValueError(f'the curvature term D must be positive, got {curvature_d!r}')
+    return 0.6 * gravity / (coefficient * curvature_d)

@@ -7,6 +7,7 @@ from ato_controller_node.laws.liu_li import LiuLiLaw
 from ato_controller_node.laws.luo_xu import LuoXuLaw, LuoXuProjectionLaw
 from ato_controller_node.laws.mao_2017 import Mao2017Law
 from ato_controller_node.laws.mao_multibody import MaoAdaptiveLaw, MaoNominalLaw
+from ato_controller_node.laws.mao_rigid import MaoRigidLaw
 from ato_controller_node.laws.pid import PidLaw
 from ato_controller_node.laws.tan import (
     SecondLevelAdaptiveLaw,
@@ -16,7 +17,8 @@ from ato_controller_node.laws.tan import (
 )
 
 LAWS: dict[str, type[ControlLaw]] = {law.name: law for law in (
-    PidLaw, LuoXuLaw, LuoXuProjectionLaw, Mao2017Law, MaoNominalLaw, MaoAdaptiveLaw, LiuLiLaw,
+    PidLaw, LuoXuLaw, LuoXuProjectionLaw, Mao2017Law, MaoNominalLaw, MaoAdaptiveLaw, MaoRigidLaw,
+    LiuLiLaw,
     SecondLevelFixedLaw, SecondLevelAdaptiveLaw, SwitchingMultipleModelLaw,
     WeightedMultipleModelLaw)}
 

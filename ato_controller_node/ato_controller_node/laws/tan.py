@@ -36,6 +36,16 @@ Laws (one class each, registry names in brackets):
   w_k(n) = w_k(n-1) l_k / sum_j w_j(n-1) l_j, l_k = 1 - J_k / sum_j J_j, from equal weights,
   each weight kept above weight_floor so a model can come back after a change.
 
+Options of the comparison (Section 4.3), all settings:
+- ``initial_alpha_1..4``: alpha at t = 0 (paper: 0.2 each). With ``alpha_gain`` 0 and those the
+  barycentric coordinates of a parameter vector in the simplex, tan_second_level is law (24)
+  with that vector, never updated (the reproduction's "no adaptation" reference).
+- ``adaptive_models`` of methods (3) and (4): the paper says all four methods start their models
+  from the same initial values, which suggests (3) and (4) adapt their models too; with the
+  option set their five models adapt by the law of tan_second_level_adaptive (same
+  ``identification_gain``) and the index or weights rank the adapting models. Off by default
+  (the fixed models of Narendra & Balakrishnan's switching and of classical weighting).
+
 Integration at the control period dt (documented deviations from the continuous-time paper):
 - The identification models (17) are linear with the stable Am: they are advanced exactly over
   each period with u held (zero-order hold, as the actuators apply it) and the measured x and
@@ -97,11 +107,29 @@ class TanSettings:
                                          'grade of the model box (covers the 30 per mille jump)')
 
 
+def _initial_alpha(k: int):
+    return setting(ALPHA_INITIAL, minimum=-10.0, maximum=10.0, units='-',
+                   description=f'alpha_{k} at t = 0, initial convex-combination '
+                               f'coefficient of model {k} (paper: 0.2; alpha_5 = 1 - the sum '
+                               'of the four)')
+
+
+def _identification_gain():
+    return setting(0.1, minimum=0.0, maximum=1e6, units='-',
+                   description='gamma of the adaptive identification models, Gamma = gamma '
+                               'diag(box width^2) in the units of theta (not in the paper)')
+
+
 @dataclass(frozen=True)
 class SecondLevelSettings(TanSettings):
     alpha_gain: float = setting(1.0, minimum=0.0, maximum=1e6, units='1/(m^2 s)',
                                 description='Gamma_a of the convex-combination law (23) '
-                                            '(paper: identity)')
+                                            '(paper: identity; 0 keeps the initial alpha: '
+                                            'law (24) with fixed parameters)')
+    initial_alpha_1: float = _initial_alpha(1)
+    initial_alpha_2: float = _initial_alpha(2)
+    initial_alpha_3: float = _initial_alpha(3)
+    initial_alpha_4: float = _initial_alpha(4)
     paper_freeze: bool = setting(False, minimum=0, maximum=1, units='-',
                                  description='run the printed (25): freeze alpha when '
                                              'sum alpha_k G_k <= 0, instead of projecting onto '
@@ -110,10 +138,7 @@ class SecondLevelSettings(TanSettings):
 
 @dataclass(frozen=True)
 class AdaptiveModelSettings(SecondLevelSettings):
-    identification_gain: float = setting(0.1, minimum=0.0, maximum=1e6, units='-',
-                                         description='gamma of the adaptive identification '
-                                                     'models, Gamma = gamma diag(box width^2) '
-                                                     'in the units of theta (not in the paper)')
+    identification_gain: float = _identification_gain()
 
 
 @dataclass(frozen=True)
@@ -124,6 +149,11 @@ class IndexSettings(TanSettings):
                                   description='c2: weight of the discounted integral of |e_k|^2')
     forgetting_per_s: float = setting(0.1, minimum=0.0, maximum=100.0, units='1/s',
                                       description='lambda: forgetting rate of the index memory')
+    adaptive_models: bool = setting(False, minimum=0, maximum=1, units='-',
+                                    description='the five models adapt their parameters (the '
+                                                'law of tan_second_level_adaptive) instead of '
+                                                'staying fixed: a reading of Section 4.3')
+    identification_gain: float = _identification_gain()
 
 
 @dataclass(frozen=True)
@@ -255,6 +285,10 @@ class _MultipleModelLaw(ControlLaw):
         self.initial_thetas = corner_simplex(self.theta_min, self.theta_max)
         self.bank = IdentificationBank(s.am1, s.am2, self.dt, self.initial_thetas)
         self.g_min = float(self.theta_min[0])          # 1/M_max
+        am = np.array([[0.0, 1.0], [s.am1, s.am2]])
+        p = solve_continuous_lyapunov(am.T, -np.eye(2))       # Am^T P + P Am = -I
+        self._pb = p[:, 1].tolist()                            # P B
+        self._gamma = ((self.theta_max - self.theta_min) ** 2).tolist()
         self._last_x = None
         self._last_time = None
         self._last_force = 0.0
@@ -304,6 +338,22 @@ class _MultipleModelLaw(ControlLaw):
                 'resistance_a_hat_mps2': float(theta[1]), 'resistance_b_hat_per_s': float(theta[2]),
                 'resistance_c_hat_per_m': float(theta[3])}
 
+    def _adapt_models(self, errors, x) -> None:
+        """Adaptive identification models (Narendra & Han): theta_k' = -Gamma omega B^T P e_k,
+        omega = (u, phi_Z), Gamma = identification_gain diag(box width^2), at the new errors
+        (forward Euler)."""
+        v = x[1]
+        omega = (self._last_force, -1.0, -v, -v * v)
+        step = self.dt * self.settings.identification_gain
+        scaled = [step * g * w for g, w in zip(self._gamma, omega)]
+        pb0, pb1 = self._pb
+        rows = []
+        for (e0, e1), row in zip(errors, self.bank.parameter_rows()):
+            drive = pb0 * e0 + pb1 * e1                                  # B^T P e_k
+            rows.append(tuple(t - drive * c for t, c in zip(row, scaled)))
+        if all(math.isfinite(t) for row in rows for t in row):
+            self.bank.thetas = rows   # (overflow on absurd input: keep the last parameters)
+
     @abstractmethod
     def _start_weights(self) -> None:
         """Set the method's weights (or index) to their initial values."""
@@ -326,7 +376,9 @@ class SecondLevelFixedLaw(_MultipleModelLaw):
     Settings = SecondLevelSettings
 
     def _start_weights(self) -> None:
-        self.alpha = np.full(MODELS - 1, ALPHA_INITIAL)     # alpha_1..4; alpha_5 = 1 - sum
+        s = self.settings                                    # alpha_1..4; alpha_5 = 1 - sum
+        self.alpha = np.array([s.initial_alpha_1, s.initial_alpha_2, s.initial_alpha_3,
+                               s.initial_alpha_4])
         self._combined_error = 0.0
 
     def alphas(self) -> np.ndarray:
@@ -404,28 +456,9 @@ class SecondLevelAdaptiveLaw(SecondLevelFixedLaw):
                'the comparison method (2) of Tan et al. Section 4.3')
     Settings = AdaptiveModelSettings
 
-    def _build(self) -> None:
-        super()._build()
-        s = self.settings
-        am = np.array([[0.0, 1.0], [s.am1, s.am2]])
-        p = solve_continuous_lyapunov(am.T, -np.eye(2))       # Am^T P + P Am = -I
-        self._pb = p[:, 1].tolist()                            # P B
-        self._gamma = ((self.theta_max - self.theta_min) ** 2).tolist()
-
     def _update(self, errors, x) -> None:
-        # identification models: theta_k' = -Gamma omega (B^T P e_k), omega = (u, phi_Z), at the
-        # new errors (forward Euler); then the combination as for fixed models
-        v = x[1]
-        omega = (self._last_force, -1.0, -v, -v * v)
-        step = self.dt * self.settings.identification_gain
-        scaled = [step * g * w for g, w in zip(self._gamma, omega)]
-        pb0, pb1 = self._pb
-        rows = []
-        for (e0, e1), row in zip(errors, self.bank.parameter_rows()):
-            drive = pb0 * e0 + pb1 * e1                                  # B^T P e_k
-            rows.append(tuple(t - drive * c for t, c in zip(row, scaled)))
-        if all(math.isfinite(t) for row in rows for t in row):
-            self.bank.thetas = rows   # (overflow on absurd input: keep the last parameters)
+        # identification models first, then the combination as for fixed models
+        self._adapt_models(errors, x)
         super()._update(errors, x)
 
 
@@ -460,6 +493,8 @@ class SwitchingMultipleModelLaw(_IndexedLaw):
         self.selected = MODELS - 1      # start on theta_min (no index yet to choose by)
 
     def _update(self, errors, x) -> None:
+        if self.settings.adaptive_models:
+            self._adapt_models(errors, x)
         index = self._indices(errors)
         best = min(range(MODELS), key=index.__getitem__)
         if index[best] < (1.0 - self.settings.hysteresis) * index[self.selected]:
@@ -485,6 +520,8 @@ class WeightedMultipleModelLaw(_IndexedLaw):
         self.weights = [1.0 / MODELS] * MODELS
 
     def _update(self, errors, x) -> None:
+        if self.settings.adaptive_models:
+            self._adapt_models(errors, x)
         index = self._indices(errors)
         total = sum(index)
         if total <= 0.0:
