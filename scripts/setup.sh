@@ -15,6 +15,21 @@ else
   ros_source=wheels
 fi
 
+# --- 0. System packages -------------------------------------------------------------------
+# Chromium (Debian's package) opens the HTML run report in a real headless browser in the tests
+# (tests/test_report_browser.py). Installed once, when it is missing and apt can install it.
+if ! command -v chromium > /dev/null 2>&1; then
+  if command -v apt-get > /dev/null 2>&1; then
+    apt=(apt-get); [ "$(id -u)" -ne 0 ] && apt=(sudo -n apt-get)
+    log "installing chromium (Debian's package) for the report's browser test"
+    { "${apt[@]}" install -y -q chromium > /dev/null 2>&1 || \
+      { "${apt[@]}" update -q > /dev/null 2>&1 && "${apt[@]}" install -y -q chromium > /dev/null 2>&1; }; } || \
+      log "could not install chromium: install it (apt-get install chromium) for the browser test"
+  else
+    log "no apt-get: install Chromium for the report's browser test"
+  fi
+fi
+
 # --- 1. Python environment ---------------------------------------------------------------
 req_files=(requirements-tools.txt constraints.txt)
 [ "$ros_source" = wheels ] && req_files+=(requirements.txt)
