@@ -10,7 +10,8 @@ uncertainty (ato_common.uncertainty), the number of draws and the seed::
     scenarios: [short_line]          # built-in names or paths (relative to the campaign file)
     laws: [pid, {law: luo_xu_adaptive, settings: {gamma_a: 1.0e-4}}]
     baseline: pid                    # paired differences are taken against it
-    uncertainty: default             # (if absent) or nominal, or a mapping of parameters
+    uncertainty: default             # or nominal, or a mapping of parameters; if absent, each
+                                     # scenario's uncertainty: section, else default
     timeout_s: 600                   # wall-time limit of one run
     end_time_s: 0                    # > 0: every run is the first end_time_s of its scenario
 
@@ -22,8 +23,10 @@ workers run this project's environment; nothing else changes. ``--serial`` runs 
 process, in order. Each finished run is written at once as a row of the Parquet dataset
 ``<out>/<name>/rows/``; a campaign started again with the same file runs only the rows that are
 missing (a row of an earlier version of the file, with another fingerprint, does not count).
-A run that raises is a row with status ``error`` and its reason; one whose state diverges
-``diverged``; one that exceeds ``timeout_s`` ``timeout``: the campaign goes on.
+A run that raises is a row with status ``error`` and its reason; one that does not finish its
+journey (``unfinished``: its state turns non-finite, or its train is not standing at a stop that
+the reference stood at) ``diverged``; one that exceeds ``timeout_s`` ``timeout``: the campaign
+goes on. A large speed or stop error alone is not a status: the metrics show it.
 """
 
 from __future__ import annotations
@@ -57,10 +60,10 @@ from ato_controller_node.laws.base import setting_fields, validated_settings
 DEFAULT_OUT = Path('runs') / 'campaigns'
 #: the default campaign of `make campaign`, shipped beside this module
 DEFAULT_TIMEOUT_S = 600.0
-#: a run whose speed error ever exceeds this has diverged (km/h)
-DIVERGED_SPEED_ERROR_KMH = 50.0
 #: stop accuracy of a platform stop (m): outside it a stop counts as a failure
 STOP_ERROR_LIMIT_M = 0.5
+#: a train at most this fast stands still (m/s; RunSupervision.STANDSTILL_MPS)
+STANDSTILL_MPS = 0.01
 #: the key of a row: which run it is
 KEY = ('scenario', 'law', 'draw')
 STATUSES = ('ok', 'diverged', 'error', 'timeout')
@@ -88,19 +91,24 @@ class Campaign:
     draws: int
     scenarios: tuple[str, ...]       # as load_scenario takes them (built-in name or abs path)
     laws: tuple[LawEntry, ...]
-    spec: Mapping[str, uncertainty.Distribution]
+    #: the campaign file's uncertainty (None: it gives none, see ``specs``)
+    spec: Mapping[str, uncertainty.Distribution] | None
     baseline: str
     timeout_s: float | None
     end_time_s: float | None
     rates_hz: Mapping[tuple[str, str], float] = field(default_factory=dict)
     models: Mapping[str, str] = field(default_factory=dict)
+    #: the uncertainty each scenario is drawn from: the campaign file's, else the scenario's
+    #: ``uncertainty:`` section, else uncertainty.DEFAULTS
+    specs: Mapping[str, Mapping[str, uncertainty.Distribution]] = field(default_factory=dict)
 
     @property
     def fingerprint(self) -> str:
         """What the rows depend on: a row with another fingerprint is from another campaign."""
         text = json.dumps({'seed': self.seed, 'scenarios': self.scenarios,
                            'laws': [(e.label, e.law, dict(e.settings)) for e in self.laws],
-                           'spec': {k: repr(v) for k, v in sorted(self.spec.items())},
+                           'spec': {scenario: {k: repr(v) for k, v in sorted(spec.items())}
+                                    for scenario, spec in sorted(self.specs.items())},
                            'end_time_s': self.end_time_s}, sort_keys=True, default=str)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -111,7 +119,7 @@ class Campaign:
 
 
 def task_of(campaign: Campaign, scenario: str, entry: LawEntry, index: int) -> dict:
-    values = uncertainty.draw(campaign.spec, campaign.seed, index)
+    values = uncertainty.draw(campaign.specs[scenario], campaign.seed, index)
     return {'campaign': campaign.name, 'fingerprint': campaign.fingerprint,
             'scenario': scenario, 'law': entry.label, 'law_name': entry.law,
             'settings': dict(entry.settings), 'draw': index, 'values': values,
@@ -221,10 +229,13 @@ def _parse(data: Any, origin: str, base: Path) -> Campaign:
         raise ConfigError(f"baseline: '{baseline}' is not one of the campaign's laws "
                           f"({', '.join(sorted(labels))})")
     raw_spec = f.raw('uncertainty')
-    spec = uncertainty.parse_uncertainty('default' if raw_spec is None else raw_spec)
+    spec = None if raw_spec is None else uncertainty.parse_uncertainty(raw_spec)
+    specs = {key: spec if spec is not None else scenario.uncertainty
+             if scenario.uncertainty is not None else dict(uncertainty.DEFAULTS)
+             for key, scenario in loaded.items()}
     f.reject_unknown()
     return Campaign(name, origin, seed, draws, tuple(scenarios), tuple(laws), spec, baseline,
-                    timeout or None, end or None, rates, models)
+                    timeout or None, end or None, rates, models, specs)
 
 
 def _law_entry(item: Any, i: int) -> LawEntry:
@@ -339,10 +350,9 @@ def run_task(task: Mapping, runner: Callable[[Mapping], dict] | None = None) -> 
     started = time.perf_counter()
     try:
         row.update(with_time_limit(lambda: (runner or offline_metrics)(task), task['timeout_s']))
-        if row['max_speed_error_kmh'] > DIVERGED_SPEED_ERROR_KMH:
-            row.update(status='diverged', reason=(
-                f'speed error reached {row["max_speed_error_kmh"]:.1f} km/h '
-                f'(> {DIVERGED_SPEED_ERROR_KMH:g})'))
+        why = row.pop('unfinished', '')
+        if why:
+            row.update(status='diverged', reason=f'did not finish: {why}')
     except RunTimeout as timeout:
         row.update(status='timeout', reason=f'exceeded the wall-time limit of '
                                             f'{task["timeout_s"]:g} s (timeout_s)')
@@ -386,6 +396,7 @@ def run_metrics(run, dt: float) -> dict:
                            else math.nan)  # not reached within the run: the stop error says it
     stop_errors = m.stop_errors_m
     return {
+        'unfinished': unfinished(run),
         'rms_speed_error_kmh': m.rms_speed_error_kmh,
         'max_speed_error_kmh': m.max_speed_error_kmh,
         'rms_position_error_m': m.rms_position_error_m,
@@ -404,6 +415,30 @@ def run_metrics(run, dt: float) -> dict:
         'events': run_events(run.scenario, m, stations_of(run.plan), run.times_s,
                              run.positions, atp_times_s=run.atp_times_s).brief(),
     }
+
+
+def unfinished(run) -> str:
+    """Why the train of an OfflineRun did not finish its journey ('' if it did): at each stop
+    the reference stood at within the run, the train must have stood still too, within its own
+    length of the stop (at the platform: a stop error beyond +/-0.5 m is a failed stop, not an
+    unfinished run); at the end, where the reference stands, the train must stand there."""
+    standing = np.abs(run.speeds) <= STANDSTILL_MPS
+    reach = run.scenario.train.length_m
+    end = run.times_s[-1]
+    for stop in run.plan.stops:
+        x = stop.station.position_m
+        if stop.arrival_s > end or x <= run.positions[0] + 1.0:
+            continue  # not reached by the reference within the run, or the start
+        if stop.departure_s <= end:
+            near = standing & (np.abs(run.positions - x) <= reach)
+            if not near.any():
+                return (f'the train never stood within its length ({reach:g} m) of '
+                        f'{stop.station.name} at {x:g} m')
+        elif not (standing[-1] and abs(run.positions[-1] - x) <= reach):
+            return (f'at the end the train is at {run.positions[-1]:.0f} m, '
+                    f'{run.speeds[-1] * 3.6:.1f} km/h, not standing within its length '
+                    f'({reach:g} m) of {stop.station.name} at {x:g} m')
+    return ''
 
 
 # --- the rows on disk ---------------------------------------------------------------------------

@@ -62,11 +62,18 @@ def markdown(campaign: Campaign, rows, command: str, elapsed_s: float,
               f'{elapsed_s:.0f} s of wall time on {os.cpu_count()} cores (a resumed campaign '
               'runs only the missing rows); offline closed loop, the plant perturbed by each draw, '
               'the controller on the nominal train.', '',
-              '## Uncertainty', '',
-              '| parameter | unit | distribution | source |', '|---|---|---|---|']
-    for name, unit, dist, source in uncertainty.describe(campaign.spec):
-        lines.append(f'| `{name}` | {unit} | {dist} | {source} |')
-    lines.append('')
+              '## Uncertainty', '']
+    specs = [(key, campaign.specs[key]) for key in campaign.scenarios]
+    if all(spec == specs[0][1] for _, spec in specs):
+        specs = specs[:1]  # one for every scenario
+    for key, spec in specs:
+        if len(specs) > 1:
+            lines += [f'Scenario `{scenario_name(key)}` (its own `uncertainty:` section, or the '
+                      'defaults):', '']
+        lines += ['| parameter | unit | distribution | source |', '|---|---|---|---|']
+        for name, unit, dist, source in uncertainty.describe(spec):
+            lines.append(f'| `{name}` | {unit} | {dist} | {source} |')
+        lines.append('')
     for key in campaign.scenarios:
         name = scenario_name(key)
         sub = rows[rows['scenario'] == key]

@@ -5,12 +5,14 @@ values computed by hand."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import socket
 import subprocess
 import sys
 import time
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +29,11 @@ from ato_bringup.campaign_engine import (
     rows_folder,
     run_campaign,
     run_task,
+    unfinished,
 )
+from ato_bringup.offline import run_offline
+from ato_common import uncertainty
+from ato_common.scenario import load_scenario
 from ato_common.validation import ConfigError
 
 #: a tiny campaign: 2 laws x 1 scenario x 4 draws of the first 40 s of the short line
@@ -98,7 +104,7 @@ def test_a_serial_campaign_has_one_row_per_run_with_its_draw_and_metrics(serial_
     assert set(rows['law']) == {'pid', 'luo_xu'} and sorted(set(rows['draw'])) == [0, 1, 2, 3]
     for column in ('campaign', 'scenario', 'law', 'draw', 'status', 'reason', *METRICS):
         assert column in rows.columns
-    for name in campaign.spec:
+    for name in campaign.specs[campaign.scenarios[0]]:
         assert f'p_{name}' in rows.columns
     assert rows['p_mass_factor'].nunique() == 4  # one value per draw, shared by the laws
     assert np.all(np.isfinite(rows['rms_speed_error_kmh']))
@@ -238,11 +244,48 @@ def test_a_hanging_run_times_out_a_failing_one_is_reported_and_the_campaign_comp
     assert (failed['p_mass_factor'] > 0).all()  # the drawn parameters are kept
 
 
-def test_a_run_whose_speed_error_explodes_is_reported_diverged(tmp_path):
+def test_a_run_is_diverged_when_it_does_not_finish_not_when_its_error_is_large(tmp_path):
     campaign = load_campaign(write(tmp_path, TINY))
     task = campaign.tasks()[0]
-    row = run_task(task, runner=lambda t: {'max_speed_error_kmh': 80.0})
-    assert row['status'] == 'diverged' and '80.0 km/h' in row['reason']
+    row = run_task(task, runner=lambda t: {'max_speed_error_kmh': 80.0, 'unfinished': ''})
+    assert row['status'] == 'ok' and row['max_speed_error_kmh'] == 80.0
+    row = run_task(task, runner=lambda t: {'unfinished': 'stands at 12 km'})
+    assert row['status'] == 'diverged' and row['reason'] == 'did not finish: stands at 12 km'
+
+
+def test_a_train_stopped_short_by_its_odometer_bias_finishes_its_journey():
+    # The cause of pid's "did not finish" under the default uncertainty: an odometer reading
+    # 0.75 m ahead makes the ATO stop 0.75 m short of Midway; the plant's ATP took the true
+    # position, never saw the train at the stop and held it there for ever. The stop check
+    # now takes the odometer's reading, as the on-board unit reports it.
+    values = {name: p.nominal for name, p in uncertainty.PARAMETERS.items()}
+    values['position_bias_m'] = 0.75
+    run = run_offline(load_scenario('short_line'), 'pid', uncertainty=values)
+    assert unfinished(run) == ''
+    assert run.metrics().stop_errors_m['Midway'] == pytest.approx(-0.75, abs=0.05)
+    assert run.positions[-1] == pytest.approx(36000.0 - 0.75, abs=0.05)
+    # a train held short of its stop (the old behaviour) is named as unfinished
+    stranded = dataclasses.replace(run, positions=np.minimum(run.positions, 14000.0 - 300.0))
+    assert 'never stood within its length (200 m) of Midway' in unfinished(stranded)
+
+
+def test_a_campaign_without_uncertainty_draws_from_each_scenarios_section(tmp_path):
+    data = yaml.safe_load(Path(str(resources.files('ato_common') / 'scenarios'
+                                   / 'short_line.yaml')).read_text())
+    data['uncertainty'] = {'defaults': False, 'wind_mps': 7.0}
+    write(tmp_path, data, 'windy.yaml')
+    campaign = load_campaign(write(tmp_path, dict(TINY, scenarios=['short_line',
+                                                                   'windy.yaml'])))
+    windy = str((tmp_path / 'windy.yaml').resolve())
+    assert campaign.spec is None
+    assert campaign.specs['short_line'] == uncertainty.DEFAULTS
+    assert [t['values']['wind_mps'] for t in campaign.tasks() if t['scenario'] == windy] == \
+        [7.0] * 8
+    assert {t['values']['mass_factor'] for t in campaign.tasks() if t['scenario'] == windy} \
+        == {1.0}
+    given = load_campaign(write(tmp_path, dict(TINY, scenarios=['windy.yaml'],
+                                               uncertainty='nominal')))
+    assert given.specs[windy] == uncertainty.NOMINAL
 
 
 # --- statistics against values computed by hand ---------------------------------------------

@@ -18,13 +18,14 @@ are converted here, through :mod:`ato_common.units`. Schema (all keys optional):
       abrupt_changes:              # Tan et al. 4.3: the grade is 30 per mille for 1000 <= t < 1100
         - {start_s: 1000, end_s: 1100, grade_per_mille: 30}
       disturbance: {kind: fast, amplitude_n: 8900, omega_rad_per_s: 1.0}   # Liu & Li Case 3
-      actuators: {time_constant_s: 0.5, rate_limit_n_per_s: 1.0e+5}
+      actuators: {time_constant_s: 0.5, dead_time_s: 0.3, rate_limit_n_per_s: 1.0e+5}
       failures:                    # Mao et al. 2017 eqs (13)-(20)
         - {actuator: motor_2, kind: stuck, start_s: 600, end_s: 1000, force_n: 2.0e+5}
       sensors:
         seed: 1
         speed: {noise_std: 0.01, bias: 0.0, quantum: 0.0, dropout_probability: 0.0,
-                failed_from_s: 300, failed_cars: [train]}
+                failed_from_s: 300, failed_cars: [train], scale_error: 0.002}
+        position: {bias: 0.3, scale_error: 0.002, reset_positions_m: [13700, 14000]}
 """
 
 from __future__ import annotations
@@ -147,12 +148,14 @@ class Disturbance:
 
 @dataclass(frozen=True)
 class ActuatorSettings:
-    """Each actuated unit: first-order lag (0: none), rate limit of the applied force (0: none).
-    Force, power and braking limits are the unit's equal share of the train's
+    """Each actuated unit: dead time (0: none), then first-order lag (0: none), then rate limit
+    of the applied force (0: none): the drive responds to what it was asked ``dead_time_s``
+    earlier. Force, power and braking limits are the unit's equal share of the train's
     :class:`~ato_common.trains.TractionCharacteristic`."""
 
     time_constant_s: float = 0.0
     rate_limit_n_per_s: float = 0.0
+    dead_time_s: float = 0.0
 
 
 FAILURE_KINDS = ('stuck', 'stuck_signal', 'loss', 'partial')
@@ -203,9 +206,15 @@ class ActuatorFailure:
 
 @dataclass(frozen=True)
 class QuantitySensor:
-    """One measured quantity of every car: truth + bias + white noise, then quantised; NaN when
-    dropped out (probability per sample) or failed (from failed_from_s to failed_until_s on
-    ``failed_cars``, all cars if empty). Units: m, m/s or m/s^2 as the quantity."""
+    """One measured quantity of every car: truth + scale error + bias + white noise, then
+    quantised; NaN when dropped out (probability per sample) or failed (from failed_from_s to
+    failed_until_s on ``failed_cars``, all cars if empty). Units: m, m/s or m/s^2 as the
+    quantity.
+
+    ``scale_error`` s is an odometer's relative scale error (a wheel diameter taken as D while
+    it is D (1 + s)): a speed reads v (1 + s); a position reads the odometer's last reset
+    point r plus (1 + s) times the distance run since, x + s (x - r), where r is the largest of
+    the run's initial position and ``reset_positions_m`` (balise groups) at or behind x."""
 
     noise_std: float = 0.0
     bias: float = 0.0
@@ -214,11 +223,14 @@ class QuantitySensor:
     failed_from_s: float = math.inf
     failed_until_s: float = math.inf
     failed_cars: tuple[str, ...] = ()
+    scale_error: float = 0.0
+    reset_positions_m: tuple[float, ...] = ()
 
     @property
     def ideal(self) -> bool:
         return (self.noise_std == 0.0 and self.bias == 0.0 and self.quantum == 0.0
-                and self.dropout_probability == 0.0 and math.isinf(self.failed_from_s))
+                and self.dropout_probability == 0.0 and math.isinf(self.failed_from_s)
+                and self.scale_error == 0.0)
 
     def failed(self, time_s: float, car: str) -> bool:
         return (self.failed_from_s <= time_s < self.failed_until_s
@@ -434,6 +446,12 @@ def _quantity_sensor(f: Fields, car_names: Sequence[str]) -> QuantitySensor:
                               f"{', '.join(car_names)}")
         cars.append(name)
     failed_from = f.number('failed_from_s', math.inf, minimum=0.0)
+    resets = f.raw('reset_positions_m') or []
+    if not isinstance(resets, list) or any(
+            isinstance(r, bool) or not isinstance(r, (int, float)) or not math.isfinite(r)
+            or r < 0.0 for r in resets):
+        raise ConfigError(f'{f.where}.reset_positions_m: must be a list of positions >= 0 (m), '
+                          f'got {resets!r}')
     sensor = QuantitySensor(
         noise_std=f.number('noise_std', 0.0, minimum=0.0),
         bias=f.number('bias', 0.0),
@@ -442,7 +460,9 @@ def _quantity_sensor(f: Fields, car_names: Sequence[str]) -> QuantitySensor:
         failed_from_s=failed_from,
         failed_until_s=(f.number('failed_until_s', minimum=failed_from, exclusive_minimum=True)
                         if f.has('failed_until_s') else math.inf),
-        failed_cars=tuple(cars))
+        failed_cars=tuple(cars),
+        scale_error=f.number('scale_error', 0.0, minimum=-0.1, maximum=0.1),
+        reset_positions_m=tuple(sorted(float(r) for r in resets)))
     f.reject_unknown()
     return sensor
 
@@ -474,7 +494,8 @@ def parse_plant_setup(data, train: TrainParameters, where: str = 'plant') -> Pla
     modes, switch = _modes(f, train)
     a = f.section('actuators')
     actuators = ActuatorSettings(a.number('time_constant_s', 0.0, minimum=0.0, maximum=60.0),
-                                 a.number('rate_limit_n_per_s', 0.0, minimum=0.0))
+                                 a.number('rate_limit_n_per_s', 0.0, minimum=0.0),
+                                 a.number('dead_time_s', 0.0, minimum=0.0, maximum=10.0))
     a.reject_unknown()
     setup = PlantSetup(
         resistance_variation=variation, modes=modes, mode_switch=switch,

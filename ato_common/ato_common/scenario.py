@@ -8,7 +8,10 @@ The train is a preset (``train: {preset: name}``) or a TTOBench train file
 TTOBench track (``line: {ttobench: path, dwell_s: 30}``), optionally with a TTOBench journey
 (``journey: {ttobench: path}``) whose stopping points become the run's stations. Relative paths
 are taken from the scenario file's folder. The optional ``supervision`` section sets the times
-and distances of the braking-curve supervision (:mod:`ato_common.braking_curves`).
+and distances of the braking-curve supervision (:mod:`ato_common.braking_curves`). The optional
+``uncertainty`` section is the distribution of the scenario's uncertain train, line and sensors
+(the schema of :mod:`ato_common.uncertainty`): a campaign whose file gives no uncertainty draws
+from it; a single run (the nodes, ``make demo``, ``make compare``) never reads it.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
+from typing import Mapping
 
 import yaml
 
@@ -28,6 +32,7 @@ from ato_common.braking_curves import (
 from ato_common.line import Line, PiecewiseConstant, parse_line
 from ato_common.plant_setup import PlantSetup, parse_plant_setup
 from ato_common.trains import TRAIN_PRESETS, TrainParameters, train_preset
+from ato_common.uncertainty import Distribution, parse_uncertainty
 from ato_common.validation import ConfigError, Fields
 
 DEFAULT_SCENARIO = 'short_line'
@@ -64,6 +69,8 @@ class Scenario:
     supervision: SupervisionSettings
     plant: PlantSetup = PlantSetup()  # what varies, actuators, failures, sensors
     journey: ttobench.TTOBenchJourney | None = None  # timing points of a TTOBench journey
+    #: the ``uncertainty:`` section, parsed (None: absent); read by campaigns only
+    uncertainty: Mapping[str, Distribution] | None = None
 
 
 def builtin_scenarios() -> list[str]:
@@ -230,6 +237,8 @@ def parse_scenario(data, origin: str = '<memory>', base: Path | None = None) -> 
         name=f.text('name'), description=f.text('description', ''),
         source=f.text('source', 'suite'), origin=origin, train=train, line=line,
         planning=planning, run=run, supervision=_parse_supervision(f, train, loaded_train),
-        plant=parse_plant_setup(f.raw('plant'), train, 'plant'), journey=journey)
+        plant=parse_plant_setup(f.raw('plant'), train, 'plant'), journey=journey,
+        uncertainty=(None if f.raw('uncertainty') is None
+                     else parse_uncertainty(f.raw('uncertainty'), 'uncertainty')))
     f.reject_unknown()
     return scenario

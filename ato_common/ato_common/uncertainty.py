@@ -147,6 +147,15 @@ PARAMETERS: dict[str, Parameter] = {p.name: p for p in (
               'first-order lag of traction and brake force (plant.actuators.time_constant_s)',
               'EN 14531-1:2015 brake build-up times (service brake 2-4 s to 95 %, a time '
               'constant near 1 s); traction drives respond in a few hundred ms'),
+    Parameter('actuator_dead_time_s', 's', 0.0, 0.0, 5.0,
+              Distribution('uniform', 0.1, 0.5),
+              'dead time of traction and brake force before the lag acts '
+              '(plant.actuators.dead_time_s): a drive responds to what it was asked that long '
+              'ago',
+              'UIC 544-1 (2014) equivalent response time of the brake (the delay before the '
+              'force builds up is a few tenths of a second on an electro-pneumatic EMU brake); '
+              'traction converters and the train bus add about 0.1 s (suite assumption within '
+              'those figures)'),
     Parameter('effectiveness', '1', 1.0, 0.05, 1.0,
               Distribution('choice', values=(1.0, 0.875), weights=(0.9, 0.1)),
               'traction and brake effectiveness: every actuator delivers this share of its '
@@ -170,10 +179,20 @@ PARAMETERS: dict[str, Parameter] = {p.name: p for p in (
               'UNISIG SUBSET-041 5.3.1.2, as for speed_noise_mps'),
     Parameter('position_bias_m', 'm', 0.0, -50.0, 50.0,
               Distribution('truncated_normal', 0.0, 0.5, -2.0, 2.0),
-              'constant error of the measured position (the odometer at the start of the run; '
-              'the plant has no scale error yet, see docs/guide/campaigns.md)',
+              'constant error of the measured position (the odometer at the start of the run)',
               'UNISIG SUBSET-041 5.3.1.1: odometry distance error +/-(5 m + 5 % of the '
               'distance since the last balise); reset at a balise group near a station'),
+    Parameter('odometry_scale_error', '1', 0.0, -0.1, 0.1,
+              Distribution('truncated_normal', 0.0, 0.001, -0.005, 0.005),
+              'relative scale error s of the odometer (a wheel diameter known as D while it is '
+              'D (1 + s)): the measured speed is (1 + s) v and the measured position errs by s '
+              'times the distance since the odometer was last reset: at each station, at a '
+              'balise group every ODOMETER_RESET_SPACING_M and ODOMETER_RESET_BEFORE_STOP_M '
+              'before each stop (plant.sensors.*.scale_error)',
+              'EN 15313:2016 wheel wear: a 920 mm wheel may wear to about 850 mm, 8 %, which '
+              'the odometer corrects by calibrating the diameter against balise distances; '
+              'the default residual, within +/-0.5 % (SUBSET-041 5.3.1.2 speed accuracy), is a '
+              'suite assumption'),
     Parameter('disturbance_per_weight', '1', 0.0, 0.0, 0.05,
               Distribution('uniform', 0.0, 0.002),
               'amplitude of a random external force (plant.disturbance kind random, a new '
@@ -188,6 +207,12 @@ NOMINAL = {name: _fixed(p.nominal) for name, p in PARAMETERS.items()}
 DEFAULTS = {name: p.default for name, p in PARAMETERS.items()}
 #: hold time of the random disturbance, s
 DISTURBANCE_HOLD_S = 5.0
+#: where the odometer is reset before each stop (a precise-stopping balise group), m before it;
+#: a suite assumption: ATO stops on a balise group placed shortly before the stopping point
+ODOMETER_RESET_BEFORE_STOP_M = 200.0
+#: the spacing of the balise groups that reset the odometer along the line, m (a suite
+#: assumption: ETCS level 2 lines have a balise group at each block marker, every 1-2 km)
+ODOMETER_RESET_SPACING_M = 1500.0
 
 
 def _distribution(value: Any, where: str, param: Parameter) -> Distribution:
@@ -325,7 +350,8 @@ def perturbed(scenario, values: Mapping[str, float]):
     modes = tuple(replace(m, mass_kg=m.mass_kg * inertia, davis=_davis(m.davis, load, v))
                   for m in plant.modes)
     actuators = replace(plant.actuators, time_constant_s=max(
-        plant.actuators.time_constant_s, v['actuator_time_constant_s']))
+        plant.actuators.time_constant_s, v['actuator_time_constant_s']),
+        dead_time_s=max(plant.actuators.dead_time_s, v['actuator_dead_time_s']))
     failures = plant.failures
     if v['effectiveness'] < 1.0:
         failed = {f.actuator for f in failures if f.start_s <= 0.0}
@@ -340,8 +366,17 @@ def perturbed(scenario, values: Mapping[str, float]):
                                   * units.STANDARD_GRAVITY, hold_s=DISTURBANCE_HOLD_S,
                                   seed=zlib.crc32(repr(sorted(v.items())).encode()) % 2**31)
     s = plant.sensors
-    speed = _add_error(s.speed, v['speed_noise_mps'], v['speed_bias_mps'])
-    position = _add_error(s.position, 0.0, v['position_bias_m'])
+    scale = v['odometry_scale_error']
+    speed = _add_error(s.speed, v['speed_noise_mps'], v['speed_bias_mps'], scale)
+    position = _add_error(s.position, 0.0, v['position_bias_m'], scale)
+    if scale:
+        stops = [st.position_m for st in scenario.line.stations[1:]]
+        resets = {st.position_m for st in scenario.line.stations} | {
+            max(x - ODOMETER_RESET_BEFORE_STOP_M, 0.0) for x in stops} | {
+            k * ODOMETER_RESET_SPACING_M for k in range(
+                int(scenario.line.length_m // ODOMETER_RESET_SPACING_M) + 1)}
+        position = replace(position, reset_positions_m=tuple(sorted(
+            resets | set(position.reset_positions_m))))
     sensors = replace(s, speed=speed, position=position,
                       seed=(s.seed + zlib.crc32(repr(sorted(v.items())).encode())) % 2**31)
     true_plant = replace(plant, modes=modes, actuators=actuators, failures=failures,
@@ -350,11 +385,14 @@ def perturbed(scenario, values: Mapping[str, float]):
     return replace(scenario, train=true_train, plant=true_plant)
 
 
-def _add_error(sensor: QuantitySensor, noise_std: float, bias: float) -> QuantitySensor:
-    if noise_std == 0.0 and bias == 0.0:
+def _add_error(sensor: QuantitySensor, noise_std: float, bias: float,
+               scale_error: float = 0.0) -> QuantitySensor:
+    if noise_std == 0.0 and bias == 0.0 and scale_error == 0.0:
         return sensor
+    # two scale errors compose: (1 + s1)(1 + s2) - 1
     return replace(sensor, noise_std=math.hypot(sensor.noise_std, noise_std),
-                   bias=sensor.bias + bias)
+                   bias=sensor.bias + bias,
+                   scale_error=(1.0 + sensor.scale_error) * (1.0 + scale_error) - 1.0)
 
 
 def describe(spec: Mapping[str, Distribution]) -> list[tuple[str, str, str, str]]:

@@ -117,3 +117,27 @@ def test_numbers_in_exponent_form_without_a_dot_load_from_yaml(tmp_path):
     assert scenario.line.length_m == 10000.0
     assert scenario.plant.disturbance.amplitude_n == 2e5
     assert scenario.plant.disturbance.phase_rad == -1.5e-3
+
+
+def test_an_uncertainty_section_is_parsed_with_the_campaign_schema_and_named_errors(tmp_path):
+    from importlib import resources
+
+    from ato_common import uncertainty as u
+    data = yaml.safe_load((resources.files('ato_common') / 'scenarios' / 'short_line.yaml')
+                          .read_text())
+    assert load_scenario('short_line').uncertainty is None
+    data['uncertainty'] = {'defaults': False, 'wind_mps': {'dist': 'uniform', 'low': -2,
+                                                           'high': 2}}
+    path = tmp_path / 'windy.yaml'
+    path.write_text(yaml.safe_dump(data))
+    spec = load_scenario(str(path)).uncertainty
+    assert spec['wind_mps'] == u.Distribution('uniform', -2.0, 2.0)
+    assert spec['mass_factor'] == u.NOMINAL['mass_factor']
+    data['uncertainty'] = {'wind_mps': {'dist': 'uniform', 'low': 2, 'high': -2}}
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError, match=rf'{path}: uncertainty.wind_mps: high .* above low'):
+        load_scenario(str(path))
+    data['uncertainty'] = {'odometer_scale': 0.01}
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError, match=rf'{path}: uncertainty.odometer_scale: unknown'):
+        load_scenario(str(path))

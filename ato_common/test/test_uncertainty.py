@@ -90,9 +90,10 @@ def test_the_truth_is_perturbed_and_the_nominal_scenario_and_its_knowledge_are_n
     values = {name: p.nominal for name, p in u.PARAMETERS.items()}
     values.update(mass_factor=1.1, rotating_mass_factor=0.09, davis_a_factor=1.2,
                   davis_b_factor=0.8, davis_c_factor=1.05, wind_mps=5.0,
-                  actuator_time_constant_s=0.5, effectiveness=0.875, adhesion=0.02,
+                  actuator_time_constant_s=0.5, actuator_dead_time_s=0.3,
+                  effectiveness=0.875, adhesion=0.02,
                   speed_noise_mps=0.03, speed_bias_mps=0.1, position_bias_m=-1.0,
-                  disturbance_per_weight=0.001)
+                  odometry_scale_error=0.002, disturbance_per_weight=0.001)
     truth = u.perturbed(scenario, values)
     train, d = scenario.train, scenario.train.davis
     inertia = 1.1 * 1.09 / 1.06
@@ -105,6 +106,7 @@ def test_the_truth_is_perturbed_and_the_nominal_scenario_and_its_knowledge_are_n
     assert truth.train.traction.max_traction_force_n == pytest.approx(limit)
     assert truth.train.traction.max_emergency_brake_force_n == pytest.approx(limit)
     assert truth.plant.actuators.time_constant_s == 0.5
+    assert truth.plant.actuators.dead_time_s == 0.3
     assert [(f.actuator, f.kind, f.effectiveness, f.start_s) for f in truth.plant.failures] == \
         [('traction', 'partial', 0.875, 0.0)]
     assert truth.plant.disturbance.kind == 'random'
@@ -113,6 +115,13 @@ def test_the_truth_is_perturbed_and_the_nominal_scenario_and_its_knowledge_are_n
     assert truth.plant.sensors.speed.noise_std == pytest.approx(0.03)
     assert truth.plant.sensors.speed.bias == 0.1
     assert truth.plant.sensors.position.bias == -1.0
+    position, speed = truth.plant.sensors.position, truth.plant.sensors.speed
+    assert position.scale_error == pytest.approx(0.002) and speed.scale_error == \
+        pytest.approx(0.002)
+    # the odometer is reset at the stations, at every balise group and before each stop
+    resets = set(position.reset_positions_m)
+    assert {0.0, 14000.0, 36000.0, 14000.0 - u.ODOMETER_RESET_BEFORE_STOP_M,
+            36000.0 - u.ODOMETER_RESET_BEFORE_STOP_M, u.ODOMETER_RESET_SPACING_M} <= resets
     # the nominal scenario (the controller's) is untouched, and so is its knowledge
     assert knowledge_of(scenario) == known
     assert known.nominal_mass_kg == train.mass_kg and not math.isclose(
@@ -128,3 +137,12 @@ def test_modes_of_the_truth_are_perturbed_and_the_known_modes_stay_nominal():
         [m.mass_kg * 1.1 for m in scenario.plant.modes])
     assert [m.mass_kg for m in knowledge_of(scenario).modes] == \
         [m.mass_kg for m in scenario.plant.modes]
+
+
+def test_the_new_parameters_have_cited_defaults_inside_their_valid_ranges():
+    for name in ('actuator_dead_time_s', 'odometry_scale_error'):
+        p = u.PARAMETERS[name]
+        assert p.source and p.minimum <= p.nominal <= p.maximum
+        values = [u.draw(u.DEFAULTS, 3, i)[name] for i in range(200)]
+        assert min(values) >= p.minimum and max(values) <= p.maximum
+        assert np.std(values) > 0.0

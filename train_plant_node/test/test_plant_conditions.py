@@ -140,6 +140,39 @@ def test_actuator_lag_rate_limit_and_power_share():
     assert applied[0] == pytest.approx(traction.max_traction_power_w / 80.0 / 4)
 
 
+def test_actuator_dead_time_delays_the_request_exactly_then_the_lag_acts():
+    # 0.25 s dead time: a 10 Hz command acts from 0.25 s, within the third period; then the lag
+    sim = TrainSimulation(scenario(plant={'actuators': {'dead_time_s': 0.25,
+                                                        'time_constant_s': 1.0}}))
+    trace = run(sim, 2, (40e3,) * 4, lambda s: s.applied[0])
+    assert trace[0] == 0.0 and trace[1] == 0.0  # after 0.1 s and 0.2 s: nothing yet
+    assert trace[2] == pytest.approx(40e3 * (1 - math.exp(-0.05)), rel=1e-9)  # 0.05 s of lag
+    assert trace[-1] == pytest.approx(40e3 * (1 - math.exp(-1.75)), rel=1e-9)
+    # a pure dead time: the force steps 0.3 s after the command (the period after 0.3 s), and
+    # back 0.3 s after the command ends
+    sim = TrainSimulation(scenario(plant={'actuators': {'dead_time_s': 0.3}}))
+    trace = run(sim, 1, lambda s: (40e3,) * 4 if s.time_s < 0.5 else (0.0,) * 4,
+                lambda s: s.applied[0])
+    assert trace[:4] == [0.0, 0.0, 0.0, 40e3] and trace[7:] == [40e3, 0.0, 0.0]
+    with pytest.raises(ConfigError, match='plant.actuators.dead_time_s'):
+        scenario(plant={'actuators': {'dead_time_s': -1.0}})
+
+
+def test_odometry_scale_error_reads_speed_and_the_distance_since_the_last_reset():
+    sensors = {'position': {'bias': 0.5, 'scale_error': 0.01, 'reset_positions_m': [100.0]},
+               'speed': {'scale_error': 0.01}}
+    sim = TrainSimulation(scenario(plant={'sensors': sensors}))
+    sim.state = sim.model.initial_state(60.0, 20.0)
+    m = sim.measured()
+    assert m.speeds[0] == pytest.approx(20.2) and m.positions[0] == pytest.approx(60.6 + 0.5)
+    sim.state = sim.model.initial_state(300.0, 20.0)  # 200 m since the reset at 100 m
+    assert sim.measured().positions[0] == pytest.approx(302.0 + 0.5)
+    assert sim.odometer_error(300.0) == pytest.approx(2.5)
+    assert sim._true_position(302.5) == pytest.approx(300.0)
+    with pytest.raises(ConfigError, match='plant.sensors.position.reset_positions_m'):
+        scenario(plant={'sensors': {'position': {'reset_positions_m': ['x']}}})
+
+
 def test_sensors_bias_quantisation_noise_dropout_and_failed_speed_sensor():
     sensors = {'seed': 11,
                'position': {'bias': 2.0, 'quantum': 0.5},

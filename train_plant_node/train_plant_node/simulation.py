@@ -7,11 +7,17 @@ dependency and is deterministic for a seed. The scenario's ``plant:`` section
 
 Actuators (one per actuated unit: per motor, or per power car): the command is limited to the
 unit's equal share of the train's traction characteristic (force and power) and of its
-emergency brake, then passes a first-order lag and a rate limit. These run at the integration
-step (at most ``max_substep_s``): the drive holds its force within a step, as a traction
+emergency brake, then passes a dead time, a first-order lag and a rate limit. These run at the
+integration step (at most ``max_substep_s``): the drive holds its force within a step, as a traction
 controller sampling at that rate does, so every model step is a zero-order hold. A failure
 (Mao et al. 2017 eqs 13-20) replaces what the unit delivers from its start time; a stuck signal
-is sampled at the middle of each integration step.
+is sampled at the middle of each integration step. The dead time delays what each drive is
+asked for (the command, or the safety functions' traction cut and service brake; not the
+emergency brake, which has its own build-up time): integration steps are split where a delayed
+request takes effect, so the delay is exact, not rounded to a step.
+
+Sensors: truth, times (1 + scale error) for a speed and for the distance run since the
+odometer's last reset (``QuantitySensor``), plus bias and white noise, quantised.
 """
 
 from __future__ import annotations
@@ -169,6 +175,10 @@ class TrainSimulation:
         self.sensors = merged_sensors(self.setup.sensors, sensors)
         self.sensors.check_cars(self.model.car_names, model_name)
         self._rng = np.random.default_rng(self.sensors.seed)
+        # The odometer misreads where the train stands (bias, scale error): the ATP's stop
+        # check takes its reading (``_track_stop``).
+        self._odometer_errs = self.sensors.position.bias != 0.0 or \
+            self.sensors.position.scale_error != 0.0
         self.stamp_ns = 0
         self.state = self.model.initial_state(scenario.run.initial_position_m)
         n = len(self.model.actuator_names)
@@ -197,7 +207,11 @@ class TrainSimulation:
         self._constant_env = not self.setup.modes and not self.setup.abrupt_changes
         settings = self.setup.actuators
         self._instant_actuators = settings.time_constant_s == 0.0 and \
-            settings.rate_limit_n_per_s == 0.0
+            settings.rate_limit_n_per_s == 0.0 and settings.dead_time_s == 0.0
+        self._dead_time_s = settings.dead_time_s
+        # What the drives were asked for and since when, (time_s, targets), oldest first: the
+        # requests still to take effect after the dead time, and the one in effect.
+        self._asked: list[tuple[float, list[float]]] = [(-math.inf, [0.0] * n)]
         # One integration step per period is possible (see ``advance``).
         self._one_step_possible = self._instant_actuators and \
             self.setup.disturbance.kind != 'random'
@@ -381,6 +395,8 @@ class TrainSimulation:
         if self._instant_actuators:
             self._drive = targets
         else:
+            if self._dead_time_s:
+                targets = self._delayed(time_s, targets)
             gain = 1.0 - math.exp(-h / settings.time_constant_s) if settings.time_constant_s \
                 else 1.0
             max_change = settings.rate_limit_n_per_s * h if settings.rate_limit_n_per_s \
@@ -388,6 +404,25 @@ class TrainSimulation:
             self._drive = [f + min(max(gain * (target - f), -max_change), max_change)
                            for f, target in zip(self._drive, targets)]
         return self._failed(self._drive, time_s, h)
+
+    def _ask(self, time_s: float, targets: list[float]) -> None:
+        """Note what the drives are asked for from ``time_s`` on (dead time)."""
+        if targets != self._asked[-1][1]:
+            self._asked.append((time_s, targets))
+
+    def _delayed(self, time_s: float, targets: list[float]) -> list[float]:
+        """What the drives act on at ``time_s``: the request of ``dead_time_s`` earlier."""
+        self._ask(time_s, targets)
+        asked, then = self._asked, time_s - self._dead_time_s + EVENT_TOLERANCE_S
+        while len(asked) > 1 and asked[1][0] <= then:
+            asked.pop(0)
+        return asked[0][1]
+
+    def _dead_time_events(self, start_s: float, end_s: float) -> list[float]:
+        """Times in (start_s, end_s) at which a delayed request takes effect."""
+        self._ask(start_s, self.targets())
+        return [t + self._dead_time_s for t, _ in self._asked
+                if start_s + EVENT_TOLERANCE_S < t + self._dead_time_s < end_s - EVENT_TOLERANCE_S]
 
     def intervention_speed(self) -> float:
         """The ATP's emergency brake intervention speed (EBI) at the lead car, m/s."""
@@ -416,10 +451,15 @@ class TrainSimulation:
         """The leg moves on once the stop's dwell has passed since the train first stood still
         at its stop (``RunSupervision.at_stop``), as long as it has stayed within the stop's
         zone: a train that starts off with the reference a moment before its own dwell is over
-        (it arrived later than the reference) is still at the station."""
+        (it arrived later than the reference) is still at the station. Where the train stands
+        is what the on-board odometer reads (``odometer_error``): the ATO stops on that reading
+        and the on-board unit reports it, so a biased odometer does not strand at a station a
+        train that the ATO stopped there."""
         run = self.supervision
         low, high = run.stop_zone(self.leg)
         position = self.lead_position()
+        if self._odometer_errs:
+            position += self.odometer_error(position)
         if not low <= position <= high:
             self._standing_since_s = None
             return
@@ -456,6 +496,8 @@ class TrainSimulation:
         events = [e for e in self._events if t + EVENT_TOLERANCE_S < e < end - EVENT_TOLERANCE_S]
         if self.setup.disturbance.kind == 'random':
             events = sorted(set(events) | set(self.setup.disturbance.switch_times(t, end)))
+        if self._dead_time_s:
+            events = sorted(set(events) | set(self._dead_time_events(t, end)))
         boundaries = sorted(set([t + k * h_nominal for k in range(1, substeps)] + events))
         boundaries = [b for b in boundaries if b < end - EVENT_TOLERANCE_S] + [end]
         for stop in boundaries:
@@ -562,6 +604,8 @@ class TrainSimulation:
         if self._packed_supervision is None:
             self._packed_supervision = (*run.packed_curve('ebi'), *run.packed_curve('permitted'))
         low, high = run.stop_zone(self.leg)
+        if self._odometer_errs:  # the zone of the odometer's reading, in true positions
+            low, high = self._true_position(low), self._true_position(high)
         atp = (np.int64(self.leg), low, high, run.STANDSTILL_MPS, *self._packed_supervision)
         traction = self.scenario.train.traction
         state = np.array(self.state, dtype=float)
@@ -591,11 +635,52 @@ class TrainSimulation:
         env = self._env if self._constant_env and self._env is not None else self.surroundings()
         return self.model.outputs(self.state, self.applied, self.stamp_ns / NS_PER_S, env)
 
+    def odometer_error(self, position_m: float) -> float:
+        """The position sensor's systematic error at a true position, m: its bias plus its
+        scale error times the distance run since the odometer's last reset point
+        (``QuantitySensor``); no noise."""
+        sensor = self.sensors.position
+        if not sensor.scale_error:
+            return sensor.bias
+        return sensor.bias + sensor.scale_error * max(
+            position_m - self._odometer_start(position_m), 0.0)
+
+    def _odometer_start(self, position_m: float) -> float:
+        """The odometer's last reset point at or behind a position: the run's initial position
+        or the last of the position sensor's ``reset_positions_m``."""
+        resets = self.sensors.position.reset_positions_m
+        i = bisect_right(resets, position_m)
+        return max(self.scenario.run.initial_position_m, resets[i - 1] if i else -math.inf)
+
+    def _true_position(self, reading_m: float) -> float:
+        """The true position at which the odometer reads ``reading_m``: x + s (x - r) + bias =
+        reading, x = r + (reading - bias - r) / (1 + s) (exact unless a reset point lies
+        within the error of the reading)."""
+        bias, s = self.sensors.position.bias, self.sensors.position.scale_error
+        x = reading_m - bias
+        if not (s and math.isfinite(x)):
+            return x
+        start = self._odometer_start(x)
+        return x if x <= start else start + (x - start) / (1.0 + s)
+
+    def _scaled(self, values: Sequence[float], sensor: QuantitySensor,
+                distance: bool) -> Sequence[float]:
+        """The truth as the scale error reads it: (1 + s) v, or x + (the systematic error of
+        ``odometer_error`` without its bias) for a position (``distance``)."""
+        if not sensor.scale_error:
+            return values
+        if distance:
+            bias = sensor.bias
+            return [x + self.odometer_error(x) - bias for x in values]
+        return [(1.0 + sensor.scale_error) * v for v in values]
+
     def _measure(self, values: Sequence[float], sensor: QuantitySensor,
-                 cars: Sequence[str]) -> tuple[float, ...]:
-        """Truth + bias + white noise, quantised; NaN when dropped out or failed."""
+                 cars: Sequence[str], distance: bool = False) -> tuple[float, ...]:
+        """Truth with its scale error, + bias + white noise, quantised; NaN when dropped out
+        or failed."""
         if sensor.ideal:
             return tuple(values)
+        values = self._scaled(values, sensor, distance)
         n = len(values)
         noise = (self._rng.normal(0.0, sensor.noise_std, n) if sensor.noise_std
                  else np.zeros(n))
@@ -619,7 +704,8 @@ class TrainSimulation:
         if s.ideal:
             return truth
         cars = truth.car_names
-        return TrainState(truth.stamp_ns, cars, self._measure(truth.positions, s.position, cars),
+        return TrainState(truth.stamp_ns, cars,
+                          self._measure(truth.positions, s.position, cars, distance=True),
                           self._measure(truth.speeds, s.speed, cars),
                           self._measure(truth.accelerations, s.acceleration, cars), truth.forces)
 
