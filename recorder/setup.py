@@ -24,7 +24,7 @@ setup(
         'recording, and serves the running graph to Foxglove live.'
     ),
     license='Apache-2.0',
-    tests_require=['pytest', 'PyYAML', 'mcap', 'mcap-ros2-support', 'rosbags'],
+    tests_require=['pytest', 'PyYAML', 'mcap', 'mcap-ros2-support', 'rosbags', 'tornado'],
     entry_points={
         'console_scripts': [
             'recorder = recorder.node:main',

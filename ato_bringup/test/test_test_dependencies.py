@@ -27,6 +27,8 @@ LIBRARIES = {
     'rosbags': ('python3-rosbags-pip', 'rosbags'),
     'rclpy': ('rclpy', None),
     'grimp': (None, 'grimp'),
+    'tornado': ('python3-tornado', 'tornado'),
+    'foxglove': (None, 'foxglove-sdk'),
 }
 DECLARING = ('depend', 'exec_depend', 'test_depend')
 
