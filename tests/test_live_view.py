@@ -4,6 +4,7 @@ at its stamp, and the view holds a ROS subscription only while a client watches.
 
 import asyncio
 import json
+import os
 import queue
 import re
 import struct
@@ -16,6 +17,7 @@ from rclpy.serialization import deserialize_message
 from tornado.websocket import websocket_connect
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from ato_bringup.runner import run_lockstep
 from ato_bringup.stack import Stack, StackConfig, executable_path
 from ato_common.conventions import TOPICS
 from ato_common.ros import qos_profile
@@ -154,3 +156,58 @@ def test_a_port_that_is_not_a_port_is_refused(tmp_path):
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2
     assert '70000 is not a port number' in result.stderr
+
+
+def test_a_client_watches_a_lockstep_run(tmp_path, domain_id):
+    """During a lockstep run, a client subscribed to the train's state receives it, decodable
+    and at its stamps; the run is not held up by the view."""
+    state = TOPICS['state']
+    topic = '/' + state.name
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED='1')
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    env.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'SHM')  # as the stack's own processes
+    log = tmp_path / 'live.log'
+    with open(log, 'wb') as out:
+        live = subprocess.Popen([executable_path('recorder', 'live'), '--port', '0', topic],
+                                stdout=out, stderr=subprocess.STDOUT, env=env,
+                                stdin=subprocess.DEVNULL)
+    client = None
+    try:
+        deadline = time.monotonic() + 30
+        found = None
+        while found is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+            found = re.search(r'ws://127\.0\.0\.1:(\d+)', log.read_text(errors='replace'))
+        assert found, log.read_text(errors='replace')
+        client = FoxgloveClient(f'ws://127.0.0.1:{found.group(1)}')
+
+        def watch(stack):
+            channel = client.next(advertised(topic), 30, lambda: stack.spin_for(0.05))
+            client.send({'op': 'subscribe',
+                         'subscriptions': [{'id': 3, 'channelId': channel['id']}]})
+            return channel['id']
+
+        outcome = run_lockstep(StackConfig(scenario='short_line', domain_id=domain_id,
+                                           end_time_s=60.0, log_dir=tmp_path / 'logs'),
+                               actions={5.0: watch})
+        assert outcome.metrics.simulated_time_s >= 59.0
+        stamps = []
+        while True:
+            try:
+                message = client.received.get(timeout=2.0)
+            except queue.Empty:
+                break
+            data = message_data(3)(message)
+            if data is not None:
+                log_time, payload = data
+                decoded = deserialize_message(payload, JointTrajectory)
+                stamp = decoded.header.stamp.sec * 1_000_000_000 + decoded.header.stamp.nanosec
+                assert log_time == stamp
+                stamps.append(stamp)
+        assert len(stamps) >= 100, len(stamps)  # 10 Hz steps from about 5 s to 60 s
+        assert stamps == sorted(stamps) and stamps[-1] >= 59_000_000_000
+    finally:
+        if client is not None:
+            client.close()
+        live.send_signal(2)
+        assert live.wait(timeout=30) == 0, log.read_text(errors='replace')
