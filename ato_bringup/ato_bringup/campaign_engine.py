@@ -412,9 +412,16 @@ def run_metrics(run, dt: float) -> dict:
         'atp_interventions': float(run.atp_interventions),
         'watchdog_events': float(run.watchdog_events),
         # what went wrong, with the first occurrence of each kind (ato_bringup.run_events)
-        'events': run_events(run.scenario, m, stations_of(run.plan), run.times_s,
-                             run.positions, atp_times_s=run.atp_times_s).brief(),
+        'events': events_of(run, m),
     }
+
+
+def events_of(run, metrics) -> str:
+    """What went wrong in an OfflineRun, each kind with its first occurrence (ATP
+    interventions, missed windows, stopping errors beyond the platform tolerance;
+    ``ato_bringup.run_events``), in brief."""
+    return run_events(run.scenario, metrics, stations_of(run.plan), run.times_s, run.positions,
+                      atp_times_s=run.atp_times_s).brief()
 
 
 def unfinished(run) -> str:

@@ -62,9 +62,11 @@ from ato_bringup.campaign_engine import (
     FASTER_RATES_HZ,
     RESTART,
     RunTimeout,
+    events_of,
     execute,
     failed_measurement,
     plant_model_for,
+    unfinished,
     with_time_limit,
     worker_address,
 )
@@ -79,8 +81,6 @@ from profile_node.planner import plan_reference
 #: the results page of the docs that `make compare` rewrites
 DEFAULT_RESULTS_PAGE = Path('docs/results/comparison.md')
 DEFAULT_OUT = Path('runs') / 'compare'
-#: a run whose speed error ever exceeds this has diverged (km/h)
-DIVERGED_SPEED_ERROR_KMH = 50.0
 #: the ranking's stop accuracy constraint (m): the usual ATO platform-stop tolerance
 STOP_ERROR_LIMIT_M = 0.5
 #: scenario on which ``make demo`` takes the best law, and the law used without a comparison
@@ -200,11 +200,13 @@ def run_job(job: Job) -> dict:
             stop_error_m=stop_error, stop_errors_m=metrics.stop_errors_m,
             traction_energy_kwh=metrics.traction_energy_kwh, max_jerk_mps3=jerk,
             step_p50_us=float(np.percentile(run.step_times_s, 50) * 1e6),
-            step_p99_us=float(np.percentile(run.step_times_s, 99) * 1e6))
-        if metrics.max_speed_error_kmh > DIVERGED_SPEED_ERROR_KMH:
-            status = 'diverged'
-            reason = (f'speed error reached {metrics.max_speed_error_kmh:.1f} km/h '
-                      f'(> {DIVERGED_SPEED_ERROR_KMH:g})')
+            step_p99_us=float(np.percentile(run.step_times_s, 99) * 1e6),
+            events=events_of(run, metrics))
+        # diverged as in a campaign: the train did not finish its journey (a large error alone
+        # is the law's behaviour, shown by the metrics)
+        why = unfinished(run)
+        if why:
+            status, reason = 'diverged', f'did not finish: {why}'
     if held:
         if status == 'ok':
             status = 'faults'

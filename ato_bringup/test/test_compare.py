@@ -32,6 +32,13 @@ class RunawayLaw(PidLaw):
         return LawOutput(1e9, {})  # full traction whatever the reference: the train runs away
 
 
+class StandingLaw(PidLaw):
+    name = 'standing'
+
+    def step(self, measurement, reference):
+        return LawOutput(-1e9, {})  # full brake whatever the reference: the train never leaves
+
+
 class HoldingLaw(PidLaw):
     name = 'holding'
 
@@ -72,15 +79,21 @@ def test_a_law_that_needs_a_faster_rate_runs_at_it_over_a_window():
 
 
 def test_a_failing_or_diverging_law_is_shown_with_its_reason(monkeypatch, tmp_path):
-    for cls in (ExplodingLaw, RunawayLaw, HoldingLaw):
+    for cls in (ExplodingLaw, RunawayLaw, StandingLaw, HoldingLaw):
         monkeypatch.setitem(LAWS, cls.name, cls)
     jobs = [compare.Job('short_line', law, 'point_mass', 10.0)
-            for law in ('exploding', 'runaway', 'holding', 'pid')]
+            for law in ('exploding', 'runaway', 'standing', 'holding', 'pid')]
     results = {r['law']: r for r in compare.run_all(jobs, processes=1)}
     assert results['exploding']['status'] == 'error'
     assert 'ZeroDivisionError: estimate reached zero' in results['exploding']['reason']
-    assert results['runaway']['status'] == 'diverged'
-    assert 'speed error reached' in results['runaway']['reason']
+    # the ATP brakes the runaway train to a stop before each end of authority: it finishes,
+    # with its interventions and stopping errors in the events, and is never ranked
+    assert results['runaway']['status'] == 'ok'
+    assert 'ATP' in results['runaway']['events']
+    assert results['runaway']['stop_error_m'] > 0.5
+    assert results['standing']['status'] == 'diverged'
+    assert 'did not finish: the train never stood within its length' in \
+        results['standing']['reason']
     assert results['holding']['status'] == 'faults'
     assert 'steps held: holding produced a non-finite force' in results['holding']['reason']
     assert results['pid']['status'] == 'ok'
@@ -92,7 +105,7 @@ def test_a_failing_or_diverging_law_is_shown_with_its_reason(monkeypatch, tmp_pa
     text = compare.markdown(list(results.values()), [], ['short_line'], 'now', 'make compare')
     assert ('| exploding | point_mass, 10 Hz | error (ZeroDivisionError: estimate reached zero) |'
             in text)
-    assert '| runaway | point_mass, 10 Hz | diverged (speed error reached' in text
+    assert '| standing | point_mass, 10 Hz | diverged (did not finish' in text
     assert 'Best: **pid**' in text   # the ranking never picks a failed run
 
 
