@@ -203,6 +203,8 @@ class TrainSimulation:
             self.setup.disturbance.kind != 'random'
         self._applied_for = None  # the state ``applied`` was last computed for
         self._packed_supervision = None  # the ATP's tables for ``periods.py``'s kernels
+        self._leg_tables = (None, None, None, None)  # (supervision, leg, its EBI, stop zone)
+        self._sensors_ideal = (None, False)    # (sensors, sensors.ideal): asked once per setup
         self._update_applied()
 
     # --- time and state ----------------------------------------------------------------------
@@ -251,8 +253,8 @@ class TrainSimulation:
         if len(forces) != len(names):
             self.rejected_commands += 1
             raise CommandRejected(f'{len(forces)} forces for {len(names)} actuators {list(names)}')
-        values = tuple(float(f) for f in forces)
-        if not all(math.isfinite(f) for f in values):
+        values = tuple(map(float, forces))
+        if not all(map(math.isfinite, values)):
             self.rejected_commands += 1
             raise CommandRejected(f'non-finite force in {list(values)}')
         self._hold(values)
@@ -390,8 +392,19 @@ class TrainSimulation:
         return self._failed(self._drive, time_s, h)
 
     def intervention_speed(self) -> float:
-        """The ATP's emergency brake intervention speed (EBI) at the lead car, m/s."""
-        return self.supervision.sampled_curve('ebi', self.lead_position(), self.leg)
+        """The ATP's emergency brake intervention speed (EBI) at the lead car, m/s:
+        ``supervision.sampled_curve('ebi', position, leg)``, the leg's table looked up once."""
+        return self._leg_lookups()[0](self.lead_position())
+
+    def _leg_lookups(self) -> tuple:
+        """(the sampled EBI, the stop zone) of the leg under supervision, looked up again
+        only when the leg moves on (the supervision's tables are built once and kept)."""
+        run, leg, ebi, zone = self._leg_tables
+        if leg != self.leg or run is not self.supervision:
+            run, leg = self.supervision, self.leg
+            ebi, zone = run.legs[leg].sampled('ebi'), run.stop_zone(leg)
+            self._leg_tables = (run, leg, ebi, zone)
+        return ebi, zone
 
     def _supervise(self) -> None:
         speed = self.lead_speed()
@@ -418,7 +431,7 @@ class TrainSimulation:
         zone: a train that starts off with the reference a moment before its own dwell is over
         (it arrived later than the reference) is still at the station."""
         run = self.supervision
-        low, high = run.stop_zone(self.leg)
+        low, high = self._leg_lookups()[1]
         position = self.lead_position()
         if not low <= position <= high:
             self._standing_since_s = None
@@ -616,7 +629,11 @@ class TrainSimulation:
         """What the on-board sensors report; a missing measurement is NaN."""
         truth = truth or self.truth()
         s = self.sensors
-        if s.ideal:
+        sensors, ideal = self._sensors_ideal
+        if sensors is not s:
+            ideal = s.ideal
+            self._sensors_ideal = (s, ideal)
+        if ideal:
             return truth
         cars = truth.car_names
         return TrainState(truth.stamp_ns, cars, self._measure(truth.positions, s.position, cars),
