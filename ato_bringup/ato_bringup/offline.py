@@ -153,6 +153,13 @@ def scenario_key(scenario: Scenario) -> str | None:
     return hashlib.sha256(repr(description).encode()).hexdigest()
 
 
+def clear_plan_cache() -> None:
+    """Forget every cached plan and sampled reference of this process (for a benchmark of
+    the planning, or after changing what the planner reads from outside the scenario)."""
+    _plans.clear()
+    _references.clear()
+
+
 def _remember(cache: OrderedDict, key, value, size: int):
     cache[key] = value
     cache.move_to_end(key)
