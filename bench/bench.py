@@ -7,7 +7,11 @@
 2. Controller step time (p50, p99, max) of every law on the same scenario, offline.
 3. Plant simulation speed standalone (simulated seconds per CPU second, one core), driven period
    by period and given all its commands at once (``TrainSimulation.run_commands``).
-4. Campaign throughput (ato_bringup.campaign): runs per minute of a small campaign with 1 and 2
+4. The offline closed loop (ato_bringup.offline, what campaigns run thousands of times): the
+   real-time factor of every law that applies to short_line (the PID and the adaptive laws) on
+   one core, with the plan cached and with the planning included, and the planning time of
+   every built-in scenario.
+5. Campaign throughput (ato_bringup.campaign): runs per minute of a small campaign with 1 and 2
    Dask workers and their ratio, and the engine's overhead per run (Dask, the time limit, the
    Parquet row) against the bare offline loop of the same runs.
 """
@@ -26,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ato_bringup.compare import plan_jobs
-from ato_bringup.offline import run_offline
+from ato_bringup.offline import clear_plan_cache, run_offline
 from ato_bringup.provenance import results_page_provenance, write_results_page
 from ato_bringup.runner import run_lockstep
 from ato_bringup.stack import StackConfig
@@ -123,6 +127,69 @@ def plant_speed(scenario_name: str, model: str = 'point_mass', train: str | None
     return float(np.median(speeds))
 
 
+#: the scenario of the offline loop's figures (issue 20: pid at least 4000x on it)
+OFFLINE_SCENARIO = 'short_line'
+
+
+def _cpu_time_of(run, repeats: int) -> float:
+    """Median CPU time of this process (one core) of ``repeats`` calls of ``run``, with the
+    objects alive before each frozen out of the cyclic garbage collector (see ``plant_speed``)."""
+    times = []
+    for _ in range(repeats):
+        gc.collect()
+        gc.freeze()
+        started = time.process_time()
+        run()
+        times.append(time.process_time() - started)
+        gc.unfreeze()
+    return float(np.median(times))
+
+
+def offline_loop_speed(repeats: int = 3) -> list[str]:
+    """Real-time factor (simulated time / CPU time of one core) of the offline closed loop of
+    every law that applies to OFFLINE_SCENARIO, as ``make compare`` runs it (its plant model and
+    rate): with the plan cached (as a campaign's runs after the first of each scenario take it),
+    and with the planning included (the plan cache cleared before each run). Markdown rows."""
+    jobs, _ = plan_jobs([OFFLINE_SCENARIO])
+    rows = ['| law | plant, rate | steps | plan cached | planning included |',
+            '|---|---|---|---|---|']
+    print('\n'.join(rows), flush=True)
+    for job in jobs:
+        def run(job=job):
+            return run_offline(load_scenario(job.scenario), job.law, model=job.model,
+                               controller_rate_hz=job.rate_hz, end_time_s=job.end_time_s)
+
+        done = run()  # compiles, and caches the plan
+        simulated_s = float(done.times_s[-1])
+        cached = _cpu_time_of(run, repeats)
+
+        def cold(run=run):
+            clear_plan_cache()
+            run()
+        planning = _cpu_time_of(cold, repeats)
+        rows.append(f'| `{job.law}` | {job.model}, {job.rate_hz:g} Hz | {done.times_s.size} | '
+                    f'{simulated_s / cached:.0f}x | {simulated_s / planning:.0f}x |')
+        print(rows[-1], flush=True)
+    return rows
+
+
+def planning_times(repeats: int = 3) -> list[str]:
+    """CPU time of ``plan_reference`` (profile_node.planner) per built-in scenario, median of
+    ``repeats``: what a run pays once per scenario content with the offline loop's plan cache,
+    and on every run without it. Markdown rows."""
+    from profile_node.planner import plan_reference
+    rows = ['| scenario | planning time | target curve |', '|---|---|---|']
+    print('\n'.join(rows), flush=True)
+    for name in builtin_scenarios():
+        scenario = load_scenario(name)
+        plan = plan_reference(scenario)
+        elapsed = _cpu_time_of(lambda scenario=scenario: plan_reference(scenario), repeats)
+        rows.append(f'| `{name}` | {1e3 * elapsed:.1f} ms | '
+                    f'{plan.trajectory.end_time - plan.trajectory.start_time:.0f} s |')
+        print(rows[-1], flush=True)
+    return rows
+
+
 def plant_accuracy(model: str, preset: str, total_n: float, seconds: float = 600.0) -> float:
     """Largest speed error against DOP853 (rtol 1e-12) over a run with varying commands (kept
     below the power limit, which the plant re-evaluates within a command period)."""
@@ -212,7 +279,7 @@ def main() -> int:
     parser.add_argument('--results-page', type=Path, default=None,
                         help='also write the figures, with date, machine and commit, to this '
                         'results page of the docs (make bench: docs/results/benchmarks.md)')
-    parser.add_argument('--only', choices=('campaign',), default=None,
+    parser.add_argument('--only', choices=('campaign', 'offline'), default=None,
                         help='measure only this section (printed, no results page)')
     args = parser.parse_args()
     measured = (results_page_provenance(args.results_page)
@@ -228,6 +295,21 @@ def main() -> int:
         'on 2 cores: at least 1.8.', '',
         '| engine | runs | wall time | CPU time | runs per minute | overhead, wall | '
         'overhead, CPU |', '|---|---|---|---|---|---|---|']
+    offline_section = [
+        '## Offline closed loop', '',
+        f'`ato_bringup.offline.run_offline` (what `make compare` and the campaigns run) of every '
+        f'law that applies to `{OFFLINE_SCENARIO}`, the whole run, at the rate `make compare` '
+        'gives it; real-time factor = simulated time / CPU time of one core, median of 3. Plan '
+        'cached: the target curve planned once per scenario content and reused (a campaign\'s '
+        'runs of one scenario share it); planning included: the plan cache cleared before each '
+        'run. Goal for `pid`: at least 4000x with the plan cached.', '']
+    if args.only == 'offline':
+        page.add(*offline_section)
+        offline_loop_speed()
+        page.add('', 'Planning time per built-in scenario (`plan_reference`, CPU, median of 3):',
+                 '')
+        planning_times()
+        return 0
     if args.only == 'campaign':
         page.add(f'Scenario `{args.scenario}`.', '', *campaign_section)
         page.add(*campaign_throughput(args.scenario))
@@ -263,6 +345,10 @@ def main() -> int:
                                 'CRH2 4-car unit, exact coupler dynamics, ETDRK4')):
         page.add(f'| `{model}` ({what}) | {plant_speed(args.scenario, model, train):.0f}x | '
                  f'{plant_speed(args.scenario, model, train, batched=True):.0f}x |')
+    page.add('', *offline_section)
+    page.lines += offline_loop_speed()
+    page.add('', 'Planning time per built-in scenario (`plan_reference`, CPU, median of 3):', '')
+    page.lines += planning_times()
     page.add('', '## Plant accuracy', '',
              'Largest speed error against DOP853 (rtol 1e-12), 600 s, commands changing every '
              'second, across grade, curve and tunnel boundaries.', '',

@@ -11,16 +11,20 @@ nominal ``scenario``: no drawn value reaches it."""
 
 from __future__ import annotations
 
+import hashlib
 import math
 import time
-from dataclasses import dataclass, field
+import types
+from collections import OrderedDict
+from dataclasses import dataclass, field, fields, is_dataclass
+from enum import Enum
 
 import numpy as np
 
 from ato_common.knowledge import knowledge_of
 from ato_common.metrics import RunMetrics, StopSample, compute_metrics
 from ato_common.scenario import Scenario
-from ato_common.types import nanoseconds, seconds
+from ato_common.types import NS_PER_S, nanoseconds, seconds
 from ato_common.uncertainty import perturbed
 from ato_controller_node.host import ControllerHost
 from profile_node.planner import Plan, plan_reference
@@ -76,6 +80,124 @@ def run_end_time_s(scenario: Scenario, plan: Plan) -> float:
     return plan.trajectory.end_time + scenario.run.settle_time_s
 
 
+# --- the plan, once per scenario --------------------------------------------------------------
+#
+# A campaign runs the same nominal scenario thousands of times (every law, every draw: the draw
+# perturbs only the plant's truth), and the target curve is a function of the scenario alone
+# (``plan_reference(scenario)``). The plan is therefore cached here, at the call site, under a
+# digest of the scenario's whole content: two scenarios loaded separately share it, two that
+# differ anywhere (even under the same name) do not. The references the loop samples at its
+# control instants are a function of the plan and the instants: cached beside it.
+
+#: plans kept per process (each a few hundred kB), least recently used dropped first
+PLAN_CACHE_SIZE = 16
+#: sampled references kept per process, and the longest run whose samples are kept (a longer
+#: one, e.g. 200 Hz over a whole line, samples them as it goes)
+REFERENCE_CACHE_SIZE = 8
+REFERENCE_CACHE_MAX_STEPS = 50_000
+
+_plans: OrderedDict[str, Plan] = OrderedDict()
+_references: OrderedDict[tuple, list] = OrderedDict()
+
+
+class _Undescribable(TypeError):
+    """A value whose content ``content_key`` cannot describe (its object would be the key)."""
+
+
+def content_key(value):
+    """A canonical, hashable description of a value's content: equal for equal content, unequal
+    wherever a computation could tell the values apart (0.0 and -0.0, 1 and 1.0 and True, a
+    tuple and a list; two closures of one function are equal only with equal captured values).
+    Raises ``_Undescribable`` for an object it cannot look into (no ``__dict__``, not a
+    dataclass, a container, a number, a string, an array or a function)."""
+    if value is None or isinstance(value, str):
+        return value
+    if isinstance(value, (bool, np.bool_)):
+        return ('b', bool(value))
+    if isinstance(value, (int, np.integer)):
+        return ('i', int(value))
+    if isinstance(value, (float, np.floating)):
+        return ('f', float(value).hex())
+    if isinstance(value, (tuple, list)):
+        return ('t' if isinstance(value, tuple) else 'l', *(content_key(v) for v in value))
+    if isinstance(value, dict):
+        return ('d', *sorted(((repr(content_key(k)), content_key(v))
+                              for k, v in value.items()), key=lambda item: item[0]))
+    if isinstance(value, (set, frozenset)):
+        return ('set', *sorted(repr(content_key(v)) for v in value))
+    if isinstance(value, np.ndarray):
+        return ('a', value.dtype.str, value.shape,
+                hashlib.sha256(np.ascontiguousarray(value).tobytes()).hexdigest())
+    if isinstance(value, Enum):
+        return ('e', type(value).__qualname__, value.name)
+    if isinstance(value, types.FunctionType):
+        code = value.__code__
+        return ('fn', value.__module__, value.__qualname__, code.co_code, content_key(
+            code.co_consts), content_key(value.__defaults__),
+            content_key(tuple(c.cell_contents for c in value.__closure__ or ())))
+    kind = f'{type(value).__module__}.{type(value).__qualname__}'
+    if is_dataclass(value):
+        return (kind, *((f.name, content_key(getattr(value, f.name))) for f in fields(value)))
+    if hasattr(value, '__dict__') and not hasattr(type(value), '__slots__'):
+        return (kind, content_key(vars(value)))
+    raise _Undescribable(f'{kind} has no content to key a cache by')
+
+
+def scenario_key(scenario: Scenario) -> str | None:
+    """The digest of a scenario's whole content (None if some part of it cannot be described:
+    such a scenario is planned on every run)."""
+    try:
+        description = content_key(scenario)
+    except _Undescribable:
+        return None
+    return hashlib.sha256(repr(description).encode()).hexdigest()
+
+
+def clear_plan_cache() -> None:
+    """Forget every cached plan and sampled reference of this process (for a benchmark of
+    the planning, or after changing what the planner reads from outside the scenario)."""
+    _plans.clear()
+    _references.clear()
+
+
+def _remember(cache: OrderedDict, key, value, size: int):
+    cache[key] = value
+    cache.move_to_end(key)
+    while len(cache) > size:
+        cache.popitem(last=False)
+    return value
+
+
+def cached_plan(scenario: Scenario, key: str | None = None) -> Plan:
+    """``plan_reference(scenario)``, planned once per scenario content in this process."""
+    key = key or scenario_key(scenario)
+    if key is None:
+        return plan_reference(scenario)
+    plan = _plans.get(key)
+    if plan is None:
+        return _remember(_plans, key, plan_reference(scenario), PLAN_CACHE_SIZE)
+    _plans.move_to_end(key)
+    return plan
+
+
+def _sampled_references(plan: Plan, key: str | None, period_ns: int, steps: int) -> list | None:
+    """``plan.trajectory.at`` at the run's control instants k * period (k = 0..steps), as the
+    simulation's clock gives them (integer nanoseconds over 1e9); None for a run too long to
+    keep them (it samples them step by step)."""
+    if steps + 1 > REFERENCE_CACHE_MAX_STEPS:
+        return None
+    at = plan.trajectory.at
+    if key is None:
+        return [at(k * period_ns / NS_PER_S) for k in range(steps + 1)]
+    entry = (key, period_ns, steps)
+    references = _references.get(entry)
+    if references is None:
+        references = _remember(_references, entry,
+                               [at(k * period_ns / NS_PER_S) for k in range(steps + 1)],
+                               REFERENCE_CACHE_SIZE)
+    return references
+
+
 def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
                 switches: dict[float, str] | None = None,
                 sensors: SensorSettings = SensorSettings(), model: str = 'point_mass',
@@ -84,48 +206,71 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
     """Run ``controller`` on ``scenario`` with the plant ``model``; ``switches`` maps times to
     law names selected then; ``end_time_s`` and ``controller_rate_hz`` override the scenario's
     (a law that must run faster than a node can, e.g. Mao et al.'s feedback linearisation);
-    ``uncertainty``: the drawn values the plant's truth is perturbed by (None: nominal)."""
-    plan = plan_reference(scenario)
+    ``uncertainty``: the drawn values the plant's truth is perturbed by (None: nominal). The
+    plan comes from this process's cache of plans (``cached_plan``)."""
+    key = scenario_key(scenario)
+    plan = cached_plan(scenario, key)
     period_ns = nanoseconds(1.0 / (controller_rate_hz or scenario.run.controller_rate_hz))
     truth_scenario = perturbed(scenario, uncertainty) if uncertainty is not None else scenario
     sim = TrainSimulation(truth_scenario, model, sensors=sensors, **model_options)
     host = ControllerHost(knowledge_of(scenario), seconds(period_ns), controller, settings)
     end = end_time_s if end_time_s is not None else run_end_time_s(scenario, plan)
     steps = int(end * 1e9 // period_ns)
+    references = _sampled_references(plan, key, period_ns, steps)
+    sampled = references is not None
+    if not sampled:
+        references = []  # sampled as the run goes
+    at, add_reference = plan.trajectory.at, references.append
     pending = sorted((switches or {}).items())
-    rows, car_positions, car_speeds, actuator_forces, step_times = [], [], [], [], []
+    count = steps + 1
+    times = np.empty(count)
+    forces = np.empty(count)
+    step_times = np.empty(count)
+    saturated = np.empty(count, dtype=bool)
+    car_positions, car_speeds, actuator_forces = [], [], []
     laws, estimates, faults = [], [], []
     watchdog_events = 0
-    saturated = []
     atp_times = []
-    for _ in range(steps + 1):
+    # Hoisted out of the loop: bound methods and the appends (one attribute look-up each).
+    truth_of, measured_of, measurement_of = sim.truth, sim.measured, host.measurement
+    step, command, advance = host.step, sim.apply_command, sim.advance
+    clock, fsum = time.perf_counter, math.fsum
+    add_positions, add_speeds, add_forces = (car_positions.append, car_speeds.append,
+                                             actuator_forces.append)
+    add_law, add_estimates, add_fault = laws.append, estimates.append, faults.append
+    for k in range(count):
         t = sim.time_s
         while pending and pending[0][0] <= t:
             host.select(pending.pop(0)[1])
-        truth = sim.truth()
-        measured = sim.measured(truth)
-        reference = plan.trajectory.at(t)
-        measurement = host.measurement(t, measured)  # with the known mode, from the knowledge
-        started = time.perf_counter()
-        result = host.step(measurement, reference)
-        step_times.append(time.perf_counter() - started)
-        sim.apply_command(result.forces_n)
-        rows.append((t, truth.positions[0], truth.speeds[0], math.fsum(sim.applied),
-                     reference.position, reference.speed, reference.acceleration))
-        car_positions.append(truth.positions)
-        car_speeds.append(truth.speeds)
-        actuator_forces.append(sim.applied)
-        laws.append(result.law)
-        estimates.append(dict(result.estimates))
-        faults.append(result.fault)
-        saturated.append(result.saturated)
+        truth = truth_of()
+        if sampled:
+            reference = references[k]
+        else:
+            reference = at(t)
+            add_reference(reference)
+        measurement = measurement_of(t, measured_of(truth))
+        started = clock()
+        result = step(measurement, reference)
+        step_times[k] = clock() - started
+        command(result.forces_n)
+        applied = sim.applied
+        times[k] = t
+        forces[k] = fsum(applied)
+        add_positions(truth.positions)
+        add_speeds(truth.speeds)
+        add_forces(applied)
+        add_law(result.law)
+        add_estimates(dict(result.estimates))
+        add_fault(result.fault)
+        saturated[k] = result.saturated
         watchdog_events += sim.watchdog != NORMAL
         interventions = sim.atp_interventions
-        sim.advance(period_ns)
+        advance(period_ns)
         if sim.atp_interventions > interventions:
             atp_times.append(sim.time_s)
-    data = np.array(rows)
-    return OfflineRun(scenario, plan, *data.T, np.array(car_positions), np.array(car_speeds),
-                      np.array(actuator_forces), np.array(step_times), laws, estimates, faults,
-                      sim.atp_interventions, watchdog_events, np.array(saturated, dtype=bool),
-                      tuple(atp_times))
+    positions, speeds = np.array(car_positions), np.array(car_speeds)
+    ref = np.array([(r.position, r.speed, r.acceleration) for r in references])
+    return OfflineRun(scenario, plan, times, positions[:, 0].copy(), speeds[:, 0].copy(),
+                      forces, ref[:, 0].copy(), ref[:, 1].copy(), ref[:, 2].copy(), positions,
+                      speeds, np.array(actuator_forces), step_times, laws, estimates, faults,
+                      sim.atp_interventions, watchdog_events, saturated, tuple(atp_times))

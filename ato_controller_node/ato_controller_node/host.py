@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from math import isfinite
 from typing import Any, Mapping
 
 from ato_common.knowledge import TrainKnowledge
@@ -62,6 +63,9 @@ class ControllerHost:
         self._has_commanded = False
         self.faults = 0
         self.mode = 0  # the known operating mode, kept while it cannot be determined
+        self._actuators = len(train.actuator_names)  # the knowledge is frozen
+        self._fit = (None, None, None, None)  # (law, knowledge, cars, law.fits' reason) checked
+        self._decay = (None, None, 1.0)   # (dt, time constant, the offset's decay per step)
 
     def measurement(self, time_s: float, state: TrainState) -> Measurement:
         """The law's measurement of a measured ``state`` at run time ``time_s``, with the
@@ -102,11 +106,30 @@ class ControllerHost:
     def settings(self, law: str):
         return self._settings[law]
 
+    def _fits(self, law: ControlLaw) -> str | None:
+        """``law.fits(self.train, self.measured_cars)``, asked again only when the law, the
+        knowledge or the measured cars change (it depends on nothing else)."""
+        cached_law, train, cars, reason = self._fit
+        if cached_law is not law or train is not self.train or cars != self.measured_cars:
+            reason = law.fits(self.train, self.measured_cars)
+            self._fit = (law, self.train, self.measured_cars, reason)
+        return reason
+
+    def _offset_decay(self) -> float:
+        """exp(-dt / bumpless_time_constant_s), computed again when either changes (the node
+        sets the time constant at run time)."""
+        dt, time_constant, decay = self._decay
+        if dt != self.dt or time_constant != self.bumpless_time_constant_s:
+            dt, time_constant = self.dt, self.bumpless_time_constant_s
+            decay = math.exp(-dt / time_constant)
+            self._decay = (dt, time_constant, decay)
+        return decay
+
     def step(self, measurement: Measurement, reference: ReferencePoint) -> StepResult:
         law = self.law
         if measurement.car_positions:
             self.measured_cars = measurement.car_count
-        reason = law.fits(self.train, self.measured_cars)
+        reason = self._fits(law)
         if reason:
             self.faults += 1
             return self._held(law, f'{reason}; holding the last command', reference,
@@ -122,32 +145,34 @@ class ControllerHost:
             law.reset(measurement, reference,
                       self.last_force_n if self._has_commanded else None)
         output = law.step(measurement, reference)
-        n = len(self.train.actuator_names)
-        if output.forces_n is not None and len(output.forces_n) != n:
+        n = self._actuators
+        law_forces = output.forces_n
+        if law_forces is not None and len(law_forces) != n:
             self.faults += 1
-            return self._held(law, f'{law.name} returned {len(output.forces_n)} forces for {n} '
+            return self._held(law, f'{law.name} returned {len(law_forces)} forces for {n} '
                               'actuators; holding the last command', reference, measurement)
-        if not all(math.isfinite(f) for f in (output.force_n, *(output.forces_n or ()))):
+        if not (isfinite(output.force_n) and (not law_forces or all(map(isfinite, law_forces)))):
             self.faults += 1
             self.started = False  # restart the law from the current state at the next step
             return self._held(law, f'{law.name} produced a non-finite force; holding the last '
                               'command', reference, measurement)
-        law_total = sum(output.forces_n) if output.forces_n is not None else output.force_n
+        law_total = sum(law_forces) if law_forces is not None else output.force_n
         if not self.started:
             # Nothing to be bumpless to before the first command.
             self._offset_n = self.last_force_n - law_total if self._has_commanded else 0.0
             self.started = True
         else:
-            self._offset_n *= math.exp(-self.dt / self.bumpless_time_constant_s)
-        offset_each = self._offset_n / n
-        law_each = output.forces_n if output.forces_n is not None else (law_total / n,) * n
+            self._offset_n *= self._offset_decay()
+        offset = self._offset_n
+        offset_each = offset / n
+        law_each = law_forces if law_forces is not None else (law_total / n,) * n
         wanted_each = [f + offset_each for f in law_each]
         lowest, highest = self.train.actuator_limits_at(self._speed_for_limits(
             measurement, reference, output.estimates))
-        forces = tuple(min(max(f, lowest), highest) for f in wanted_each)
+        forces = tuple([min(max(f, lowest), highest) for f in wanted_each])
         total, wanted = sum(forces), sum(wanted_each)
-        law.after_saturation(wanted - self._offset_n, total - self._offset_n,
-                             tuple(f - offset_each for f in forces), applied_n=total)
+        law.after_saturation(wanted - offset, total - offset,
+                             tuple([f - offset_each for f in forces]), applied_n=total)
         self.last_force_n, self.last_forces_n = total, forces
         self._has_commanded = True
         return self._result(total, forces, wanted, law, dict(output.estimates), reference,
@@ -157,12 +182,12 @@ class ControllerHost:
     def _missing_input(law: ControlLaw, measurement: Measurement,
                        reference: ReferencePoint) -> str:
         """Why the law cannot step on these inputs ('' if it can)."""
-        if not all(math.isfinite(x) for x in (reference.position, reference.speed,
-                                              reference.acceleration, reference.jerk)):
+        if not (isfinite(reference.position) and isfinite(reference.speed)
+                and isfinite(reference.acceleration) and isfinite(reference.jerk)):
             return 'non-finite reference'
         for quantity in law.requires:
             values = measurement.values_of(quantity)
-            if not values or not all(math.isfinite(x) for x in values):
+            if not values or not all(map(isfinite, values)):
                 return f'{law.name} needs the measured {quantity.replace("_", " ")}, which is ' \
                        'not available (NaN or missing)'
         return ''

@@ -122,3 +122,34 @@ def test_a_law_requiring_an_unknown_measurement_is_refused_with_the_valid_names(
     train = TrainKnowledge.of(train_preset('crh2_4car_mao'))
     with pytest.raises(LawRejected, match=r"unknown measurements \['car_speed'\]; valid: "):
         ControllerHost(train, 0.1, _PerActuatorProbe.name)
+
+
+def test_the_fit_is_asked_again_when_the_measured_cars_change(probe_registered):
+    """The host checks ``fits`` once per law and measured cars: a plant that starts publishing
+    one car after four has the per-car law held from that step, and released when four return."""
+    train = TrainKnowledge.of(train_preset('crh2_4car_mao'))
+    host = ControllerHost(train, 0.1, _PerActuatorProbe.name)
+    reference = ReferencePoint(0.0, 0.0, 20.0, 0.0)
+    assert host.step(four_car_measurement(cars=4), reference).fault == ''
+    held = host.step(four_car_measurement(cars=1), reference)
+    assert 'needs the measurements of 4 cars but the plant publishes 1' in held.fault
+    assert host.step(four_car_measurement(cars=4), reference).fault == ''
+    assert host.faults == 1
+
+
+def test_the_bumpless_offset_decays_with_the_time_constant_in_force_at_each_step():
+    """The decay per step follows ``bumpless_time_constant_s`` when the node changes it while
+    running (and ``dt``): exp(-dt / tau) of the values in force at that step."""
+    train = TrainKnowledge.of(train_preset('crh3_luo_xu'))
+    host = ControllerHost(train, 0.1, 'pid', {'pid': {'ki_position': 0.0}})
+    measurement = Measurement(0.0, 0.0, 20.0)
+    reference = ReferencePoint(0.0, 0.0, 20.0, 0.0)
+    host.step(measurement, reference)
+    host._offset_n = 5e4  # as a switch leaves it: the step between the last and the new law
+    offsets = [host._offset_n]
+    for tau in (3.0, 3.0, 0.5, 0.5, 10.0):
+        host.bumpless_time_constant_s = tau
+        host.step(measurement, reference)
+        offsets.append(host._offset_n)
+    for before, after, tau in zip(offsets, offsets[1:], (3.0, 3.0, 0.5, 0.5, 10.0)):
+        assert after == before * math.exp(-0.1 / tau)

@@ -217,6 +217,8 @@ class TrainSimulation:
             self.setup.disturbance.kind != 'random'
         self._applied_for = None  # the state ``applied`` was last computed for
         self._packed_supervision = None  # the ATP's tables for ``periods.py``'s kernels
+        self._leg_tables = (None, None, None, None)  # (supervision, leg, its EBI, stop zone)
+        self._sensors_ideal = (None, False)    # (sensors, sensors.ideal): asked once per setup
         self._update_applied()
 
     # --- time and state ----------------------------------------------------------------------
@@ -265,8 +267,8 @@ class TrainSimulation:
         if len(forces) != len(names):
             self.rejected_commands += 1
             raise CommandRejected(f'{len(forces)} forces for {len(names)} actuators {list(names)}')
-        values = tuple(float(f) for f in forces)
-        if not all(math.isfinite(f) for f in values):
+        values = tuple(map(float, forces))
+        if not all(map(math.isfinite, values)):
             self.rejected_commands += 1
             raise CommandRejected(f'non-finite force in {list(values)}')
         self._hold(values)
@@ -425,8 +427,19 @@ class TrainSimulation:
                 if start_s + EVENT_TOLERANCE_S < t + self._dead_time_s < end_s - EVENT_TOLERANCE_S]
 
     def intervention_speed(self) -> float:
-        """The ATP's emergency brake intervention speed (EBI) at the lead car, m/s."""
-        return self.supervision.sampled_curve('ebi', self.lead_position(), self.leg)
+        """The ATP's emergency brake intervention speed (EBI) at the lead car, m/s:
+        ``supervision.sampled_curve('ebi', position, leg)``, the leg's table looked up once."""
+        return self._leg_lookups()[0](self.lead_position())
+
+    def _leg_lookups(self) -> tuple:
+        """(the sampled EBI, the stop zone) of the leg under supervision, looked up again
+        only when the leg moves on (the supervision's tables are built once and kept)."""
+        run, leg, ebi, zone = self._leg_tables
+        if leg != self.leg or run is not self.supervision:
+            run, leg = self.supervision, self.leg
+            ebi, zone = run.legs[leg].sampled('ebi'), run.stop_zone(leg)
+            self._leg_tables = (run, leg, ebi, zone)
+        return ebi, zone
 
     def _supervise(self) -> None:
         speed = self.lead_speed()
@@ -456,7 +469,7 @@ class TrainSimulation:
         and the on-board unit reports it, so a biased odometer does not strand at a station a
         train that the ATO stopped there."""
         run = self.supervision
-        low, high = run.stop_zone(self.leg)
+        low, high = self._leg_lookups()[1]
         position = self.lead_position()
         if self._odometer_errs:
             position += self.odometer_error(position)
@@ -701,7 +714,11 @@ class TrainSimulation:
         """What the on-board sensors report; a missing measurement is NaN."""
         truth = truth or self.truth()
         s = self.sensors
-        if s.ideal:
+        sensors, ideal = self._sensors_ideal
+        if sensors is not s:
+            ideal = s.ideal
+            self._sensors_ideal = (s, ideal)
+        if ideal:
             return truth
         cars = truth.car_names
         return TrainState(truth.stamp_ns, cars,
