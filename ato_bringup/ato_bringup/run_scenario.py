@@ -12,12 +12,18 @@ brakes, missed journey windows and stopping errors beyond the platform tolerance
 count and first occurrence. Exit code: 0 for a clean run (or any completed run with
 --no-fail-on-events), 3 for a completed run with such events, 1 for a failed run, 2 for bad
 input.
+
+Runs side by side: by default each run takes a DDS domain that no other run or test session on
+this machine holds (a lock file per domain, ato_common.domains) and a run folder of its own, so
+two runs started in the same second neither hear each other nor share a recording. Any process
+of the run that exits before the plant's end (a node that fails, a recorder that stops) ends the
+run at once, naming it with its exit code and the end of its log.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
+import contextlib
 import sys
 from datetime import datetime
 from pathlib import Path
@@ -26,6 +32,7 @@ from ato_bringup.compare import DEFAULT_DEMO_LAW, DEFAULT_OUT, ranked_demo_law
 from ato_bringup.run_events import PLATFORM_TOLERANCE_M, final_exit_code
 from ato_bringup.runner import RunFailed, run_lockstep
 from ato_bringup.stack import StackConfig
+from ato_common.domains import NoFreeDomain, free_domain
 from ato_common.knowledge import knowledge_of
 from ato_common.metrics import format_summary
 from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
@@ -46,9 +53,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                              f'{DEFAULT_DEMO_LAW})')
     parser.add_argument('--ranking', type=Path, default=DEFAULT_OUT / 'compare.json',
                         help='the comparison whose best law runs when --controller is not given')
-    parser.add_argument('--domain-id', type=int,
-                        default=int(os.environ.get('ROS_DOMAIN_ID', '0') or 0),
-                        help='ROS_DOMAIN_ID of the run (default: the environment\'s, else 0)')
+    parser.add_argument('--domain-id', type=int, default=None,
+                        help='ROS_DOMAIN_ID of the run (default: a free one, that no other run '
+                             'or test session on this machine holds; printed at the start)')
     parser.add_argument('--timeout', type=float, default=900.0, help='wall-time limit, s')
     parser.add_argument('--log-dir', type=Path, default=None,
                         help='where each node writes its log and the recording goes '
@@ -63,6 +70,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                         metavar='M', help='the platform tolerance of a stopping error, m '
                                           f'(default {PLATFORM_TOLERANCE_M:g})')
     args = parser.parse_args(argv)
+    if args.domain_id is not None and not 0 <= args.domain_id <= 232:
+        parser.error(f'--domain-id: must be 0..232 (Fast DDS derives its ports from it), got '
+                     f'{args.domain_id}')
     if not args.stop_tolerance >= 0.0 or args.stop_tolerance == float('inf'):
         parser.error(f'--stop-tolerance: must be a finite number >= 0 m, got '
                      f'{args.stop_tolerance}')
@@ -85,14 +95,40 @@ def default_controller(scenario_name: str, ranking: Path) -> tuple[str, str]:
     return law, why
 
 
+def unique_run_dir(parent: Path, name: str) -> Path:
+    """``parent/name``, or ``parent/name-2``, ``-3``... : a folder this call created, so two runs
+    started in the same second never share one (mkdir is atomic)."""
+    parent.mkdir(parents=True, exist_ok=True)
+    for index in range(1, 1000):
+        candidate = parent / (name if index == 1 else f'{name}-{index}')
+        try:
+            candidate.mkdir()
+            return candidate
+        except FileExistsError:
+            continue
+    raise FileExistsError(f'{parent / name} and 998 numbered folders beside it exist')
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
+    with contextlib.ExitStack() as held:
+        if args.domain_id is None:
+            try:
+                args.domain_id = held.enter_context(free_domain())
+            except NoFreeDomain as error:
+                print(f'error: {error}', file=sys.stderr)
+                return 1
+        return run(args)
+
+
+def run(args: argparse.Namespace) -> int:
     if args.controller is None:
         args.controller, why = default_controller(args.scenario, args.ranking)
         print(f'controller {args.controller}: {why}', file=sys.stderr)
     stamp = datetime.now().strftime('%Y%m%d-%H%M%S')
     scenario_label = Path(args.scenario).stem
-    log_dir = args.log_dir or Path('runs') / f'{stamp}-{scenario_label}-{args.controller}'
+    log_dir = args.log_dir or unique_run_dir(Path('runs'),
+                                             f'{stamp}-{scenario_label}-{args.controller}')
     record_to = None if args.no_record else log_dir / 'bag'
     config = StackConfig(scenario=args.scenario, controller=args.controller,
                          domain_id=args.domain_id, log_dir=log_dir, record_to=record_to)

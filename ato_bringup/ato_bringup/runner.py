@@ -53,6 +53,26 @@ class RunOutcome:
         return np.array([k / NS_PER_S for k, _ in self.samples])
 
 
+def progress_bar(end_time_s: float):
+    """The run's progress on stderr: simulated seconds, with the rate (simulated s per wall s,
+    the real-time factor) and the time left."""
+    from tqdm import tqdm
+    return tqdm(total=end_time_s, unit='sim s', file=sys.stderr, dynamic_ncols=True,
+                bar_format='{l_bar}{bar}| {n:.1f}/{total:.1f} s [{elapsed}<{remaining}, '
+                           '{rate_fmt}]')
+
+
+def last_reports(stack: Stack) -> str:
+    """Each node's newest diagnostics message and the tail of its log (a stalled run)."""
+    newest = {}
+    for _, name, _, message in stack.monitor.diagnostics:
+        newest[name] = message
+    lines = [f'  {name}: {message}' for name, message in sorted(newest.items())]
+    alive = [n for n in stack.processes if not stack.exited(n)]
+    lines.append(f'  running: {", ".join(alive) or "none"}')
+    return '\n'.join(lines) + '\n' + stack.log_tail('plant', 10)
+
+
 def prepare(config: StackConfig) -> tuple[Scenario, float]:
     scenario = load_scenario(config.scenario)
     plan = plan_reference(scenario)
@@ -77,22 +97,30 @@ def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], obj
         started = time.monotonic()
         last_report = started
         monitor = stack.monitor
+        bar = progress_bar(end_time_s) if progress else None
         while not stack.exited('plant'):
             if time.monotonic() - started > timeout_s:
                 raise RunFailed(f'the run did not end within {timeout_s:.0f} s of wall time '
-                                f'(simulated {monitor.last_stamp_ns / NS_PER_S:.1f} s of '
-                                f'{end_time_s:.1f} s)\n{stack.log_tail("plant")}')
-            for name in ('controller', 'profile'):
-                if stack.exited(name):
-                    raise RunFailed(f'{name} exited early with code '
-                                    f'{stack.processes[name].returncode}:\n{stack.log_tail(name)}')
+                                f'(simulated {max(monitor.last_stamp_ns, 0) / NS_PER_S:.1f} s '
+                                f'of {end_time_s:.1f} s); last reports:\n'
+                                + last_reports(stack))
+            ended = stack.ended()
+            if ended is not None:  # every process the run started is watched
+                name, code = ended
+                raise RunFailed(f'{name} exited with code {code} at simulated '
+                                f'{max(monitor.last_stamp_ns, 0) / NS_PER_S:.1f} s of '
+                                f'{end_time_s:.1f} s: the run is stopped. Its log '
+                                f'({stack.logs[name]}) ends:\n{stack.log_tail(name)}')
             stack.executor.spin_once(timeout_sec=0.05)
-            t = monitor.last_stamp_ns / NS_PER_S
+            t = max(monitor.last_stamp_ns, 0) / NS_PER_S
             while pending and t >= pending[0][0]:
                 results.append(pending.pop(0)[1](stack))
-            if progress and time.monotonic() - last_report > 2.0:
+            if bar is not None and time.monotonic() - last_report > 0.5:
                 last_report = time.monotonic()
-                print(f'  ... simulated {t:7.1f} / {end_time_s:.1f} s', file=sys.stderr)
+                bar.update(min(t, end_time_s) - bar.n)
+        if bar is not None:
+            bar.update(end_time_s - bar.n)
+            bar.close()
         wall = time.monotonic() - started
         stack.spin_for(0.3)  # the last messages in flight
         codes = stack.stop()

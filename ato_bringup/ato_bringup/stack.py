@@ -24,7 +24,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from ato_common.ros import from_time, make_executor, qos_profile, topic
+from ato_common.conventions import normalised_namespace, stack_remaps
+from ato_common.ros import from_time, make_executor, qos_profile, status_in_namespace, topic
 
 EXECUTABLES = {
     'plant': ('train_plant_node', 'train_plant_node'),
@@ -41,12 +42,16 @@ def executable_path(package: str, executable: str) -> str:
     return str(path)
 
 
-def ros_args(params: dict[str, object]) -> list[str]:
+def ros_args(params: dict[str, object], namespace: str = '') -> list[str]:
+    """``--ros-args`` with the parameters and, for a stack in ``namespace``, its remappings
+    (the namespace and a ``/clock`` of its own: ``conventions.stack_remaps``)."""
     args = ['--ros-args']
     for name, value in params.items():
         if isinstance(value, bool):
             value = 'true' if value else 'false'
         args += ['-p', f'{name}:={value}']
+    for source, target in stack_remaps(namespace):
+        args += ['-r', f'{source}:={target}']
     return args
 
 
@@ -69,6 +74,7 @@ class Monitor:
     """Subscriptions of the runner: truth, reference, command and diagnostics, keyed by stamp."""
 
     node: Node
+    namespace: str = '/'  # of the stack: statuses of other stacks' nodes are left out
     samples: dict[int, Sample] = field(default_factory=dict)
     diagnostics: list[tuple[int, str, dict[str, str], str]] = field(default_factory=list)
     last_stamp_ns: int = -1  # of the newest state
@@ -116,7 +122,10 @@ class Monitor:
     def on_diagnostics(self, msg: DiagnosticArray) -> None:
         self.counts['diagnostics'] += 1
         for status in msg.status:
-            self.diagnostics.append((from_time(msg.header.stamp), status.name,
+            name = status_in_namespace(status.name, self.namespace)
+            if name is None:
+                continue  # another stack's node on the one /diagnostics
+            self.diagnostics.append((from_time(msg.header.stamp), name,
                                      {kv.key: kv.value for kv in status.values}, status.message))
 
     def complete_samples(self) -> list[tuple[int, Sample]]:
@@ -136,6 +145,7 @@ class StackConfig:
     profile_params: dict = field(default_factory=dict)
     controller_params: dict = field(default_factory=dict)
     record_to: Path | None = None  # bag folder: run the recorder too
+    namespace: str = ''  # push the stack into it, with its own /clock ('' : the root)
 
 
 class Stack:
@@ -151,9 +161,10 @@ class Stack:
         # The stack runs on one host: Fast DDS over shared memory only is about 30 % faster per
         # step than its default UDP + shared memory, and still talks to default participants.
         self.env.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'SHM')
+        self.namespace = normalised_namespace(config.namespace)
         rclpy.init(context=self.context, domain_id=config.domain_id)
-        self.node = Node('ato_run_monitor', context=self.context)
-        self.monitor = Monitor(self.node)
+        self.node = Node('ato_run_monitor', namespace=self.namespace, context=self.context)
+        self.monitor = Monitor(self.node, self.namespace)
         self.parameter_clients: dict[str, object] = {}
         self.executor = make_executor(self.context)
         self.executor.add_node(self.node)
@@ -195,7 +206,7 @@ class Stack:
         self.logs[name] = log
         with open(log, 'ab') as out:
             process = subprocess.Popen([executable_path(package, executable), *args,
-                                        *ros_args(params)],
+                                        *ros_args(params, self.namespace)],
                                        stdout=out, stderr=subprocess.STDOUT, env=self.env,
                                        stdin=subprocess.DEVNULL)
         self.processes[name] = process
@@ -217,6 +228,15 @@ class Stack:
     def exited(self, name: str) -> bool:
         return self.processes[name].poll() is not None
 
+    def ended(self, expected=('plant',)) -> tuple[str, int] | None:
+        """The first process that has ended, other than the ``expected`` ones that end the run
+        by themselves with code 0 (the plant at its end time): (name, exit code), or None."""
+        for name, process in self.processes.items():
+            code = process.poll()
+            if code is not None and (name not in expected or code != 0):
+                return name, code
+        return None
+
     def set_parameters(self, node_name: str, values: dict[str, object],
                        timeout_s: float = 10.0, attempt_s: float = 2.0):
         """ros2 param set, over the node's SetParameters service; returns the results.
@@ -229,7 +249,9 @@ class Stack:
         """
         client = self.parameter_clients.get(node_name)
         if client is None:
-            client = self.node.create_client(SetParameters, f'/{node_name}/set_parameters')
+            prefix = '' if self.namespace == '/' else self.namespace
+            client = self.node.create_client(SetParameters,
+                                             f'{prefix}/{node_name}/set_parameters')
             self.parameter_clients[node_name] = client
         deadline = time.monotonic() + timeout_s
         if not self.spin_until(lambda: client.service_is_ready(), timeout_s):

@@ -1,44 +1,86 @@
 """The ATO stack: plant, profile and controller, in lockstep simulated time by default.
 
     ros2 launch ato_bringup ato.launch.py controller:=luo_xu scenario:=short_line
+    ros2 launch ato_bringup ato.launch.py namespace:=train1 end_time_s:=300   # beside others
 
 Arguments: controller (a law of ``ato_controller_node.laws.LAWS``; launch refuses any other
 name before it starts a node), scenario (built-in name or YAML path), lockstep (true: the plant owns
 /clock and the other nodes use it), rate_hz (control rate; 0: the scenario's), end_time_s (the
-plant ends the run there and the launch shuts down; 0: run until Ctrl-C).
+plant ends the run there and the launch shuts down; 0: run until Ctrl-C), namespace (push the
+stack into it, with a /clock of its own, so several stacks run side by side in one domain).
+
+Any node's exit ends the launch. A node that ends with code 0 (the plant at end_time_s) shuts the
+launch down with that reason; one that fails (any other code) is reported as an error naming
+the node and its exit code, and ``ros2 launch`` then exits with 1 (the handler raises
+:class:`NodeFailed`: launch logs an exception in a handler as an error, shuts everything down
+and returns 1, the only way a launch file sets its exit code).
 """
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, EmitEvent, RegisterEventHandler
+from launch.actions import (
+    DeclareLaunchArgument,
+    EmitEvent,
+    OpaqueFunction,
+    RegisterEventHandler,
+)
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
+from ato_common.conventions import normalised_namespace, stack_remaps
 from ato_controller_node.laws import LAWS
 
+NODES = ('ato_controller_node', 'profile_node', 'train_plant_node')
 
-def generate_launch_description():
+
+class NodeFailed(RuntimeError):
+    """A node of the stack exited with a non-zero code: the launch ends with 1."""
+
+
+def exit_handler(name: str):
+    """What the launch does when node ``name`` exits: (event, context) -> actions."""
+    def on_exit(event, context):
+        code = event.returncode
+        if code == 0:
+            return [EmitEvent(event=Shutdown(reason=f'{name} ended (exit code 0): the run is '
+                                                    'over, stopping the stack'))]
+        raise NodeFailed(f'{name} exited with code {code}: the run has failed, stopping the '
+                         'stack (its output above says why)')
+    return on_exit
+
+
+def stack(context):
+    """The three nodes in the namespace, each watched: its exit ends the launch."""
+    namespace = normalised_namespace(context.launch_configurations['namespace'])
+    # /clock into the namespace too (ato_common.conventions.stack_remaps): every use_sim_time
+    # node follows the /clock it hears, so stacks side by side need a clock each.
+    remappings = [(source, target) for source, target in stack_remaps(namespace)
+                  if source != '__ns']
     controller = LaunchConfiguration('controller')
     scenario = LaunchConfiguration('scenario')
     lockstep = ParameterValue(LaunchConfiguration('lockstep'), value_type=bool)
     rate_hz = ParameterValue(LaunchConfiguration('rate_hz'), value_type=float)
     end_time_s = ParameterValue(LaunchConfiguration('end_time_s'), value_type=float)
+    parameters = {
+        'ato_controller_node': {'scenario': scenario, 'controller': controller,
+                                'lockstep': lockstep, 'rate_hz': rate_hz,
+                                'use_sim_time': lockstep},
+        'profile_node': {'scenario': scenario, 'lockstep': lockstep, 'use_sim_time': lockstep},
+        'train_plant_node': {'scenario': scenario, 'lockstep': lockstep,
+                             'control_rate_hz': rate_hz, 'end_time_s': end_time_s},
+    }
+    entities = []
+    for name in NODES:
+        node = Node(package=name, executable=name, name=name, namespace=namespace,
+                    output='screen', parameters=[parameters[name]], remappings=remappings)
+        entities += [node, RegisterEventHandler(OnProcessExit(target_action=node,
+                                                              on_exit=exit_handler(name)))]
+    return entities
 
-    plant = Node(package='train_plant_node', executable='train_plant_node',
-                 name='train_plant_node', output='screen',
-                 parameters=[{'scenario': scenario, 'lockstep': lockstep,
-                              'control_rate_hz': rate_hz, 'end_time_s': end_time_s}])
-    profile = Node(package='profile_node', executable='profile_node', name='profile_node',
-                   output='screen',
-                   parameters=[{'scenario': scenario, 'lockstep': lockstep,
-                                'use_sim_time': lockstep}])
-    ato = Node(package='ato_controller_node', executable='ato_controller_node',
-               name='ato_controller_node', output='screen',
-               parameters=[{'scenario': scenario, 'controller': controller,
-                            'lockstep': lockstep, 'rate_hz': rate_hz,
-                            'use_sim_time': lockstep}])
+
+def generate_launch_description():
     return LaunchDescription([
         DeclareLaunchArgument('controller', default_value='pid', choices=sorted(LAWS),
                               description='control law, one of the registry: '
@@ -51,9 +93,8 @@ def generate_launch_description():
                               description="control rate, Hz (0: the scenario's)"),
         DeclareLaunchArgument('end_time_s', default_value='0.0',
                               description='simulated time at which the run ends (0: never)'),
-        ato, profile, plant,
-        # The plant ends the run: take the rest of the stack down with it.
-        RegisterEventHandler(OnProcessExit(target_action=plant,
-                                           on_exit=[EmitEvent(event=Shutdown(
-                                               reason='the plant ended the run'))])),
+        DeclareLaunchArgument('namespace', default_value='',
+                              description='push the stack into this namespace, with its own '
+                                          '/clock (several stacks in one domain)'),
+        OpaqueFunction(function=stack),
     ])

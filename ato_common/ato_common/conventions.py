@@ -2,6 +2,8 @@
 
 Names of the suite's own topics are relative, so a whole stack can be pushed into a namespace
 (``--ros-args -r __ns:=/train1``); ``/clock`` and ``/diagnostics`` are global by ROS convention.
+A stack pushed into a namespace beside others also remaps ``/clock`` into it
+(:func:`stack_remaps`), since every ``use_sim_time`` node follows whatever ``/clock`` it hears.
 The QoS is described here as plain data (no rclpy import) and turned into rclpy profiles by
 :func:`ato_common.ros.qos_profile`.
 """
@@ -84,9 +86,35 @@ TOPICS = {
                                'N', 'train_plant_node', 'recorder, evaluation',
                                'force per actuated unit as delivered (limits, lag, rate limit, '
                                'safety brakes and failures applied), same layout'),
+    'identity': Topic('train/identity', 'std_msgs/msg/String', LATCHED, '-', 'train_plant_node',
+                      'ato_controller_node, profile_node',
+                      'what the plant simulates, once: JSON {"scenario": name, "sha256": hash of '
+                      'the resolved scenario} (ato_common.identity)'),
     'diagnostics': Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', DIAGNOSTICS, '-',
                          'all nodes', 'run_scenario, rqt_robot_monitor',
                          'active law, tracking errors, parameter estimates, rejected input'),
 }
 
 REFERENCE_JOINT = 'train'
+
+
+def stack_remaps(namespace: str) -> list[tuple[str, str]]:
+    """The remappings that push a stack into ``namespace`` with a clock of its own: every node
+    of the stack (and its monitor) takes them. The empty namespace (or ``/``) is the root: no
+    remapping."""
+    ns = normalised_namespace(namespace)
+    if ns == '/':
+        return []
+    return [('__ns', ns), (TOPICS['clock'].name, f'{ns}{TOPICS["clock"].name}')]
+
+
+def normalised_namespace(namespace: str) -> str:
+    """``train1``, ``/train1/`` -> ``/train1``; '' -> ``/``; ValueError naming a bad one."""
+    ns = '/' + namespace.strip('/')
+    parts = ns[1:].split('/') if ns != '/' else []
+    for part in parts:
+        if not part or not (part[0].isalpha() or part[0] == '_') or \
+                not all(c.isalnum() or c == '_' for c in part):
+            raise ValueError(f'namespace {namespace!r}: each part must start with a letter or _ '
+                             'and hold only letters, digits and _')
+    return ns

@@ -11,12 +11,16 @@ import math
 import os
 import signal
 import sys
-from typing import Callable, Sequence
+import textwrap
+import time
+from typing import Callable, Iterable, Sequence
 
 import rclpy
 import rclpy.signals
 from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.duration import Duration as RclpyDuration
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -174,6 +178,71 @@ def _format_value(value: object) -> str:
     return str(value)
 
 
+def status_name(node, part: str) -> str:
+    """The name of a node's diagnostics status: the node's fully qualified name without its
+    leading slash, and what the status is about (``train_plant_node: simulation`` in the root
+    namespace, ``train1/train_plant_node: simulation`` in ``/train1``), so that the statuses of
+    two stacks on the one ``/diagnostics`` are told apart."""
+    return f'{node.get_fully_qualified_name().lstrip("/")}: {part}'
+
+
+def status_in_namespace(name: str, namespace: str) -> str | None:
+    """A status ``name`` as its node's own (``train_plant_node: simulation``) if it comes from a
+    node of ``namespace`` (``/train1``, ``/`` the root), else None."""
+    prefix = namespace.strip('/')
+    node_part = name.split(':', 1)[0]
+    if not prefix:
+        return name if '/' not in node_part else None
+    if not name.startswith(prefix + '/'):
+        return None
+    relative = name[len(prefix) + 1:]
+    return relative if '/' not in relative.split(':', 1)[0] else None
+
+
+class Publishing:
+    """A node's publishes that must not kill it. rclpy raises ``RCLError`` ('Failed to publish:
+    cannot publish data') when the middleware refuses a sample, e.g. a reliable keep-all writer
+    whose history is full of samples a reader that died (a SIGKILLed recorder) never
+    acknowledged, until discovery drops that reader. Such a failure is counted, logged at most
+    once a second and kept for the diagnostics; the node goes on (in lockstep the plant re-sends
+    the step, so the loop resumes once the middleware accepts samples again)."""
+
+    def __init__(self, node):
+        self.node = node
+        self.failures = 0
+        self.last_failure = ''
+
+    def __call__(self, publisher, msg) -> bool:
+        """Publish ``msg``; False if the middleware refused it."""
+        try:
+            publisher.publish(msg)
+            return True
+        except rclpy_implementation.RCLError as error:
+            self.failures += 1
+            self.last_failure = f'{publisher.topic_name}: {str(error).splitlines()[0]}'
+            self.node.get_logger().warning(
+                f'publish failed on {self.last_failure} ({self.failures} so far); going on',
+                throttle_duration_sec=1.0)
+            return False
+
+    def values(self) -> dict[str, object]:
+        """The diagnostics' keys of the failures."""
+        return {'failed_publishes': self.failures,
+                'last_failed_publish': self.last_failure or 'none'}
+
+
+def wait_until_delivered(publishers, timeout_s: float) -> bool:
+    """Wait until every reliable subscriber matched to ``publishers`` has acknowledged all they
+    sent (a node about to exit: its last messages must not be lost with it); False if some were
+    not acknowledged within ``timeout_s`` in all (a subscriber that died)."""
+    deadline = time.monotonic() + timeout_s
+    delivered = True
+    for publisher in publishers:
+        left = max(0.0, deadline - time.monotonic())
+        delivered &= publisher.wait_for_all_acked(RclpyDuration(seconds=left))
+    return delivered
+
+
 def make_executor(context=None):
     """The executor every node of the suite spins: EventsExecutor (about 0.35 ms per
     inter-process round trip against 0.57 ms for SingleThreadedExecutor) unless the environment
@@ -236,7 +305,36 @@ def tear_down(executor, node: RunNodeHooks) -> None:
     node.destroy_node()
 
 
-def run_node(make_node: Callable[[], RunNodeHooks], args=None) -> int:
+def help_requested(args=None) -> bool:
+    """Whether the command line (without its ``--ros-args`` part) asks for ``-h``/``--help``."""
+    from rclpy.utilities import remove_ros_args
+    argv = remove_ros_args(args if args is not None else sys.argv)[1:]
+    return '-h' in argv or '--help' in argv
+
+
+def node_usage(package: str, executable: str, doc: str | None, params: Iterable) -> str:
+    """``--help`` of a node: how to start it, the first paragraph of its module docstring and
+    every declared parameter (:class:`ato_common.params.Param`) with its type, default, range or
+    valid values, whether it may change at run time, and its description."""
+    lines = [f'usage: ros2 run {package} {executable} [-h] [--ros-args -p NAME:=VALUE ...]', '']
+    summary = (doc or '').strip().split('\n\n')[0]
+    lines += [textwrap.fill(' '.join(summary.split()), 100), '', 'parameters:']
+    for p in params:
+        kind = {bool: 'bool', int: 'integer', float: 'double', str: 'string'}[type(p.default)]
+        facts = [kind, f'default {p.default!r}']
+        if p.minimum is not None or p.maximum is not None:
+            facts.append(f'range [{p.minimum:g}, {p.maximum:g}]')
+        if p.choices:
+            facts.append('one of: ' + ', '.join(p.choices))
+        facts.append('fixed at start-up' if p.read_only else 'may change at run time')
+        lines.append(f"  {p.name} ({'; '.join(facts)})")
+        lines.append(textwrap.fill(p.description, 100, initial_indent=' ' * 6,
+                                   subsequent_indent=' ' * 6))
+    return '\n'.join(lines)
+
+
+def run_node(make_node: Callable[[], RunNodeHooks], args=None,
+             usage: Callable[[], str] | None = None) -> int:
     """Entry point body of every node: init, build, spin until shutdown or the node asks to stop
     (``node.finished`` becomes True), clean up. SIGINT and SIGTERM end it cleanly with exit 0
     (or the node's ``exit_code``); a configuration error is printed and gives exit 2 before
@@ -245,8 +343,13 @@ def run_node(make_node: Callable[[], RunNodeHooks], args=None) -> int:
 
     Teardown order: the node's own outputs first (``node.close_outputs()``, e.g. the recorder's
     file, with no time limit), then, within ``TEARDOWN_LIMIT_S``, the executor (it lets go of
-    every entity while the context is still valid), the node, the context."""
+    every entity while the context is still valid), the node, the context.
+
+    ``usage``: the text ``-h``/``--help`` prints (then the node exits 0 without starting)."""
     from ato_common.validation import ConfigError
+    if usage is not None and help_requested(args):
+        print(usage())
+        return 0
     faulthandler.enable()  # a fatal signal or SIGABRT writes every thread's stack to stderr
     rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     stop = {'requested': False}

@@ -11,30 +11,42 @@ Parameters: ``controller`` selects the law and may change at run time (``ros2 pa
 /ato_controller_node controller luo_xu``; bumpless); an unknown name or a law that does not fit
 the train is rejected with the reason and the running law stays. Every law's gains are
 parameters ``<law>.<gain>`` with ranges, defaults from the papers.
+
+Graph: ``wait_for_subscribers`` holds back only the first command; an observer that goes away
+later does not stop the loop. A state stamped before the last step (lockstep) is a restarted
+plant: the controller starts its law again from that step. The plant's latched identity
+(``train/identity``) must be the controller's own scenario: on another one the controller
+refuses to drive (exit code 2, naming both). A failed publish is counted and reported, never
+fatal.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Header
+from std_msgs.msg import Header, String
 from trajectory_msgs.msg import JointTrajectory
 
+from ato_common.identity import identity_mismatch, scenario_identity
 from ato_common.knowledge import knowledge_of
 from ato_common.params import Param, ParameterTable
 from ato_common.ros import (
     MessageError,
+    Publishing,
     RunNodeHooks,
     command_to_msg,
     diagnostic_status,
     freeze_startup_objects,
+    node_usage,
     qos_profile,
     reference_from_msg,
     run_node,
     state_from_msg,
+    status_name,
     to_time,
     topic,
 )
@@ -102,6 +114,7 @@ class AtoControllerNode(RunNodeHooks, Node):
         self.params = ParameterTable(self, NODE_PARAMS + tuple(gain_params()))
         p = self.params
         scenario = load_scenario(p['scenario'])  # not kept: its plant section is the truth
+        self.identity = scenario_identity(scenario)  # name and hash only: no truth in it
         self.rate_hz = p['rate_hz'] or scenario.run.controller_rate_hz
         self.dt = 1.0 / self.rate_hz
         self.lockstep = p['lockstep']
@@ -109,8 +122,7 @@ class AtoControllerNode(RunNodeHooks, Node):
         settings = {law: {f.name: p[f'{law}.{f.name}'] for f in setting_fields(cls.Settings)}
                     for law, cls in LAWS.items()}
         try:
-            self.host = ControllerHost(self.knowledge, self.dt, p['controller'], settings,
-                                       p['bumpless_time_constant_s'])
+            self.host = self.make_host(p['controller'], settings)
         except (LawRejected, ValueError) as error:
             raise ConfigError(str(error)) from None
         self.params.extra_checks.append(self.check_changes)
@@ -130,6 +142,10 @@ class AtoControllerNode(RunNodeHooks, Node):
         self.reference_received_wall = 0.0
         self.stale_steps = 0  # real-time periods without a command for a stale input
         self.stale_reported_wall = 0.0
+        self.subscribers_met = False  # wait_for_subscribers holds back the first command only
+        self.restarts = 0
+        self.publishing = Publishing(self)
+        self.status_name = status_name(self, 'law')
 
         self.command_pub = self.create_publisher(JointState, topic('command').name,
                                                  qos_profile(topic('command').qos))
@@ -139,12 +155,30 @@ class AtoControllerNode(RunNodeHooks, Node):
                                  qos_profile(topic('state_measured').qos))
         self.create_subscription(JointTrajectory, topic('reference').name, self.on_reference,
                                  qos_profile(topic('reference').qos))
+        self.create_subscription(String, topic('identity').name, self.on_identity,
+                                 qos_profile(topic('identity').qos))
         if not self.lockstep:
             self.create_timer(self.dt, self.on_timer)
         self.get_logger().info(f"law {self.host.law.name} at {self.rate_hz:g} Hz "
                                f"({'lockstep' if self.lockstep else 'real time'}), actuators "
                                f'{list(self.knowledge.actuator_names)}')
         freeze_startup_objects()
+
+    def make_host(self, law: str, settings=None) -> ControllerHost:
+        if settings is None:  # the current gains of every law
+            settings = {name: dataclasses.asdict(self.host.settings(name)) for name in LAWS}
+        return ControllerHost(self.knowledge, self.dt, law, settings,
+                              self.params['bumpless_time_constant_s'])
+
+    def on_identity(self, msg: String) -> None:
+        try:
+            mismatch = identity_mismatch(self.identity, msg.data)
+        except ValueError as error:
+            mismatch = str(error)
+        if mismatch:
+            self.get_logger().error(f'refusing to drive: {mismatch}')
+            self.exit_code = 2
+            self.finished = True
 
     # --- parameters: validate, then apply ---------------------------------------------------
     def _gain_changes(self, changes: dict) -> dict[str, dict]:
@@ -212,14 +246,16 @@ class AtoControllerNode(RunNodeHooks, Node):
             if stamp_ns in self.states and self.last_command_msg is not None:
                 self.states.pop(stamp_ns, None)
                 self.references.pop(stamp_ns, None)
-                self.command_pub.publish(self.last_command_msg)  # the plant asked again
+                self.publishing(self.command_pub, self.last_command_msg)  # asked again
             return
         if stamp_ns not in self.states or stamp_ns not in self.references:
             return
-        if self.command_pub.get_subscription_count() < self.params['wait_for_subscribers']:
-            return  # the plant re-sends the step until the command comes
+        if not self.subscribers_met:
+            if self.command_pub.get_subscription_count() < self.params['wait_for_subscribers']:
+                return  # the plant re-sends the step until the command comes
+            self.subscribers_met = True
         if stamp_ns < self.last_stamp_ns:
-            return
+            self.restart(stamp_ns)
         if (not self.period_warning_given and self.last_stamp_ns >= 0
                 and abs(seconds(stamp_ns - self.last_stamp_ns) - self.dt) > 1e-6):
             self.period_warning_given = True
@@ -232,6 +268,22 @@ class AtoControllerNode(RunNodeHooks, Node):
         self.states = {k: v for k, v in self.states.items() if k > stamp_ns}
         self.references = {k: v for k, v in self.references.items() if k > stamp_ns}
         self.step(stamp_ns, state, reference, seconds(stamp_ns))
+
+    def restart(self, stamp_ns: int) -> None:
+        """A state and a reference stamped before the last step: a new plant (and so a new
+        run). The law starts again from this step; what was kept of the old run goes."""
+        self.restarts += 1
+        self.get_logger().warning(
+            f'state stamped {seconds(stamp_ns):.3f} s, before the last step '
+            f'{seconds(self.last_stamp_ns):.3f} s: the plant started again; the law '
+            f'{self.host.law.name} starts again from there ({self.restarts} restarts)')
+        self.host = self.make_host(self.host.law.name)
+        self.states = {k: v for k, v in self.states.items() if k <= stamp_ns}
+        self.references = {k: v for k, v in self.references.items() if k <= stamp_ns}
+        self.last_stamp_ns = -1
+        self.last_command_msg = None
+        self.next_diagnostic_ns = 0
+        self.period_warning_given = False
 
     def on_timer(self) -> None:
         state, reference = self.states.get(0), self.references.get(0)
@@ -265,7 +317,7 @@ class AtoControllerNode(RunNodeHooks, Node):
         self.step_times_s.append(time.perf_counter() - started)
         msg = command_to_msg(Command(stamp_ns, self.knowledge.actuator_names, result.forces_n,
                                      result.law))
-        self.command_pub.publish(msg)
+        self.publishing(self.command_pub, msg)
         self.last_command_msg = msg
         self.last_stamp_ns = stamp_ns
         self.last_result = result
@@ -277,11 +329,11 @@ class AtoControllerNode(RunNodeHooks, Node):
         message = (f'{what} stale for {age_s:.1f} s (limit {self.params["stale_after_s"]:g} '
                    's): commanding nothing')
         self.get_logger().warning(message)
-        status = diagnostic_status('ato_controller_node: law', self.host.law.name,
+        status = diagnostic_status(self.status_name, self.host.law.name,
                                    DiagnosticStatus.ERROR, message,
                                    {'law': self.host.law.name, f'{what}_age_s': age_s,
                                     'stale_input': what, 'stale_periods': self.stale_steps})
-        self.diag_pub.publish(DiagnosticArray(
+        self.publishing(self.diag_pub, DiagnosticArray(
             header=Header(stamp=self.get_clock().now().to_msg()), status=[status]))
 
     def publish_diagnostics(self, stamp_ns: int) -> None:
@@ -290,22 +342,25 @@ class AtoControllerNode(RunNodeHooks, Node):
         values = {'law': r.law, 'rate_hz': self.rate_hz, 'speed_error_mps': r.speed_error_mps,
                   'position_error_m': r.position_error_m, 'command_n': r.total_force_n,
                   'wanted_n': r.wanted_force_n, 'saturated': r.saturated,
-                  'faults': self.host.faults}
+                  'faults': self.host.faults, 'restarts': self.restarts,
+                  **self.publishing.values()}
         values.update({f'estimate.{k}': v for k, v in r.estimates.items()})
         if self.step_times_s:
             values['step_time_max_ms'] = 1e3 * max(self.step_times_s)
             self.step_times_s.clear()
         status = diagnostic_status(
-            'ato_controller_node: law', r.law,
+            self.status_name, r.law,
             DiagnosticStatus.WARN if fault else DiagnosticStatus.OK,
             fault or f'{r.law} running', values)
-        self.diag_pub.publish(DiagnosticArray(header=Header(stamp=to_time(stamp_ns)),
-                                              status=[status]))
+        self.publishing(self.diag_pub, DiagnosticArray(header=Header(stamp=to_time(stamp_ns)),
+                                                       status=[status]))
         self.input_fault = ''
 
 
 def main(args=None) -> int:
-    return run_node(AtoControllerNode, args)
+    return run_node(AtoControllerNode, args,
+                    usage=lambda: node_usage('ato_controller_node', 'ato_controller_node',
+                                             __doc__, NODE_PARAMS + tuple(gain_params())))
 
 
 if __name__ == '__main__':

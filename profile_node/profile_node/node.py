@@ -21,6 +21,11 @@ A measured train standing still more than ``RESUME_GAP_M`` behind the reference 
 emergency or watchdog brake) gets the rest of its leg planned again from where it stands
 (``planner.resume_plan``), so the law does not chase a reference far ahead. The latched curve
 stays the original plan.
+
+Graph: ``wait_for_subscribers`` holds back only the first reference (an observer that goes away
+later does not stop the loop); the plant's latched identity must be the profile's own scenario,
+else the profile refuses to run (exit code 2, naming both); a failed publish is counted and
+logged, never fatal. A preview of more than ``MAX_PREVIEW_POINTS`` points is refused.
 """
 
 from __future__ import annotations
@@ -29,17 +34,20 @@ import math
 
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Float64
+from std_msgs.msg import Float64, String
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_common.braking_curves import RunSupervision
+from ato_common.identity import identity_mismatch, scenario_identity
 from ato_common.params import Param, ParameterTable
 from ato_common.ros import (
     MessageError,
+    Publishing,
     RunNodeHooks,
     freeze_startup_objects,
     from_duration,
     from_time,
+    node_usage,
     qos_profile,
     reference_to_msg,
     run_node,
@@ -48,7 +56,25 @@ from ato_common.ros import (
 )
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import Reference, nanoseconds, seconds
+from ato_common.validation import ConfigError
 from profile_node.planner import RESUME_GAP_M, plan_reference, resume_plan
+
+# Each preview point costs the profile a curve evaluation and every reader of ato/reference its
+# bytes, on every step: 60,001 of them (a 600 s horizon every 0.01 s) slowed a lockstep run from
+# 15.6x to 0.03x real time. A hundred cover a 100 s horizon at the default 1 s spacing.
+MAX_PREVIEW_POINTS = 100
+
+
+def preview_problem(horizon_s: float, step_s: float) -> str | None:
+    """None if the preview of ``horizon_s`` every ``step_s`` is acceptable, else the reason."""
+    points = int(horizon_s / step_s + 1e-9) + 1
+    if points > MAX_PREVIEW_POINTS:
+        return (f'preview_horizon_s {horizon_s:g} every preview_step_s {step_s:g} is {points} '
+                f'preview points per step, more than {MAX_PREVIEW_POINTS}: each costs CPU on '
+                'every step in the profile and in every reader; lengthen the step or shorten '
+                'the horizon')
+    return None
+
 
 PARAMS = (
     Param('scenario', DEFAULT_SCENARIO, 'built-in scenario name or path to a scenario YAML file'),
@@ -70,6 +96,10 @@ class ProfileNode(RunNodeHooks, Node):
     def __init__(self):
         super().__init__('profile_node')
         self.params = ParameterTable(self, PARAMS)
+        problem = preview_problem(self.params['preview_horizon_s'], self.params['preview_step_s'])
+        if problem:
+            raise ConfigError(problem)
+        self.params.extra_checks.append(self.check_preview)
         self.scenario = load_scenario(self.params['scenario'])
         self.plan = plan_reference(self.scenario)
         self.trajectory = self.plan.trajectory
@@ -79,6 +109,9 @@ class ProfileNode(RunNodeHooks, Node):
         self.sent_ahead_ns: int | None = None
         self.last_run_time_ns = -1
         self.resumes = 0
+        self.subscribers_met = False
+        self.publishing = Publishing(self)
+        self.identity = scenario_identity(self.scenario)
 
         self.reference_pub = self.create_publisher(JointTrajectory, topic('reference').name,
                                                    qos_profile(topic('reference').qos))
@@ -88,8 +121,10 @@ class ProfileNode(RunNodeHooks, Node):
                                                    qos_profile(topic('permitted_speed').qos))
         curve_pub = self.create_publisher(JointTrajectory, topic('curve').name,
                                           qos_profile(topic('curve').qos))
-        curve_pub.publish(self.curve_msg())
+        self.publishing(curve_pub, self.curve_msg())
         self._curve_pub = curve_pub  # keep the latched publisher alive
+        self.create_subscription(String, topic('identity').name, self.on_identity,
+                                 qos_profile(topic('identity').qos))
         if self.lockstep:
             self.create_subscription(Clock, topic('clock').name, self.on_clock,
                                      qos_profile(topic('clock').qos))
@@ -111,6 +146,20 @@ class ProfileNode(RunNodeHooks, Node):
                     f'{check.planned_s:.1f} s, outside [{point.earliest_s}, {point.latest_s}] s')
         freeze_startup_objects()
 
+    def check_preview(self, changes) -> str | None:
+        return preview_problem(changes.get('preview_horizon_s', self.params['preview_horizon_s']),
+                               changes.get('preview_step_s', self.params['preview_step_s']))
+
+    def on_identity(self, msg: String) -> None:
+        try:
+            mismatch = identity_mismatch(self.identity, msg.data)
+        except ValueError as error:
+            mismatch = str(error)
+        if mismatch:
+            self.get_logger().error(f'refusing to stream the target curve: {mismatch}')
+            self.exit_code = 2
+            self.finished = True
+
     def curve_msg(self) -> JointTrajectory:
         step = self.params['curve_sample_period_s']
         count = int(self.trajectory.end_time // step) + 1
@@ -130,19 +179,21 @@ class ProfileNode(RunNodeHooks, Node):
                                          for i in range(count + 1)))
 
     def publish(self, stamp_ns: int) -> None:
-        self.reference_pub.publish(reference_to_msg(self.reference_at(stamp_ns)))
+        self.publishing(self.reference_pub, reference_to_msg(self.reference_at(stamp_ns)))
 
     def publish_supervision(self, stamp_ns: int) -> None:
         """Distance to go and permitted speed now (unstamped: only ever for the current tick)."""
         now = self.trajectory.at(seconds(stamp_ns - self.time_origin_ns))
         target = self.plan.next_target(now.position, now.time_s)
-        self.dtg_pub.publish(Float64(data=target.location_m - now.position))
-        self.permitted_pub.publish(Float64(data=self.plan.permitted_speed(now.position,
-                                                                          now.time_s)))
+        self.publishing(self.dtg_pub, Float64(data=target.location_m - now.position))
+        self.publishing(self.permitted_pub, Float64(data=self.plan.permitted_speed(now.position,
+                                                                                   now.time_s)))
 
     def on_clock(self, msg: Clock) -> None:
-        if self.reference_pub.get_subscription_count() < self.params['wait_for_subscribers']:
-            return  # the plant re-sends the tick until the reference comes
+        if not self.subscribers_met:
+            if self.reference_pub.get_subscription_count() < self.params['wait_for_subscribers']:
+                return  # the plant re-sends the tick until the reference comes
+            self.subscribers_met = True
         tick = from_time(msg.clock)
         if tick != self.sent_ahead_ns or tick == self.last_tick_ns:
             self.publish(tick)  # not sent ahead, or the plant re-sent the tick
@@ -200,7 +251,8 @@ class ProfileNode(RunNodeHooks, Node):
 
 
 def main(args=None) -> int:
-    return run_node(ProfileNode, args)
+    return run_node(ProfileNode, args,
+                    usage=lambda: node_usage('profile_node', 'profile_node', __doc__, PARAMS))
 
 
 if __name__ == '__main__':

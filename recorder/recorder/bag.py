@@ -125,7 +125,12 @@ class BagWriter:
         try:
             self.folder.mkdir(parents=True, exist_ok=True)
             self.path = bag_file(self.folder)
-            self._file: BinaryIO = open(self.path, 'wb')
+            # 'x': created by this writer or not at all (two recorders given one folder at
+            # the same moment: the second is refused instead of both writing one file).
+            self._file: BinaryIO = open(self.path, 'xb')
+        except FileExistsError:
+            raise BagError(f'{self.path} was just created by another recorder: choose another '
+                           'output folder') from None
         except OSError as error:
             raise BagError(f'cannot create {self.folder}: {error.strerror}') from None
         self._writer = Writer(self._file, chunk_size=chunk_size, compression=kinds[compression])

@@ -4,7 +4,16 @@ Lockstep (default): the plant owns simulated time. It publishes /clock, the true
 state at t_k, waits for the command stamped t_k, holds it while integrating to t_k+1, and
 publishes again. Until the first command arrives (and while waiting for one) it re-publishes the
 current step every ``resend_period_s`` of wall time, so start-up order and DDS discovery do not
-matter. Real time: the same simulation advanced by a wall-clock timer, commands held as they come.
+matter. A step whose command has not come after ``command_wait_limit_s`` of wall time (the
+controller or the profile gone) is reported as a WARN in the diagnostics and in the log, again
+each such period. Real time: the same simulation advanced by a wall-clock timer, commands held as
+they come.
+
+The plant publishes the identity of what it simulates, latched (``train/identity``: the
+scenario's name and a hash of the resolved scenario); the controller and the profile refuse to
+run on another scenario. A failed publish (the middleware refusing a sample) is counted and
+reported, never fatal. Before it exits at ``end_time_s`` the plant waits until every matched
+subscriber has acknowledged the last step.
 """
 
 from __future__ import annotations
@@ -15,26 +24,31 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Header
+from std_msgs.msg import Header, String
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_common import units
+from ato_common.identity import scenario_identity
 from ato_common.params import Param, ParameterTable
 from ato_common.plant_setup import parse_failure_injection
 from ato_common.ros import (
     MessageError,
+    Publishing,
     RunNodeHooks,
     actuator_forces_to_msg,
     command_from_msg,
     diagnostic_status,
     freeze_startup_objects,
     from_time,
+    node_usage,
     qos_profile,
     run_node,
     state_to_msg,
+    status_name,
     to_duration,
     to_time,
     topic,
+    wait_until_delivered,
 )
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import TrainState, nanoseconds, seconds
@@ -91,6 +105,12 @@ PARAMS = (
     Param('command_stamp_tolerance_s', 1.0, 'real time: a command stamped more than this before '
           'or after now is dropped (counted, and the watchdog sees no valid command), s',
           minimum=0.001, maximum=60.0, read_only=False),
+    Param('command_wait_limit_s', 5.0, 'lockstep: wall time to wait for the command of a step '
+          'before reporting the wait (WARN diagnostics and log, again each such period), s',
+          minimum=0.1, maximum=3600.0, read_only=False),
+    Param('final_delivery_timeout_s', 5.0, 'at end_time_s: wall time to wait for every matched '
+          'subscriber to acknowledge the last step before exiting, s', minimum=0.0,
+          maximum=60.0),
 )
 
 DIAGNOSTIC_PERIOD_S = 1.0
@@ -110,6 +130,11 @@ class TrainPlantNode(RunNodeHooks, Node):
         if p['emergency_periods'] < p['watchdog_periods']:
             raise ConfigError(f"emergency_periods ({p['emergency_periods']}) must not be below "
                               f"watchdog_periods ({p['watchdog_periods']})")
+        if not self.lockstep and self.get_parameter('use_sim_time').value:
+            raise ConfigError('use_sim_time is true on a real-time plant (lockstep false): '
+                              'nobody publishes /clock then, so its clock would never advance '
+                              'and it would publish nothing; set use_sim_time false (only the '
+                              'other nodes of a lockstep run use simulated time)')
         self.control_period_ns = control_period_ns(rate)
         try:
             self.sim = TrainSimulation(
@@ -137,6 +162,12 @@ class TrainPlantNode(RunNodeHooks, Node):
         self.ready_since: float | None = None
         self.wrong_stamp_commands = 0   # dropped for their stamp (lockstep and real time)
         self.last_wrong_stamp = ''      # why the last one was dropped
+        self.publishing = Publishing(self)
+        self.failures_reported = 0
+        self.step_since_wall = 0.0      # when the current step was first published
+        self.waiting_reported_wall = 0.0
+        self.waiting = ''               # lockstep: the wait for a command beyond the limit
+        self.status_name = status_name(self, 'simulation')
 
         self.truth_pub = self.create_publisher(JointTrajectory, topic('state').name,
                                                qos_profile(topic('state').qos))
@@ -153,6 +184,11 @@ class TrainPlantNode(RunNodeHooks, Node):
         self.applied_pub = self.create_publisher(
             JointState, topic('actuators_applied').name,
             qos_profile(topic('actuators_applied').qos))
+        self.identity_pub = self.create_publisher(String, topic('identity').name,
+                                                  qos_profile(topic('identity').qos))
+        self.identity = scenario_identity(self.scenario)
+        self.publishing(self.identity_pub, String(data=self.identity))
+        self.add_on_set_parameters_callback(self.check_use_sim_time)
         # Validate in the set callback, apply once the change is accepted (validate-then-apply).
         self.params.extra_checks.append(self.check_inject_failure)
         self.add_post_set_parameters_callback(self.apply_parameters)
@@ -191,13 +227,18 @@ class TrainPlantNode(RunNodeHooks, Node):
                                   self._msg(self.sim.measured(truth), stamp),
                                   actuator_forces_to_msg(stamp, names, self.sim.commanded),
                                   actuator_forces_to_msg(stamp, names, self.sim.applied))
+            self.step_since_wall = time.monotonic()
+            if self.waiting:
+                self.get_logger().info(f'commands again after {self.waiting}')
+                self.waiting = ''
         _, clock, truth_msg, measured_msg, commanded_msg, applied_msg = self.step_messages
+        publish = self.publishing
         if self.clock_pub is not None:
-            self.clock_pub.publish(clock)
-        self.truth_pub.publish(truth_msg)
-        self.measured_pub.publish(measured_msg)
-        self.commanded_pub.publish(commanded_msg)
-        self.applied_pub.publish(applied_msg)
+            publish(self.clock_pub, clock)
+        publish(self.truth_pub, truth_msg)
+        publish(self.measured_pub, measured_msg)
+        publish(self.commanded_pub, commanded_msg)
+        publish(self.applied_pub, applied_msg)
         self.steps_published += 1
         self.last_publish_wall = time.monotonic()
         safety_state = (self.sim.watchdog, self.sim.atp_intervention)
@@ -242,13 +283,29 @@ class TrainPlantNode(RunNodeHooks, Node):
         else:
             self.get_logger().info('safety functions released: the ATO is in control again')
 
+    def observers_lost(self) -> str:
+        """'' while train/state has the subscribers the start waited for, else what is missing
+        (an observer, e.g. the recorder, went away: the loop goes on without it)."""
+        wanted = self.params['wait_for_subscribers']
+        have = self.truth_pub.get_subscription_count()
+        if not self.started or have >= wanted:
+            return ''
+        return (f'train/state has {have} of the {wanted} subscribers the run started with '
+                '(an observer went away)')
+
     def publish_diagnostics(self) -> None:
         safety = self.safety_message()
+        lost = self.observers_lost()
+        failed = self.publishing.failures - self.failures_reported
+        self.failures_reported = self.publishing.failures
+        warning = (self.waiting and f'{self.waiting} (is the controller, or the profile, '
+                   'running?)') or self.last_rejection or lost or (
+            failed and f'{failed} publishes failed (last: {self.publishing.last_failure})')
         level = (DiagnosticStatus.ERROR if safety else
-                 DiagnosticStatus.WARN if self.last_rejection else DiagnosticStatus.OK)
+                 DiagnosticStatus.WARN if warning else DiagnosticStatus.OK)
         status = diagnostic_status(
-            'train_plant_node: simulation', self.scenario.train.name, level,
-            safety or self.last_rejection or 'running',
+            self.status_name, self.scenario.train.name, level,
+            safety or warning or 'running',
             {'time_s': self.sim.time_s, 'commanded_n': list(self.sim.commanded),
              'applied_n': list(self.sim.applied),
              'rejected_commands': self.sim.rejected_commands,
@@ -264,13 +321,27 @@ class TrainPlantNode(RunNodeHooks, Node):
              'mode_index': self.sim.mode_index(),
              'active_failures': '; '.join(f.describe() for f in
                                           self.sim.active_failures().values()) or 'none',
-             'scheduled_failures': len(self.sim.failures)})
-        self.diag_pub.publish(DiagnosticArray(header=self._header(), status=[status]))
+             'scheduled_failures': len(self.sim.failures),
+             'waiting_for_command_s': (time.monotonic() - self.step_since_wall
+                                       if self.waiting else 0.0),
+             'state_subscribers': self.truth_pub.get_subscription_count(),
+             'identity': self.identity,
+             **self.publishing.values()})
+        self.publishing(self.diag_pub, DiagnosticArray(header=self._header(), status=[status]))
 
     def _header(self) -> Header:
         return Header(stamp=to_time(self.stamp_ns()))
 
     # --- events -------------------------------------------------------------------------------
+    def check_use_sim_time(self, parameters):
+        from rcl_interfaces.msg import SetParametersResult
+        for parameter in parameters:
+            if parameter.name == 'use_sim_time' and parameter.value and not self.lockstep:
+                return SetParametersResult(
+                    successful=False, reason='use_sim_time true on a real-time plant: nobody '
+                    'publishes /clock, its clock would stop and it would publish nothing')
+        return SetParametersResult(successful=True)
+
     def check_inject_failure(self, changes) -> str | None:
         """``ros2 param set /train_plant_node inject_failure '...'``: a text that does not parse
         is rejected with the reason and changes nothing."""
@@ -318,8 +389,18 @@ class TrainPlantNode(RunNodeHooks, Node):
             self.publish_step()
             return
         if self.lockstep:
-            if time.monotonic() - self.last_publish_wall >= self.params['resend_period_s']:
+            now = time.monotonic()
+            if now - self.last_publish_wall >= self.params['resend_period_s']:
                 self.publish_step()  # the command for this step has not come: say it again
+            waited = now - self.step_since_wall
+            limit = self.params['command_wait_limit_s']
+            if waited >= limit and now - self.waiting_reported_wall >= limit:
+                self.waiting_reported_wall = now
+                self.waiting = (f'waiting {waited:.1f} s of wall time for the command of the '
+                                f'step at {self.sim.time_s:.3f} s (limit {limit:g} s)')
+                self.get_logger().warning(f'{self.waiting}: simulated time stands still until '
+                                          'a command comes')
+                self.publish_diagnostics()
         else:
             missed = int((time.monotonic() - self.last_valid_command_wall) * 1e9
                          // self.control_period_ns)
@@ -391,9 +472,22 @@ class TrainPlantNode(RunNodeHooks, Node):
             self.get_logger().info(f'end of run at t = {self.sim.time_s:.3f} s')
             self.finished = True
 
+    def close_outputs(self) -> None:
+        """The last step (and diagnostics) reach every matched subscriber before the exit."""
+        if not self.started:
+            return
+        publishers = [self.truth_pub, self.measured_pub, self.commanded_pub, self.applied_pub,
+                      self.diag_pub] + ([self.clock_pub] if self.clock_pub else [])
+        if not wait_until_delivered(publishers, self.params['final_delivery_timeout_s']):
+            self.get_logger().warning(
+                'some subscribers did not acknowledge the last messages within '
+                f"{self.params['final_delivery_timeout_s']:g} s (gone?); exiting anyway")
+
 
 def main(args=None) -> int:
-    return run_node(TrainPlantNode, args)
+    return run_node(TrainPlantNode, args,
+                    usage=lambda: node_usage('train_plant_node', 'train_plant_node', __doc__,
+                                             PARAMS))
 
 
 if __name__ == '__main__':
