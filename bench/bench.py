@@ -19,10 +19,14 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import gc
 import math
 import os
+import re
+import signal
+import subprocess
 import tempfile
 import time
 from pathlib import Path
@@ -33,7 +37,7 @@ from ato_bringup.compare import plan_jobs
 from ato_bringup.offline import clear_plan_cache, run_offline
 from ato_bringup.provenance import results_page_provenance, write_results_page
 from ato_bringup.runner import run_lockstep
-from ato_bringup.stack import StackConfig
+from ato_bringup.stack import StackConfig, executable_path
 from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
 from ato_common.trains import train_preset
 from ato_common.types import NS_PER_S, nanoseconds
@@ -43,17 +47,70 @@ from train_plant_node.accuracy import accuracy_scenario, worst_speed_error
 from train_plant_node.simulation import TrainSimulation
 
 
-def graph_rtf(scenario: str, executor: str, domain_id: int, record: bool = False
-              ) -> tuple[float, float, int, int]:
-    """(overall and steady real-time factor, steps, messages recorded)."""
+def graph_rtf(scenario: str, executor: str, domain_id: int, record: bool = False,
+              live: bool = False) -> tuple[float, float, int, int]:
+    """(overall and steady real-time factor, steps, messages recorded, or with ``live``
+    messages the live view's client received)."""
     os.environ['ATO_EXECUTOR'] = executor
     with tempfile.TemporaryDirectory() as logs:
         bag = Path(logs) / 'bag' if record else None
-        outcome = run_lockstep(StackConfig(scenario=scenario, domain_id=domain_id,
-                                           log_dir=Path(logs), record_to=bag))
-        recorded = bag_info(bag).message_count if record else 0
+        config = StackConfig(scenario=scenario, domain_id=domain_id, log_dir=Path(logs),
+                             record_to=bag)
+        if live:
+            with watched_live_view(domain_id, Path(logs)) as (watch, received):
+                outcome = run_lockstep(config, actions={0.0: watch})
+                count = received()
+        else:
+            outcome = run_lockstep(config)
+            count = bag_info(bag).message_count if record else 0
     overall = outcome.metrics.simulated_time_s / outcome.wall_time_s
-    return overall, outcome.steady_real_time_factor(), outcome.metrics.samples, recorded
+    return overall, outcome.steady_real_time_factor(), outcome.metrics.samples, count
+
+
+def layout_topics() -> list[str]:
+    """The topics the shipped Foxglove layout plots (what a client of the live view watches)."""
+    from ament_index_python.packages import get_package_share_directory
+    layout = Path(get_package_share_directory('recorder')) / 'config' / 'foxglove_layout.json'
+    return sorted(set(re.findall(r'"(/[a-z_]+(?:/[a-z_]+)*)[.{]', layout.read_text())))
+
+
+@contextlib.contextmanager
+def watched_live_view(domain_id: int, logs: Path):
+    """``recorder live`` beside the stack, with one Foxglove client; yields (an action that
+    subscribes the client to every topic of the layout once they are advertised, a function
+    counting the messages the client received)."""
+    from recorder.foxglove_client import FoxgloveClient, advertised
+    from recorder.live import served_url
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), FASTDDS_BUILTIN_TRANSPORTS='SHM')
+    log = logs / 'live.log'
+    with open(log, 'wb') as out:
+        live = subprocess.Popen([executable_path('recorder', 'live'), '--port', '0',
+                                 *layout_topics()], stdout=out, stderr=subprocess.STDOUT,
+                                env=env, stdin=subprocess.DEVNULL)
+    client = None
+    try:
+        deadline = time.monotonic() + 30
+        while served_url(log.read_text(errors='replace')) is None:
+            if time.monotonic() > deadline or live.poll() is not None:
+                raise RuntimeError(f'the live view did not start:\n{log.read_text()}')
+            time.sleep(0.1)
+        client = FoxgloveClient(served_url(log.read_text(errors='replace')))
+
+        def watch(stack) -> None:
+            for k, topic in enumerate(layout_topics()):
+                channel = client.next(advertised(topic), 30, lambda: stack.spin_for(0.02))
+                client.subscribe(k, channel['id'])
+
+        def received() -> int:
+            time.sleep(0.5)
+            return sum(isinstance(m, bytes) and m[0] == 1 for m in list(client.received.queue))
+
+        yield watch, received
+    finally:
+        if client is not None:
+            client.close()
+        live.send_signal(signal.SIGINT)
+        live.wait(timeout=30)
 
 
 #: steps timed for a law that runs faster than its scenario's control rate
@@ -330,6 +387,11 @@ def main() -> int:
     page.add(f'| EventsExecutor, with the recorder | {steps} | {overall:.1f}x | {steady:.1f}x | '
              f'{1e3 / (10 * steady):.2f} ms | {recorded} messages, '
              f'{recorded * steady / (steps / 10):.0f} per second at the steady rate |')
+    overall, steady, steps, watched = graph_rtf(args.scenario, 'events', args.domain_id,
+                                                live=True)
+    page.add(f'| EventsExecutor, with the live view (`recorder live`) and one Foxglove client '
+             f'watching the layout\'s {len(layout_topics())} topics | {steps} | {overall:.1f}x | '
+             f'{steady:.1f}x | {1e3 / (10 * steady):.2f} ms | {watched} messages to the client |')
     page.add('', '## Controller step time', '',
              'Offline, the law and its host (saturation, bumpless transfer); target p99 < 1 ms. '
              f'A law sampled faster than its scenario is timed over {LAW_BENCH_STEPS} steps at '

@@ -11,8 +11,11 @@ recordings), so Foxglove decodes and plots them as it does a recording.
 
 Free while nobody watches: the view subscribes to a ROS topic only while a Foxglove client is
 subscribed to its channel (a panel shows it), and forwards the raw CDR bytes without decoding
-them. Each watched per-step topic costs the lockstep loop about one rclpy take per step, so a
-panel on every topic slows a lockstep run (see the benchmark page); watch what you need.
+them. Cheap while watched: by default (``--rate 20``) it forwards the latest message of each
+watched topic 20 times a second of wall time, taken from a one-message history that the
+middleware overwrites in between, so a lockstep run at 100x costs the view 20 takes a second
+per topic instead of 1000 (what it skips, a recording keeps). ``--rate 0`` forwards every
+message (one rclpy take each, on the loop's CPU).
 
 Messages are logged at their own stamp where the suite's conventions give one (as the
 recorder's default ``--log-time stamp``), else at the node's ROS time on receipt; with
@@ -22,12 +25,14 @@ recorder's default ``--log-time stamp``), else at the node's ROS time on receipt
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import threading
 
 import foxglove
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 
 from ato_common.ros import RunNodeHooks, freeze_startup_objects, run_node
@@ -38,6 +43,11 @@ from recorder.ros_io import message_class, subscription_qos
 from recorder.rosbag2_format import cdr_stamp_ns
 
 DEFAULT_PORT = 8765
+#: messages forwarded per second and watched topic by default (a panel's refresh rate)
+DEFAULT_RATE_HZ = 20.0
+# What the node logs once it serves, and how a script finds the port (with --port 0: any free).
+SERVING = 'Foxglove WebSocket on ws://{host}:{port}'
+SERVING_PATTERN = re.compile(r'Foxglove WebSocket on ws://(\S+?):(\d+)')
 # How often the view looks for new topics and for what Foxglove clients have asked for, s.
 POLL_PERIOD_S = 0.2
 
@@ -73,12 +83,29 @@ class Watched(foxglove.ServerListener):
             return set(self._clients)
 
 
+def sampling_qos(offered: list) -> QoSProfile:
+    """A one-message history that the middleware overwrites with each new message: the latest
+    of a stream (best effort, which every publisher matches), or the latched value of a topic
+    whose publishers all latch (reliable, transient local)."""
+    latched = bool(offered) and all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                                    for q in offered)
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                      reliability=ReliabilityPolicy.RELIABLE if latched
+                      else ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
+                      else DurabilityPolicy.VOLATILE)
+
+
 class LiveViewNode(RunNodeHooks, Node):
     outputs_closed = False
 
     def __init__(self, topics: list[str] | None, host: str, port: int,
-                 poll_period_s: float = POLL_PERIOD_S):
+                 rate_hz: float = DEFAULT_RATE_HZ, poll_period_s: float = POLL_PERIOD_S):
         super().__init__('live_view')
+        self.rate_hz = rate_hz
+        # Sampled subscriptions live on a node that no executor spins: nothing is taken when a
+        # message arrives; ``sample`` takes the latest at the view's rate.
+        self.sampler = Node('live_view_sampler', context=self.context) if rate_hz else None
         self.wanted = set(topics) if topics else None
         self.watched = Watched()
         self.channels: dict[str, foxglove.Channel] = {}   # topic -> channel
@@ -96,7 +123,10 @@ class LiveViewNode(RunNodeHooks, Node):
             raise ConfigError(f'cannot serve Foxglove on {host}:{port}: {error}') from None
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(poll_period_s, self.poll, clock=steady)
-        self.get_logger().info(f'Foxglove WebSocket on ws://{host}:{self.server.port} '
+        if rate_hz:
+            self.create_timer(1.0 / rate_hz, self.sample, clock=steady)
+        serving = SERVING.format(host=host, port=self.server.port)
+        self.get_logger().info(f'{serving} '
                                f'({"every topic" if self.wanted is None else sorted(self.wanted)})')
         freeze_startup_objects()
         self.poll()
@@ -109,17 +139,39 @@ class LiveViewNode(RunNodeHooks, Node):
         for topic, channel in self.channels.items():
             subscribed = topic in self.subscriptions_by_topic
             if channel.id() in watched and not subscribed:
-                self.subscriptions_by_topic[topic] = self.create_subscription(
-                    message_class(self.types[topic]), topic, self._forward(topic),
-                    subscription_qos(self.offered[topic]), raw=True)
+                msg_type = message_class(self.types[topic])
+                if self.sampler is None:  # every message, as it arrives
+                    self.subscriptions_by_topic[topic] = self.create_subscription(
+                        msg_type, topic, self._forward(topic),
+                        subscription_qos(self.offered[topic]), raw=True)
+                else:
+                    self.subscriptions_by_topic[topic] = (
+                        self.sampler.create_subscription(
+                            msg_type, topic, lambda data: None,
+                            sampling_qos(self.offered[topic]), raw=True),
+                        self._forward(topic))
                 self.get_logger().info(f'watched: {topic}')
             elif channel.id() not in watched and subscribed:
-                self.destroy_subscription(self.subscriptions_by_topic.pop(topic))
+                removed = self.subscriptions_by_topic.pop(topic)
+                if self.sampler is None:
+                    self.destroy_subscription(removed)
+                else:
+                    self.sampler.destroy_subscription(removed[0])
                 self.get_logger().info(f'no longer watched: {topic}')
         if self.sim_time:
             now = self.get_clock().now().nanoseconds
             if now > 0:
                 self.server.broadcast_time(now)
+
+    def sample(self) -> None:
+        """Forward the latest message of each watched topic, if a new one arrived."""
+        for subscription, forward in list(self.subscriptions_by_topic.values()):
+            # rclpy has no public take outside an executor; this is the call its executors
+            # make for a ready subscription (tests/test_live_view.py exercises it).
+            with subscription.handle:
+                taken = subscription.handle.take_message(subscription.msg_type, True)
+            if taken is not None:
+                forward(taken[0])
 
     def discover(self) -> None:
         for topic, types in self.get_topic_names_and_types():
@@ -163,10 +215,29 @@ class LiveViewNode(RunNodeHooks, Node):
             return
         self.outputs_closed = True
         self.server.stop()
+        if self.sampler is not None:
+            self.sampler.destroy_node()
 
     def destroy_node(self) -> None:
         self.close_outputs()
         super().destroy_node()
+
+
+def served_url(log_text: str) -> str | None:
+    """The ws:// address a live view's log says it serves on (None before it does)."""
+    found = SERVING_PATTERN.search(log_text)
+    return f'ws://{found.group(1)}:{found.group(2)}' if found else None
+
+
+def rate(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a rate in Hz') from None
+    if not (value >= 0.0 and value <= 1000.0):
+        raise argparse.ArgumentTypeError(f'{text} Hz is not a rate of 0 (every message) to '
+                                         '1000 Hz')
+    return value
 
 
 def port_number(text: str) -> int:
@@ -187,6 +258,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                              'interface)')
     parser.add_argument('--port', type=port_number, default=DEFAULT_PORT,
                         help=f'WebSocket port (default {DEFAULT_PORT}, as Foxglove expects)')
+    parser.add_argument('--rate', type=rate, default=DEFAULT_RATE_HZ,
+                        help=f'latest messages forwarded per second and watched topic (default '
+                             f'{DEFAULT_RATE_HZ:g}; 0: every message)')
     return parser.parse_args(argv)
 
 
@@ -194,7 +268,8 @@ def main(args=None) -> int:
     argv = remove_ros_args(args if args is not None else sys.argv)[1:]
     options = parse_args(argv)
     foxglove.set_log_level('WARNING')
-    return run_node(lambda: LiveViewNode(options.topics, options.host, options.port), args)
+    return run_node(lambda: LiveViewNode(options.topics, options.host, options.port,
+                                         options.rate), args)
 
 
 if __name__ == '__main__':
