@@ -79,7 +79,7 @@ def watched_live_view(domain_id: int, logs: Path):
     """``recorder live`` beside the stack, with one Foxglove client; yields (an action that
     subscribes the client to every topic of the layout once they are advertised, a function
     counting the messages the client received)."""
-    from recorder.foxglove_client import FoxgloveClient, advertised
+    from recorder.foxglove_client import FoxgloveClient
     from recorder.live import served_url
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), FASTDDS_BUILTIN_TRANSPORTS='SHM')
     log = logs / 'live.log'
@@ -98,7 +98,7 @@ def watched_live_view(domain_id: int, logs: Path):
 
         def watch(stack) -> None:
             for k, topic in enumerate(layout_topics()):
-                channel = client.next(advertised(topic), 30, lambda: stack.spin_for(0.02))
+                channel = client.channel(topic, 30, lambda: stack.spin_for(0.02))
                 client.subscribe(k, channel['id'])
 
         def received() -> int:

@@ -16,7 +16,7 @@ from ato_bringup.runner import run_lockstep
 from ato_bringup.stack import Stack, StackConfig, executable_path
 from ato_common.conventions import TOPICS
 from ato_common.ros import qos_profile
-from recorder.foxglove_client import FoxgloveClient, advertised, message_data
+from recorder.foxglove_client import FoxgloveClient, message_data
 from recorder.live import served_url
 
 
@@ -40,7 +40,7 @@ def test_a_watched_topic_arrives_as_published_and_costs_nothing_unwatched(tmp_pa
             assert url, log.read_text(errors='replace')
             client = FoxgloveClient(url)
             try:
-                channel = client.next(advertised(topic), 20, lambda: stack.spin_for(0.05))
+                channel = client.channel(topic, 20, lambda: stack.spin_for(0.05))
                 assert channel['encoding'] == 'cdr'
                 assert channel['schemaName'] == state.type_name
                 assert channel['schemaEncoding'] == 'ros2msg'
@@ -107,7 +107,7 @@ def test_a_client_watches_a_lockstep_run(tmp_path, domain_id, rate):
         client = FoxgloveClient(url)
 
         def watch(stack):
-            channel = client.next(advertised(topic), 30, lambda: stack.spin_for(0.05))
+            channel = client.channel(topic, 30, lambda: stack.spin_for(0.05))
             client.subscribe(3, channel['id'])
             return channel['id']
 

@@ -25,10 +25,13 @@ MESSAGE_DATA = 0x01
 
 
 class FoxgloveClient:
-    """Connects to ``url`` (``ws://host:port``); frames land in ``received``."""
+    """Connects to ``url`` (``ws://host:port``); frames land in ``received``, and the channels
+    the server advertises (and has not withdrawn) in ``channels``, by topic."""
 
     def __init__(self, url: str, timeout_s: float = 10.0):
         self.received: queue.Queue = queue.Queue()
+        self.channels: dict[str, dict] = {}
+        self._lock = threading.Lock()
         self.loop = asyncio.new_event_loop()
         self.connected = threading.Event()
         self.error: BaseException | None = None
@@ -58,7 +61,32 @@ class FoxgloveClient:
             message = await self.connection.read_message()
             if message is None:
                 return
+            if isinstance(message, str):
+                self._note(json.loads(message))
             self.received.put(message)
+
+    def _note(self, body: dict) -> None:
+        with self._lock:
+            if body.get('op') == 'advertise':
+                self.channels.update({c['topic']: c for c in body['channels']})
+            elif body.get('op') == 'unadvertise':
+                gone = set(body['channelIds'])
+                self.channels = {t: c for t, c in self.channels.items() if c['id'] not in gone}
+
+    def channel(self, topic: str, timeout_s: float, spin: Callable[[], None] = lambda: None
+                ) -> dict:
+        """The channel the server advertises for ``topic`` (id, encoding, schema...), waiting
+        for it up to ``timeout_s`` while calling ``spin``; TimeoutError naming the topic."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            with self._lock:
+                found = self.channels.get(topic)
+            if found is not None:
+                return found
+            if time.monotonic() > deadline:
+                raise TimeoutError(f'the live view did not advertise {topic} in {timeout_s} s')
+            spin()
+            time.sleep(0.01)
 
     def send(self, payload: dict) -> None:
         self.loop.call_soon_threadsafe(self.connection.write_message, json.dumps(payload))
@@ -90,18 +118,6 @@ class FoxgloveClient:
             if found is not None:
                 return found
         raise TimeoutError(f'nothing awaited arrived from the live view in {timeout_s} s')
-
-
-def advertised(topic: str) -> Callable[[object], dict | None]:
-    """Accepts the ``advertise`` frame of ``topic``: its channel (id, encoding, schema...)."""
-    def accept(message):
-        if isinstance(message, str):
-            body = json.loads(message)
-            for channel in body.get('channels', []) if body.get('op') == 'advertise' else []:
-                if channel['topic'] == topic:
-                    return channel
-        return None
-    return accept
 
 
 def message_data(subscription_id: int) -> Callable[[object], tuple[int, bytes] | None]:
