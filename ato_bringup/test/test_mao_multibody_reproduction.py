@@ -102,8 +102,8 @@ def test_estimates_under_the_paper_gains_converted_for_tonnes(run):
         'Gamma = 2 I (Section VI); estimates not shown',
         f'th11 {final1[0]:.3f}, th21 {final2[0]:.3f} of the truth; c1 {final1[3]:.3g}, th19 '
         f'{final1[8]:.2f}, th27 {final2[6]:.2f} of the truth after {END_S:g} s',
-        f'as the first claim; Gamma converted for Table II\'s tonnes with m and s '
-        f'(gamma11 = gamma21 = 2000 SI, others 2)',
+        'as the first claim; Gamma converted for Table II\'s tonnes with m and s '
+        '(gamma11 = gamma21 = 2000 SI, others 2)',
         'partly reproduced',
         'bounded, but the c1 estimate changes sign and the constants overshoot: Theorem 2 gives '
         'no parameter convergence, and with one gain for entries from 1.5e-5 to 3e4 the stiff '
