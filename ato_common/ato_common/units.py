@@ -107,3 +107,80 @@ def curvature_term_to_curve_radius_m(curvature_d: float, coefficient: float = 0.
     if not curvature_d > 0.0:
         raise ValueError(f'the curvature term D must be positive, got {curvature_d!r}')
     return 0.6 * gravity / (coefficient * curvature_d)
+
+
+#: dimensions (mass, length, time exponents) of Mao, Tao, Jiang & Yan's parameters Theta1 of
+#: (57)-(58) and Theta2 of (68)-(69), of their regressors W1 (after (61)) and W2 (after (73)),
+#: and of the errors eps = p12 e2 + p22 e2' of (64) and e6 of (74)
+MAO_MULTIBODY_THETA1_DIMENSIONS = ((1, 0, 1), (0, 0, -2), (0, 0, -1), (0, -1, 0), (0, 0, -3),
+                                   (0, 0, -2), (0, 0, -3), (0, 0, -2), (0, 1, -3))
+MAO_MULTIBODY_W1_DIMENSIONS = ((0, 1, -3), (0, 1, -1), (0, 1, -2), (0, 2, -3), (0, 1, 0),
+                               (0, 1, -1), (0, 1, 0), (0, 1, -1), (0, 0, 0))
+MAO_MULTIBODY_THETA2_DIMENSIONS = ((1, 0, 0), (0, 0, -1), (0, 0, -2), (0, 0, -1), (0, 0, -2),
+                                   (0, 0, -1), (0, 1, -2))
+MAO_MULTIBODY_W2_DIMENSIONS = ((0, 1, -2), (0, 1, -1), (0, 1, 0), (0, 1, -1), (0, 1, 0),
+                               (0, 1, -1), (0, 0, 0))
+MAO_MULTIBODY_ERROR_DIMENSIONS = (0, 1, -1)   # eps and e6: speeds (p12 is a number, p22 in s)
+
+
+def adaptation_gain_to_si(gamma: float, theta: tuple[int, int, int],
+                          regressor: tuple[int, int, int], error: tuple[int, int, int],
+                          mass_unit_kg: float = 1.0, length_unit_m: float = 1.0,
+                          time_unit_s: float = 1.0) -> float:
+    """One diagonal entry gamma of a gradient adaptive law theta' = -gamma w e, given in a
+    coherent unit system (mass, length and time units in kg, m and s) -> the same law in SI.
+
+    Derivation. The law fixes the gain's unit: [gamma] = [theta] / ([w] [e] [t]). A quantity of
+    dimension M^a L^b T^c is ``mass_unit_kg^a length_unit_m^b time_unit_s^c`` times its number
+    in SI, so with f(q) that factor, theta_SI = f(theta) theta_u, w_SI = f(w) w_u,
+    e_SI = f(e) e_u and t_SI = f(T) t_u give
+
+        theta_SI' = f(theta)/f(T) theta_u' = -f(theta)/f(T) gamma_u w_u e_u
+                  = -[f(theta) / (f(w) f(e) f(T))] gamma_u w_SI e_SI,
+
+    i.e. gamma_SI = gamma_u f(theta) / (f(w) f(e) f(T)): the same law, the same trajectories
+    and the same Lyapunov function theta_t^2/(2 gamma), only written in SI. ``theta``,
+    ``regressor`` and ``error`` are the (mass, length, time) exponents of the three factors.
+    """
+    for name, unit in (('mass', mass_unit_kg), ('length', length_unit_m),
+                       ('time', time_unit_s)):
+        if not (unit > 0.0 and math.isfinite(unit)):
+            raise ValueError(f'the {name} unit must be a positive finite number, got {unit!r}')
+
+    def factor(dimension):
+        mass, length, time = dimension
+        return mass_unit_kg ** mass * length_unit_m ** length * time_unit_s ** time
+
+    return gamma * factor(theta) / (factor(regressor) * factor(error) * time_unit_s)
+
+
+def mao_multibody_adaptation_gains_to_si(
+        gamma1: float, gamma2: float, mass_unit_kg: float = 1000.0, length_unit_m: float = 1.0,
+        time_unit_s: float = 1.0) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Mao, Tao, Jiang & Yan's Gamma1 = gamma1 I9 of (64) and Gamma2 = gamma2 I7 of (74), in a
+    coherent unit system -> the diagonals of Gamma1 and Gamma2 in SI (kg, m, s).
+
+    Each entry by :func:`adaptation_gain_to_si` from the dimensions of its parameter, its
+    regressor entry and its error (:data:`MAO_MULTIBODY_THETA1_DIMENSIONS` and the tables
+    beside it). The parameters are (57)-(58), (68)-(69): th11 = M1 M2/d1 [M T], th21 = M3 [M]
+    (the input gains); th12, th16 = d11 d12 - k11, ... [T^-2]; th13, th22, th24, th26 [T^-1];
+    th14 = c1 [L^-1]; th15, th17 = d11 k12, d11 k22 [T^-3]; th23, th25 = k23, k33 [T^-2];
+    th19 = d11 a2 [L T^-3]; th27 = a3 [L T^-2]. Each product th_k W_k is the output's
+    derivative (y1'' [L T^-3], y2' [L T^-2]); the input-gain entries give a force, th11
+    (nu2 - Phi1_hat) and th21 (nu3 - Phi2_hat). The errors eps and e6 are speeds.
+
+    The default is the reading docs/papers/mao_multibody.md argues for: Table II's masses in
+    tonnes, lengths in m and time in s as the paper's states and figures are (x(0) in m and
+    m/s), hence forces in kN. Only the entries with a mass in them change: gamma11 and gamma21
+    are multiplied by 1000 (th11 in t s is 1000 times its number in kg s; the regressors and
+    errors carry no mass), every other entry is per unit mass and is the same number in SI:
+    (2000, 2, ..., 2) and (2000, 2, ..., 2) for the paper's gains of 2.
+    """
+    error = MAO_MULTIBODY_ERROR_DIMENSIONS
+    units_ = dict(mass_unit_kg=mass_unit_kg, length_unit_m=length_unit_m,
+                  time_unit_s=time_unit_s)
+    first = tuple(adaptation_gain_to_si(gamma1, theta, w, error, **units_) for theta, w in
+                  zip(MAO_MULTIBODY_THETA1_DIMENSIONS, MAO_MULTIBODY_W1_DIMENSIONS))
+    second = tuple(adaptation_gain_to_si(gamma2, theta, w, error, **units_) for theta, w in
+                   zip(MAO_MULTIBODY_THETA2_DIMENSIONS, MAO_MULTIBODY_W2_DIMENSIONS))
+    return first, second

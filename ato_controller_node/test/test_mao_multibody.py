@@ -8,16 +8,20 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from ato_common import units
 from ato_common.line import parse_line
 from ato_common.trains import train_preset
 from ato_common.types import ReferencePoint
 from ato_controller_node.host import ControllerHost
 from ato_controller_node.laws.base import Measurement, TrainKnowledge, validated_settings
 from ato_controller_node.laws.mao_multibody import (
+    GAIN_PRESETS,
     MaoAdaptiveLaw,
     MaoNominalLaw,
     MaoState,
+    allocate,
     phi_regressors,
+    quasi_static_extension,
     true_parameters,
 )
 from train_plant_node.models.multi_car import MultiCarModel
@@ -129,7 +133,7 @@ def test_adaptation_follows_64_74_and_freezes_under_saturation(train, model):
     law.after_saturation(out.force_n, out.force_n, out.forces_n)
     e6 = m.car_speeds[2] - r.speed
     # (74), entry th22: Theta2' = -Gamma2 W2 e6 with W2[1] = -x4
-    expected = before[1][1] - DT * 2.0 * (-m.car_speeds[1]) * e6
+    expected = before[1][1] - DT * law.settings.gamma2 * (-m.car_speeds[1]) * e6
     assert law.theta2_hat[1] == pytest.approx(expected, rel=1e-12)
     assert law.theta1_hat != before[0]
 
@@ -169,3 +173,102 @@ def test_commands_and_estimates_stay_finite_and_within_limits(train, law, sample
                                        speeds), ReferencePoint(DT * k, 0.0, v_ref, a_ref, 0.0))
         assert all(lowest - 1e-6 <= f <= highest + 1e-6 for f in result.forces_n)
         assert all(math.isfinite(value) for value in result.estimates.values())
+
+
+def test_paper_gains_converted_from_the_adaptive_laws_dimensions():
+    # Table II's tonnes with m and s: only the input gains th11 [t s] and th21 [t] carry a mass
+    gamma1, gamma2 = units.mao_multibody_adaptation_gains_to_si(2.0, 2.0)
+    assert gamma1 == pytest.approx((2000.0,) + (2.0,) * 8, rel=1e-12)
+    assert gamma2 == pytest.approx((2000.0,) + (2.0,) * 6, rel=1e-12)
+    # one Euler step of (64) for th11 in t s and in kg s is the same step: th11_SI = 1000 th11_t
+    w, eps, dt = 0.3, 0.01, 1e-4          # nu2 - Phi1_hat [m/s^3], eps [m/s]
+    step_t = -dt * 2.0 * w * eps          # t s
+    assert -dt * gamma1[0] * w * eps == pytest.approx(1000.0 * step_t, rel=1e-12)
+    # the c1 entry [1/m] has no mass: only a length or time unit would change its gain; in km
+    # and h it would be 2 * 1000^-4 * 3600^3 (its dimension L^-4 T^3)
+    kmh = units.mao_multibody_adaptation_gains_to_si(2.0, 2.0, 1000.0, 1000.0, 3600.0)
+    assert kmh[0][3] == pytest.approx(2.0 * 1000.0 ** -4 * 3600.0 ** 3, rel=1e-12)
+    with pytest.raises(ValueError, match='mass unit'):
+        units.mao_multibody_adaptation_gains_to_si(2.0, 2.0, mass_unit_kg=0.0)
+    # every product theta_k W_k is the output's derivative (the tables are consistent)
+    for thetas, ws, output in ((units.MAO_MULTIBODY_THETA1_DIMENSIONS,
+                                units.MAO_MULTIBODY_W1_DIMENSIONS, (0, 1, -3)),
+                               (units.MAO_MULTIBODY_THETA2_DIMENSIONS,
+                                units.MAO_MULTIBODY_W2_DIMENSIONS, (0, 1, -2))):
+        products = [tuple(a + b for a, b in zip(t, w)) for t, w in zip(thetas, ws)]
+        assert products[0] == (1, 1, -2)              # th11 (nu2 - Phi1_hat): a force
+        assert set(products[1:]) == {output}
+
+
+def test_default_gains_are_the_paper_preset(train):
+    law = MaoAdaptiveLaw(train, DT)
+    for name, value in GAIN_PRESETS['paper'].items():
+        assert getattr(law.settings, name) == value
+    assert GAIN_PRESETS['paper']['gamma11'] == pytest.approx(2000.0)
+    assert set(GAIN_PRESETS['unscaled_si'].values()) == {2.0}
+
+
+def _regulated(values=None):
+    return {'regulate_internal_force': True, 'kappa': 2.0, **(values or {})}
+
+
+def test_quasi_static_extension_is_rigid_motion_of_the_plant(train, model, preset):
+    # With every car at one speed, the couplers at their quasi-static extensions and the forces
+    # of the mass split, the plant accelerates every car alike at A
+    speed, accel = 30.0, 0.3
+    cars = train.cars
+    masses = [c.mass_kg for c in cars]
+    resist = [c.mass_kg * (c.a_mps2 + c.b_per_s * speed + c.c_per_m * speed ** 2) for c in cars]
+    total = sum(masses) * accel + sum(resist)
+    f2 = total * (masses[0] + masses[1]) / sum(masses)
+    x3 = -(masses[0] * accel + resist[0]) / train.couplers[0].stiffness_n_per_m
+    x5 = (f2 - (masses[0] + masses[1]) * accel - resist[0] - resist[1]) \
+        / train.couplers[1].stiffness_n_per_m
+    x7 = (masses[3] * accel + resist[3]) / train.couplers[2].stiffness_n_per_m
+    assert quasi_static_extension(train, speed, accel) == pytest.approx(x3 + x5, rel=1e-12)
+    x = model.initial_state(1000.0, speed)    # the plant's positions: at rest spacing, equal
+    x[1:4] -= np.cumsum([x3, x5, x7])
+    flow = model.derivative(x, np.array([f2, total - f2]))
+    assert flow[4:] == pytest.approx([accel] * 4, abs=1e-6)
+    # car 3's share beyond its limit: car 2 takes the rest, the coupler between them pushes
+    lowest, highest = train.actuator_limits_at(speed)
+    hard = (2.0 * highest - sum(resist)) / sum(masses) * 0.999
+    shifted = quasi_static_extension(train, speed, hard) - (
+        -(masses[0] * hard + resist[0]) / train.couplers[0].stiffness_n_per_m)
+    assert abs(shifted) < 1e-3 and math.isfinite(shifted)
+
+
+def test_allocation_moves_what_one_actuator_cannot_give_to_the_other():
+    limits = (-80.0, 50.0)
+    assert allocate(30.0, 40.0, limits) == (30.0, 40.0)
+    assert allocate(30.0, 60.0, limits) == (40.0, 50.0)
+    assert allocate(70.0, 10.0, limits) == (50.0, 30.0)
+    assert allocate(70.0, 60.0, limits) == (50.0, 50.0)
+    assert allocate(-100.0, 0.0, limits) == (-80.0, -20.0)
+
+
+def test_regulated_second_output_is_tracked_as_55(train, model):
+    # The regulated nominal law on the plant: y2 = x6 - kappa (x3 + x5 - X*) obeys
+    # y2' = v_m' - alpha3 (y2 - v_m) (reference at constant speed: X*' = 0)
+    # a state near the quasi-static one, so that the forces stay within the actuators' limits
+    x = model.initial_state(1000.0, 10.0)
+    x[1:4] -= np.cumsum([-2e-6, 3e-6, 2e-6])
+    x[4:] += [1e-5, -2e-5, 1.5e-5, -1e-5]
+    r = ReferencePoint(0.0, 1000.0, 10.0, 0.0, 0.0)
+    law = MaoNominalLaw(train, DT, validated_settings(MaoNominalLaw.Settings, _regulated()))
+    m = _measure(model, x, (0.0, 0.0))
+    out = law.step(m, r)
+    lowest, highest = train.actuator_limits_at(10.0)
+    assert all(lowest < f < 0.9 * highest for f in out.forces_n)     # not reallocated
+    flow = model.derivative(x, np.array(out.forces_n))
+    state = MaoState.of(_measure(model, x, out.forces_n), train.car_length_m)
+    deviation = state.x[2] + state.x[4] - quasi_static_extension(train, r.speed, 0.0)
+    y2 = state.x[5] - 2.0 * deviation
+    y2_dot = flow[6] - 2.0 * (state.x[1] - state.x[5])
+    assert out.estimates['internal_extension_error_m'] == pytest.approx(deviation, rel=1e-9)
+    assert out.estimates['y2_error_mps'] == pytest.approx(y2 - r.speed, rel=1e-9)
+    assert y2_dot == pytest.approx(-1.0 * (y2 - r.speed), rel=1e-6, abs=1e-9)
+    # off, the law is the paper's (18): y2 = x6
+    plain = MaoNominalLaw(train, DT).step(m, r)
+    assert 'y2_error_mps' not in plain.estimates
+    assert plain.forces_n[1] != pytest.approx(out.forces_n[1], rel=1e-6)

@@ -43,6 +43,35 @@ Deviations for a sampled, saturating implementation (documented in README.md):
 - th11_hat and th21_hat (the input gains, mass-like) are projected onto
   [gain_min_ratio, gain_max_ratio] x nominal so that the control direction cannot reverse;
 - the car-1 acceleration x2' is the measured one (the paper: "measurable", Section III-A).
+
+Adaptation gains (:data:`GAIN_PRESETS`). The paper's Gamma1 = 2 I9, Gamma2 = 2 I7 are numbers in
+its unit system; the default, preset ``paper``, converts them to SI by
+:func:`ato_common.units.mao_multibody_adaptation_gains_to_si` for Table II's tonnes with m and s
+(forces in kN): gamma11 = gamma21 = 2000 (the input gains th11 [t s], th21 [t] carry a mass),
+every per-unit-mass entry 2. Preset ``unscaled_si``: 2 everywhere in SI (the suite's earlier
+reading). docs/papers/mao_multibody.md gives the alternatives and why this one.
+
+Option (suite, not in the paper): regulation of the internal force (``regulate_internal_force``).
+The paper's zero dynamics keep a zero eigenvalue: x3 + x5 = z1 - z3 - 2 L, whose derivative is
+v1 - v3, is not regulated, so the extension of the coupler between the powered cars (the force
+they hold against each other) drifts with the history of v1 - v3. With the option, the second
+output is
+    y2 = x6 - kappa (x3 + x5 - X*),   X* = x3* + x5*  (the quasi-static extension)
+(relative degree 1 through F3 as x6), tracked as (55): y2' = nu3 with e6 = y2 - v_m, i.e.
+    y2' = Phi2 + F3/th21 - kappa (x2 - x6) + kappa X*'
+    F3 = th21 (nu3 + kappa (x2 - x6) - kappa X*' - Phi2)              as (18), (71)
+and the adaptive law (74) with that nu3 in W2[0] and that e6 (the Lyapunov argument of (75)-(76)
+is unchanged: the added terms are known). Then s = x3 + x5 - X* obeys
+s' = e2 - (y2 - v_m) - kappa s: it decays at kappa once the outputs track. X* is the extension
+at rigid motion with the reference's acceleration A = v_m' and speed v_m, for the split of the
+unit's force F = M A + sum R_p that the actuators can give (saturation-aware: the mass split of
+``mao_rigid.split_by_mass``, a share beyond one actuator's limits moved to the other):
+x3* = -(M1 A + R1)/k1, x5* = (F2* - (M1 + M2) A - R1 - R2)/k2 (the law does not know the line;
+a grade acts in proportion to mass, which the mass split already carries). X*' is the
+derivative along the reference (a central difference with v_m''). The commanded forces are
+allocated saturation-aware as well: a force beyond one actuator's limits goes to the other car,
+up to its own limits; the adaptation freezes whenever the commanded forces differ from the
+loops'.
 """
 
 from __future__ import annotations
@@ -50,11 +79,24 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from ato_common import units
 from ato_common.knowledge import TrainKnowledge
 from ato_common.types import ReferencePoint
 from ato_controller_node.laws.base import ControlLaw, LawOutput, Measurement, setting
+from ato_controller_node.laws.mao_rigid import split_by_mass
 
 CARS = 4
+
+#: the paper's Gamma1 = 2 I9, Gamma2 = 2 I7 (Section VI) in SI, for Table II's tonnes with m, s
+PAPER_GAMMA1, PAPER_GAMMA2 = units.mao_multibody_adaptation_gains_to_si(2.0, 2.0)
+#: the gain presets: ``paper`` (the default of the settings) and ``unscaled_si`` (2 in SI for
+#: every entry, the suite's earlier reading), e.g. ``run_offline(..., settings={
+#: 'mao_multibody_adaptive': GAIN_PRESETS['unscaled_si']})``
+GAIN_PRESETS = {
+    'paper': {'gamma11': PAPER_GAMMA1[0], 'gamma1': PAPER_GAMMA1[1],
+              'gamma21': PAPER_GAMMA2[0], 'gamma2': PAPER_GAMMA2[1]},
+    'unscaled_si': {'gamma11': 2.0, 'gamma1': 2.0, 'gamma21': 2.0, 'gamma2': 2.0},
+}
 
 
 def _switch(value: float, width: float) -> float:
@@ -123,6 +165,65 @@ def nu_signals(s: MaoState, r: ReferencePoint, settings) -> tuple[float, ...]:
     return nu2, nu3, e2, e2_dot, e6
 
 
+def quasi_static_extension(train: TrainKnowledge, speed: float, acceleration: float) -> float:
+    """X* = x3* + x5*: the extension of couplers 1 and 2 at rigid motion of the unit with this
+    acceleration and speed, when the unit's force F = M A + sum R_p is split between cars 2 and
+    3 as the actuators can give it (the mass split, a share beyond one actuator's limits moved
+    to the other: ``mao_rigid.split_by_mass``). From (1)-(3) with equal speeds (no damper
+    force): car 1, M1 A = -k1 x3 - R1; cars 1 and 2, (M1 + M2) A = F2 - k2 x5 - R1 - R2."""
+    cars, couplers = train.cars, train.couplers
+    masses = [c.mass_kg for c in cars]
+    resistances = [c.mass_kg * (c.a_mps2 + c.b_per_s * speed + c.c_per_m * speed * speed)
+                   for c in cars]
+    total = sum(masses) * acceleration + math.fsum(resistances)
+    limits = train.actuator_limits_at(speed)
+    f2, _ = split_by_mass(total, (masses[0] + masses[1]) / sum(masses), limits, limits)
+    x3 = -(masses[0] * acceleration + resistances[0]) / couplers[0].stiffness_n_per_m
+    x5 = (f2 - (masses[0] + masses[1]) * acceleration - resistances[0] - resistances[1]) \
+        / couplers[1].stiffness_n_per_m
+    return x3 + x5
+
+
+def allocate(f2: float, f3: float, limits: tuple[float, float]) -> tuple[float, float]:
+    """Saturation-aware allocation of the loops' forces: what one actuator cannot give beyond
+    its limits goes to the other car, up to that car's own limits (the unit's force is kept as
+    long as it can be)."""
+    lowest, highest = limits
+    c2, c3 = min(max(f2, lowest), highest), min(max(f3, lowest), highest)
+    return (min(max(c2 + (f3 - c3), lowest), highest),
+            min(max(c3 + (f2 - c2), lowest), highest))
+
+
+#: the step of the central difference of X* along the reference [s]
+_X_STAR_STEP_S = 1e-2
+
+
+def internal_regulation(train: TrainKnowledge, s: MaoState, r: ReferencePoint,
+                        kappa: float) -> tuple[float, float, float]:
+    """(y2 - x6, the terms added to nu3, x3 + x5 - X*) of the regulated second output
+    y2 = x6 - kappa (x3 + x5 - X*): y2' = x6' - kappa (x2 - x6) + kappa X*', so nu3 gains
+    kappa (x2 - x6) - kappa X*' (see the module's docstring). X*' is the central difference of
+    X*(v_m, v_m') along the reference (v_m' and v_m'' as slopes)."""
+    h = _X_STAR_STEP_S
+    deviation = s.x[2] + s.x[4] - quasi_static_extension(train, r.speed, r.acceleration)
+    x_star_rate = (quasi_static_extension(train, r.speed + h * r.acceleration,
+                                          r.acceleration + h * r.jerk)
+                   - quasi_static_extension(train, r.speed - h * r.acceleration,
+                                            r.acceleration - h * r.jerk)) / (2.0 * h)
+    return -kappa * deviation, kappa * (s.x[1] - s.x[5]) - kappa * x_star_rate, deviation
+
+
+def _regulation_settings():
+    return (setting(False, minimum=0, maximum=1, units='-',
+                    description='regulate the internal force between the powered cars: '
+                                'second output y2 = v3 - kappa (x3 + x5 - X*), X* the '
+                                'quasi-static extension, saturation-aware allocation (suite '
+                                'option; the paper leaves that mode unregulated)'),
+            setting(1.0, minimum=1e-3, maximum=100.0, units='1/s',
+                    description='kappa of y2 = v3 - kappa (x3 + x5 - X*): the rate at which '
+                                'x3 + x5 returns to X*'))
+
+
 _ALPHAS = {
     'alpha1': ('1/s', 'alpha1 of (51) (not reported; docs/papers/mao_multibody.md: 1; > 0.5 '
                       'for p12 = 2, p22 = 4)'),
@@ -152,6 +253,8 @@ class MaoNominalSettings:
     paper_as_printed: bool = setting(False, minimum=0, maximum=1, units='-',
                                      description='printed (17)-(18): +d11 a2 and +a3 instead of '
                                                  'the physical -d11 a2, -a3 [FIX]')
+    regulate_internal_force: bool = _regulation_settings()[0]
+    kappa: float = _regulation_settings()[1]
 
 
 class _MaoBase(ControlLaw):
@@ -171,6 +274,24 @@ class _MaoBase(ControlLaw):
 
     def _state(self, m: Measurement) -> MaoState:
         return MaoState.of(m, self.train.car_length_m)
+
+    def _second_output(self, state: MaoState, reference: ReferencePoint, nu3: float, e6: float
+                       ) -> tuple[float, float, dict]:
+        """(nu3, e6) of the second output: x6 as the paper, or with ``regulate_internal_force``
+        y2 = x6 - kappa (x3 + x5 - X*) (see the module's docstring), and what to report."""
+        s = self.settings
+        if not s.regulate_internal_force:
+            return nu3, e6, {}
+        offset, nu_extra, deviation = internal_regulation(self.train, state, reference, s.kappa)
+        e_y2 = e6 + offset
+        # (55) for y2: nu3 = v_m' - alpha3 (y2 - v_m), plus the known terms of y2'
+        return (reference.acceleration - s.alpha3 * e_y2 + nu_extra, e_y2,
+                {'y2_error_mps': e_y2, 'internal_extension_error_m': deviation})
+
+    def _allocate(self, f2: float, f3: float, speed: float) -> tuple[float, float]:
+        if not self.settings.regulate_internal_force:
+            return f2, f3
+        return allocate(f2, f3, self.train.actuator_limits_at(speed))
 
     def _parameters(self, as_printed: bool):
         """(Theta1, Theta2) of the train, or None for a train the law does not fit (the host
@@ -209,9 +330,11 @@ class MaoNominalLaw(_MaoBase):
         phi1 = sum(t * w for t, w in zip(theta1[1:], w1))
         phi2 = sum(t * w for t, w in zip(theta2[1:], w2))
         nu2, nu3, e2, _, e6 = nu_signals(state, reference, s)
+        nu3, _, reported = self._second_output(state, reference, nu3, e6)
         f2 = theta1[0] * (nu2 - phi1)                                                  # (17)
         f3 = theta2[0] * (nu3 - phi2)                                                  # (18)
-        return LawOutput(f2 + f3, {'e2_mps': e2, 'e6_mps': e6}, (f2, f3))
+        forces = self._allocate(f2, f3, state.x[5])
+        return LawOutput(forces[0] + forces[1], {'e2_mps': e2, 'e6_mps': e6, **reported}, forces)
 
 
 @dataclass(frozen=True)
@@ -224,10 +347,18 @@ class MaoAdaptiveSettings:
                          description='P entry p12 in eps = p12 e2 + p22 e2\' (paper: 2)')
     p22: float = setting(4.0, minimum=1e-6, maximum=1e6, units='s',
                          description='P entry p22 in eps (paper: 4)')
-    gamma1: float = setting(2.0, minimum=0.0, maximum=1e9, units='SI',
-                            description='Gamma1 = gamma1 I9 of (64) (paper: 2)')
-    gamma2: float = setting(2.0, minimum=0.0, maximum=1e9, units='SI',
-                            description='Gamma2 = gamma2 I7 of (74) (paper: 2)')
+    gamma11: float = setting(PAPER_GAMMA1[0], minimum=0.0, maximum=1e12, units='kg s^4/m^2',
+                             description='gamma11 of Gamma1 (64), for th11 (paper: 2 in t, m, '
+                                         's, i.e. 2000 in SI; preset unscaled_si: 2)')
+    gamma1: float = setting(PAPER_GAMMA1[1], minimum=0.0, maximum=1e9, units='SI',
+                            description='gamma12 .. gamma19 of Gamma1 (64), per unit mass (paper: '
+                                        '2, the same number in SI)')
+    gamma21: float = setting(PAPER_GAMMA2[0], minimum=0.0, maximum=1e12, units='kg s^2/m^2',
+                             description='gamma21 of Gamma2 (74), for th21 (paper: 2 in t, m, '
+                                         's, i.e. 2000 in SI; preset unscaled_si: 2)')
+    gamma2: float = setting(PAPER_GAMMA2[1], minimum=0.0, maximum=1e9, units='SI',
+                            description='gamma22 .. gamma27 of Gamma2 (74), per unit mass (paper: '
+                                        '2, the same number in SI)')
     beta1: float = setting(1000.0, minimum=0.0, maximum=1e6, units='N',
                            description='beta1 of (65) (not reported)')
     beta2: float = setting(1000.0, minimum=0.0, maximum=1e6, units='N',
@@ -249,6 +380,8 @@ class MaoAdaptiveSettings:
     paper_as_printed: bool = setting(False, minimum=0, maximum=1, units='-',
                                      description='printed regressors W1, W2 (F2, F3_hat, x2 x2\', '
                                                  '+x5, -1), +th19/+th27 and th27 = a4 [FIX]')
+    regulate_internal_force: bool = _regulation_settings()[0]
+    kappa: float = _regulation_settings()[1]
 
 
 class MaoAdaptiveLaw(_MaoBase):
@@ -290,9 +423,10 @@ class MaoAdaptiveLaw(_MaoBase):
         phi1_hat = sum(t * w for t, w in zip(th1[1:], w1))
         phi2_hat = sum(t * w for t, w in zip(th2[1:], w2))
         nu2, nu3, e2, e2_dot, e6 = nu_signals(state, reference, s)
+        nu3, e_y2, reported = self._second_output(state, reference, nu3, e6)
         eps = s.p12 * e2 + s.p22 * e2_dot
         nu2_bar = -s.beta1 * _switch(eps, s.boundary_width1 if s.boundary_layer else 0.0)  # (65)
-        robust3 = -s.beta2 * _switch(e6, s.boundary_width2 if s.boundary_layer else 0.0)
+        robust3 = -s.beta2 * _switch(e_y2, s.boundary_width2 if s.boundary_layer else 0.0)
         f2 = th1[0] * (nu2 - phi1_hat) + nu2_bar                                        # (60)
         f3 = th2[0] * (nu3 - phi2_hat) + robust3                                        # (71)
         # Regressors W1 of (61) and W2 of (73): the first entries multiply th11_t, th21_t.
@@ -305,11 +439,12 @@ class MaoAdaptiveLaw(_MaoBase):
         else:
             reg1 = (nu2 - phi1_hat, *(-w for w in w1))
             reg2 = (nu3 - phi2_hat, *(-w for w in w2))
-        self._pending = (reg1, eps, reg2, e6, (f2, f3))
-        estimates = {'e2_mps': e2, 'e6_mps': e6, 'eps_mps': eps}
+        self._pending = (reg1, eps, reg2, e_y2, (f2, f3))
+        estimates = {'e2_mps': e2, 'e6_mps': e6, 'eps_mps': eps, **reported}
         estimates.update({f'theta1{k + 1}_hat': t for k, t in enumerate(th1)})
         estimates.update({f'theta2{k + 1}_hat': t for k, t in enumerate(th2)})
-        return LawOutput(f2 + f3, estimates, (f2, f3))
+        forces = self._allocate(f2, f3, state.x[5])
+        return LawOutput(forces[0] + forces[1], estimates, forces)
 
     def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=(), applied_n=None):
         if self._pending is None:
@@ -319,10 +454,12 @@ class MaoAdaptiveLaw(_MaoBase):
         if any(abs(w - c) > 1e-9 * max(1.0, abs(w)) for w, c in zip(wanted, commanded_forces_n)):
             return  # frozen while an actuator is saturated
         s, dt = self.settings, self.dt
-        self.theta1_hat = [t - dt * s.gamma1 * w * eps                                  # (64)
-                           for t, w in zip(self.theta1_hat, reg1)]
-        self.theta2_hat = [t - dt * s.gamma2 * w * e6                                   # (74)
-                           for t, w in zip(self.theta2_hat, reg2)]
+        gains1 = (s.gamma11,) + (s.gamma1,) * (len(reg1) - 1)   # Gamma1 = diag(gamma1q)
+        gains2 = (s.gamma21,) + (s.gamma2,) * (len(reg2) - 1)   # Gamma2 = diag(gamma2q)
+        self.theta1_hat = [t - dt * g * w * eps                                          # (64)
+                           for t, g, w in zip(self.theta1_hat, gains1, reg1)]
+        self.theta2_hat = [t - dt * g * w * e6                                           # (74)
+                           for t, g, w in zip(self.theta2_hat, gains2, reg2)]
         for theta, nominal in ((self.theta1_hat, self.nominal1[0]),
                                (self.theta2_hat, self.nominal2[0])):
             theta[0] = min(max(theta[0], s.gain_min_ratio * nominal), s.gain_max_ratio * nominal)
