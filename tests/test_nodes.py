@@ -85,6 +85,17 @@ def test_an_unknown_controller_at_start_is_refused_with_the_valid_names(domain_i
     assert re.search(r'valid: (.*, )?luo_xu, (.*, )?pid', result.stderr)
 
 
+@pytest.mark.parametrize('name, parameter', [('controller', 'rate_hz'),
+                                             ('plant', 'control_rate_hz')])
+def test_an_out_of_range_parameter_at_start_is_refused_naming_it(domain_id, name, parameter):
+    result = subprocess.run([executable_path(*EXECUTABLES[name]), '--ros-args', '-p',
+                             f'{parameter}:=-5.0'], capture_output=True, text=True, timeout=60,
+                            env=dict(os.environ, ROS_DOMAIN_ID=str(domain_id)))
+    assert result.returncode == 2
+    assert f'Parameter {parameter} out of range' in result.stderr
+    assert 'Traceback' not in result.stderr
+
+
 def test_plant_rejects_bad_commands_and_keeps_running(tmp_path, domain_id):
     config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path)
     with Stack(config) as stack:

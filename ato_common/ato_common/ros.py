@@ -16,6 +16,7 @@ import time
 from typing import Callable, Iterable, Sequence
 
 import rclpy
+import rclpy.exceptions
 import rclpy.signals
 from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
@@ -363,6 +364,11 @@ def run_node(make_node: Callable[[], RunNodeHooks], args=None,
         try:
             node = make_node()
         except ConfigError as error:
+            print(f'error: {error}', file=sys.stderr)
+            return 2
+        except (rclpy.exceptions.InvalidParameterValueException,
+                rclpy.exceptions.InvalidParameterTypeException) as error:
+            # a --ros-args or --params-file value the parameter's descriptor refuses
             print(f'error: {error}', file=sys.stderr)
             return 2
         if not isinstance(node, RunNodeHooks):  # rclpy.shutdown below lets go of it
