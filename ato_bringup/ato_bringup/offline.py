@@ -11,16 +11,14 @@ nominal ``scenario``: no drawn value reaches it."""
 
 from __future__ import annotations
 
-import hashlib
 import math
 import time
-import types
 from collections import OrderedDict
-from dataclasses import dataclass, field, fields, is_dataclass
-from enum import Enum
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from ato_common.identity import Undescribable, scenario_hash
 from ato_common.knowledge import knowledge_of
 from ato_common.metrics import RunMetrics, StopSample, compute_metrics
 from ato_common.scenario import Scenario
@@ -100,57 +98,14 @@ _plans: OrderedDict[str, Plan] = OrderedDict()
 _references: OrderedDict[tuple, list] = OrderedDict()
 
 
-class _Undescribable(TypeError):
-    """A value whose content ``content_key`` cannot describe (its object would be the key)."""
-
-
-def content_key(value):
-    """A canonical, hashable description of a value's content: equal for equal content, unequal
-    wherever a computation could tell the values apart (0.0 and -0.0, 1 and 1.0 and True, a
-    tuple and a list; two closures of one function are equal only with equal captured values).
-    Raises ``_Undescribable`` for an object it cannot look into (no ``__dict__``, not a
-    dataclass, a container, a number, a string, an array or a function)."""
-    if value is None or isinstance(value, str):
-        return value
-    if isinstance(value, (bool, np.bool_)):
-        return ('b', bool(value))
-    if isinstance(value, (int, np.integer)):
-        return ('i', int(value))
-    if isinstance(value, (float, np.floating)):
-        return ('f', float(value).hex())
-    if isinstance(value, (tuple, list)):
-        return ('t' if isinstance(value, tuple) else 'l', *(content_key(v) for v in value))
-    if isinstance(value, dict):
-        return ('d', *sorted(((repr(content_key(k)), content_key(v))
-                              for k, v in value.items()), key=lambda item: item[0]))
-    if isinstance(value, (set, frozenset)):
-        return ('set', *sorted(repr(content_key(v)) for v in value))
-    if isinstance(value, np.ndarray):
-        return ('a', value.dtype.str, value.shape,
-                hashlib.sha256(np.ascontiguousarray(value).tobytes()).hexdigest())
-    if isinstance(value, Enum):
-        return ('e', type(value).__qualname__, value.name)
-    if isinstance(value, types.FunctionType):
-        code = value.__code__
-        return ('fn', value.__module__, value.__qualname__, code.co_code, content_key(
-            code.co_consts), content_key(value.__defaults__),
-            content_key(tuple(c.cell_contents for c in value.__closure__ or ())))
-    kind = f'{type(value).__module__}.{type(value).__qualname__}'
-    if is_dataclass(value):
-        return (kind, *((f.name, content_key(getattr(value, f.name))) for f in fields(value)))
-    if hasattr(value, '__dict__') and not hasattr(type(value), '__slots__'):
-        return (kind, content_key(vars(value)))
-    raise _Undescribable(f'{kind} has no content to key a cache by')
-
-
 def scenario_key(scenario: Scenario) -> str | None:
-    """The digest of a scenario's whole content (None if some part of it cannot be described:
-    such a scenario is planned on every run)."""
+    """The digest of a scenario's whole content (``ato_common.identity.scenario_hash``, the
+    plant's identity), or None if some part of it cannot be described: such a scenario is
+    planned on every run."""
     try:
-        description = content_key(scenario)
-    except _Undescribable:
+        return scenario_hash(scenario)
+    except Undescribable:
         return None
-    return hashlib.sha256(repr(description).encode()).hexdigest()
 
 
 def clear_plan_cache() -> None:

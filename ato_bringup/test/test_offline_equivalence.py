@@ -17,6 +17,7 @@ import pytest
 from ato_bringup import offline
 from ato_bringup.compare import plan_jobs
 from ato_bringup.offline import OfflineRun, run_end_time_s, run_offline
+from ato_common.identity import content_key
 from ato_common.knowledge import knowledge_of
 from ato_common.scenario import load_scenario
 from ato_common.types import nanoseconds, seconds
@@ -168,7 +169,7 @@ def test_the_plan_is_shared_by_content_not_by_object_or_name():
 def test_the_key_tells_apart_what_equality_would_merge():
     """0.0 and -0.0, 1 and 1.0 and True, and two closures of different values."""
     from ato_common.braking_curves import constant_deceleration
-    key = offline.content_key
+    key = content_key
     assert key(0.0) != key(-0.0)
     assert len({key(1), key(1.0), key(True)}) == 3
     assert key(constant_deceleration(0.5)) == key(constant_deceleration(0.5))

@@ -11,39 +11,64 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import math
+import types
+from dataclasses import fields, is_dataclass
+from enum import Enum
 
 import numpy as np
 
 IDENTITY_FIELDS = ('scenario', 'sha256')
 
 
-def _canonical(value):
-    """A JSON-able form of a resolved scenario, the same for equal scenarios on any machine."""
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: _canonical(getattr(value, f.name))
-                for f in dataclasses.fields(value) if f.name != 'origin'}
-    if isinstance(value, dict):
-        return {str(k): _canonical(v) for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))}
-    if isinstance(value, (list, tuple)):
-        return [_canonical(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return [_canonical(v) for v in value.tolist()]
-    if isinstance(value, (bool, str, int)) or value is None:
+class Undescribable(TypeError):
+    """A value whose content ``content_key`` cannot describe (only its object would do)."""
+
+
+def content_key(value):
+    """A canonical, hashable description of a value's content: equal for equal content, unequal
+    wherever a computation could tell the values apart (0.0 and -0.0, 1 and 1.0 and True, a
+    tuple and a list; two closures of one function are equal only with equal captured values).
+    Raises ``Undescribable`` for an object it cannot look into (no ``__dict__``, not a
+    dataclass, a container, a number, a string, an array or a function)."""
+    if value is None or isinstance(value, str):
         return value
+    if isinstance(value, (bool, np.bool_)):
+        return ('b', bool(value))
+    if isinstance(value, (int, np.integer)):
+        return ('i', int(value))
     if isinstance(value, (float, np.floating)):
-        value = float(value)
-        return value if math.isfinite(value) else repr(value)  # JSON has no inf, nan
-    if isinstance(value, np.integer):
-        return int(value)
-    if hasattr(value, '__dict__'):
-        return {'__class__': type(value).__name__, **_canonical(vars(value))}
-    raise TypeError(f'cannot take the identity of a {type(value).__name__} in a scenario')
+        return ('f', float(value).hex())
+    if isinstance(value, (tuple, list)):
+        return ('t' if isinstance(value, tuple) else 'l', *(content_key(v) for v in value))
+    if isinstance(value, dict):
+        return ('d', *sorted(((repr(content_key(k)), content_key(v))
+                              for k, v in value.items()), key=lambda item: item[0]))
+    if isinstance(value, (set, frozenset)):
+        return ('set', *sorted(repr(content_key(v)) for v in value))
+    if isinstance(value, np.ndarray):
+        return ('a', value.dtype.str, value.shape,
+                hashlib.sha256(np.ascontiguousarray(value).tobytes()).hexdigest())
+    if isinstance(value, Enum):
+        return ('e', type(value).__qualname__, value.name)
+    if isinstance(value, types.FunctionType):
+        code = value.__code__
+        return ('fn', value.__module__, value.__qualname__, code.co_code, content_key(
+            code.co_consts), content_key(value.__defaults__),
+            content_key(tuple(c.cell_contents for c in value.__closure__ or ())))
+    kind = f'{type(value).__module__}.{type(value).__qualname__}'
+    if is_dataclass(value):
+        return (kind, *((f.name, content_key(getattr(value, f.name))) for f in fields(value)))
+    if hasattr(value, '__dict__') and not hasattr(type(value), '__slots__'):
+        return (kind, content_key(vars(value)))
+    raise Undescribable(f'{kind} has no content to key a cache by')
 
 
 def scenario_hash(scenario) -> str:
-    text = json.dumps(_canonical(scenario), sort_keys=True, separators=(',', ':'))
-    return hashlib.sha256(text.encode()).hexdigest()
+    """SHA-256 of the resolved scenario's content (``content_key``), its ``origin`` left out.
+    The same for the same scenario in every process of one installation; Undescribable if a
+    part of it has no content to describe."""
+    description = content_key(dataclasses.replace(scenario, origin=''))
+    return hashlib.sha256(repr(description).encode()).hexdigest()
 
 
 def scenario_identity(scenario) -> str:
