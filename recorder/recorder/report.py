@@ -36,6 +36,7 @@ from mcap_ros2.decoder import DecoderFactory
 from ato_common import units
 from ato_common.conventions import TOPICS
 from ato_common.metrics import RunMetrics, StopSample, compute_metrics, format_summary
+from ato_common.ros import status_in_namespace
 from recorder.bag import BagError, bag_info, read_messages
 
 REPORTED = ('state', 'reference', 'command', 'curve', 'diagnostics')
@@ -181,6 +182,8 @@ def stops_from_curve(times: np.ndarray, positions: np.ndarray, speeds: np.ndarra
 def load_run(bag: Path, namespace: str | None = None) -> RunData:
     """The run recorded in ``bag``; ``namespace``: see :func:`resolve_topics`."""
     topics = resolve_topics(bag, namespace)
+    # the stack's namespace, from where its state is ('/train1/train/state' -> '/train1')
+    stack_namespace = topics['state'][:-len(TOPICS['state'].name) - 1] or '/'
     decode = _decoder()
     states, references, commands, estimates = {}, {}, [], {}
     cars_of: dict[int, tuple] = {}
@@ -219,7 +222,10 @@ def load_run(bag: Path, namespace: str | None = None) -> RunData:
                                      np.array([p.velocities[0] for p in msg.points]))
         elif message.topic == topics['diagnostics']:
             for status in msg.status:
-                _events(status, _stamp(msg.header) / 1e9, watch, extra.events)
+                own = status_in_namespace(status.name, stack_namespace)
+                if own is None:
+                    continue  # a status of another stack recorded alongside
+                _events(own, status, _stamp(msg.header) / 1e9, watch, extra.events)
                 for kv in status.values:
                     if kv.key.startswith('estimate.'):
                         try:
@@ -251,11 +257,12 @@ def load_run(bag: Path, namespace: str | None = None) -> RunData:
     return data
 
 
-def _events(status, t: float, watch: dict, events: list) -> None:
+def _events(name: str, status, t: float, watch: dict, events: list) -> None:
     """ATP interventions and watchdog events: where the plant's diagnostics change state, and
-    every error of the controller (e.g. its own watchdog on stale measurements)."""
+    every error of the controller (e.g. its own watchdog on stale measurements). ``name``: the
+    status's name within its stack's namespace (``train_plant_node: simulation``)."""
     values = {kv.key: kv.value for kv in status.values}
-    if status.name.startswith('train_plant_node'):
+    if name.startswith('train_plant_node'):
         atp = values.get('atp_intervention')
         if atp is not None and atp != watch['atp_intervention']:
             watch['atp_intervention'] = atp
@@ -265,7 +272,7 @@ def _events(status, t: float, watch: dict, events: list) -> None:
         if dog is not None and dog != watch['watchdog']:
             watch['watchdog'] = dog
             events.append((t, f'watchdog: {dog}', status.message))
-    elif status.name.startswith('ato_controller_node') and status.level in (2, b'\x02'):
+    elif name.startswith('ato_controller_node') and status.level in (2, b'\x02'):
         events.append((t, 'controller error', status.message))
 
 

@@ -221,3 +221,28 @@ def test_the_summary_counts_what_went_wrong_with_the_first_occurrence():
     assert rows['stop errors beyond 0.5 m'] == '1: B -0.80 m'
     clean = dict(summary_rows(replace(metrics, stop_errors_m={'A': 0.01}), ['pid']))
     assert clean['ATP interventions'] == '0' and clean['stop errors beyond 0.5 m'] == '0'
+
+
+def test_each_stack_of_a_recording_has_its_own_events(tmp_path):
+    """Two stacks side by side on the one /diagnostics: the report of one takes only the
+    statuses of its own nodes (named after their fully qualified names)."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+    from ato_common.ros import diagnostic_status, to_time
+    writer = BagWriter(tmp_path / 'run')
+    for namespace in ('/train1', '/train2'):
+        write_run(writer, namespace, 0.0)
+    writer.add_topic('/diagnostics', TOPICS['diagnostics'].type_name)
+    for k in range(SECONDS):
+        stamp = k * 1_000_000_000
+        statuses = [diagnostic_status(f'{ns}/train_plant_node: simulation', 'train',
+                                      DiagnosticStatus.OK, 'running',
+                                      {'watchdog': 'normal',
+                                       'atp_intervention': k >= start})
+                    for ns, start in (('train1', 3), ('train2', 6))]
+        writer.write('/diagnostics', stamp, serialize_message(
+            DiagnosticArray(header=Header(stamp=to_time(stamp)), status=statuses)))
+    writer.close()
+    for namespace, start in (('/train1', 3.0), ('/train2', 6.0)):
+        data = load_run(tmp_path / 'run', namespace)
+        assert [(t, kind) for t, kind, _ in data.events] == [(start, 'ATP intervention')]
