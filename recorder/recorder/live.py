@@ -84,16 +84,15 @@ class Watched(foxglove.ServerListener):
 
 
 def sampling_qos(offered: list) -> QoSProfile:
-    """A one-message history that the middleware overwrites with each new message: the latest
-    of a stream (best effort, which every publisher matches), or the latched value of a topic
-    whose publishers all latch (reliable, transient local)."""
-    latched = bool(offered) and all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL
-                                    for q in offered)
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                      reliability=ReliabilityPolicy.RELIABLE if latched
-                      else ReliabilityPolicy.BEST_EFFORT,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
-                      else DurabilityPolicy.VOLATILE)
+    """A one-message history that the middleware overwrites with each new message: the
+    recorder's profile (``subscription_qos``: compatible with every publisher, latched where
+    they all latch) with a depth of one, and best effort for a stream, so that no publisher
+    waits for the view."""
+    qos = subscription_qos(offered)
+    qos.history, qos.depth = HistoryPolicy.KEEP_LAST, 1
+    if qos.durability != DurabilityPolicy.TRANSIENT_LOCAL:
+        qos.reliability = ReliabilityPolicy.BEST_EFFORT
+    return qos
 
 
 class LiveViewNode(RunNodeHooks, Node):
