@@ -58,6 +58,10 @@ class Plan:
     supervision: RunSupervision
     targets: tuple[Target, ...]   # every target of the run, by location
     timing: tuple = ()            # TimingCheck of each journey timing point, if any
+    strategy: str = 'fastest'     # how it is driven (Scenario.timetable.strategy)
+    legs: tuple = ()              # profile_node.timetable.LegTiming of each leg (timetable)
+    forecast_energy_j: float = math.nan  # traction energy to follow it, nominal train, J
+    expected_delay_s: float = 0.0  # at the last stop, against the timetable (after a replan)
 
     def next_stop(self, time_s: float) -> StopEvent:
         """The stop the reference is heading for or dwelling at; the last one at the end."""
@@ -163,6 +167,39 @@ class Section:
         return self.end_m - self.start_m
 
 
+def train_grade_sine(line, front_m: float, length_m: float) -> float:
+    """The grade the whole train feels with its front at ``front_m``: sin(theta) averaged over
+    its length [front - length, front] (exact for piecewise-constant grades; before the line's
+    start the first grade holds)."""
+    if length_m <= 0.0:
+        return line.grade_sine(front_m)
+    rear = front_m - length_m
+    starts, values = line.grade_sine.starts, line.grade_sine.values
+    total = 0.0
+    for i, value in enumerate(values):
+        a = starts[i] if i > 0 else -math.inf
+        b = starts[i + 1] if i + 1 < len(starts) else math.inf
+        overlap = min(b, front_m) - max(a, rear)
+        if overlap > 0.0:
+            total += value * overlap
+    return total / length_m
+
+
+def train_grade_extremes(line, start_m: float, end_m: float, length_m: float
+                         ) -> tuple[float, float]:
+    """(steepest climb, steepest descent) of ``train_grade_sine`` with the front in
+    [start_m, end_m]: the average is piecewise linear in the front's position, with its kinks
+    where the front or the rear crosses a change of grade, so the extremes are there or at the
+    ends."""
+    points = {start_m, end_m}
+    for s in line.grade_sine.starts:
+        for x in (s, s + length_m):
+            if start_m < x < end_m:
+                points.add(x)
+    values = [train_grade_sine(line, x, length_m) for x in points]
+    return max(values), min(values)
+
+
 def _breakpoints(function, start: float, end: float) -> list[float]:
     return [s for s in function.starts if start < s < end]
 
@@ -186,25 +223,30 @@ def leg_sections(scenario: Scenario, mrsp, start: float, end: float,
     cuts = {start, end}
     cuts.update(x for s, e, _ in pieces for x in (s, e) if start < x < end)
     cuts.update(_breakpoints(line.grade_sine, start, end))
+    # Where the rear of the train leaves a grade: the grade it feels changes there too.
+    length = scenario.train.length_m
+    cuts.update(s + length for s in line.grade_sine.starts if start < s + length < end)
     cuts = sorted(cuts)
     sections: list[Section] = []
     for a, b in zip(cuts, cuts[1:]):
         if b - a < 1e-6:
             continue
-        sine = line.grade_sine(0.5 * (a + b))
+        # Grades act over the train's length: the steepest climb and descent the whole train
+        # feels while its front runs through the piece.
+        climb, descent = train_grade_extremes(line, a, b, scenario.train.length_m)
         where = f'{scenario.origin}: line at {a:.0f}-{b:.0f} m'
         limit = ceiling(a, b)
         if limit <= 0.0:
             raise PlanningError(f'{where}: the speed limit is not above the planning margin '
                                 f'({units.mps_to_kmh(margin):g} km/h)')
-        level = highest_reachable_speed(traction_capability(scenario, sine), limit, where)
+        level = highest_reachable_speed(traction_capability(scenario, climb), limit, where)
         if sections and sections[-1].level_mps == level:
             last = sections[-1]
             last.end_m = b
-            last.climb_sine = max(last.climb_sine, sine)
-            last.descent_sine = min(last.descent_sine, sine)
+            last.climb_sine = max(last.climb_sine, climb)
+            last.descent_sine = min(last.descent_sine, descent)
         else:
-            sections.append(Section(a, b, level, sine, sine))
+            sections.append(Section(a, b, level, climb, descent))
     return sections
 
 
@@ -223,12 +265,109 @@ def highest_speed_braking_within(distance: float, v_to: float, deceleration: flo
     return low
 
 
+@dataclass(frozen=True)
+class LegCruise:
+    """The ``timetable`` strategy's choice on one leg: from ``starts_m[i]`` on, the target
+    cruises at no more than ``speeds_mps[i]``, and a coast before a braking there ends at
+    ``coast_end_mps[i]`` (the braking speed of the optimal control, profile_node.timetable)."""
+
+    starts_m: tuple[float, ...]
+    speeds_mps: tuple[float, ...]
+    coast_end_mps: tuple[float, ...]
+
+    def stretch(self, position_m: float) -> int:
+        return max(i for i, start in enumerate(self.starts_m)
+                   if start <= position_m or i == 0)
+
+    def capped(self, sections: list[Section]) -> list[Section]:
+        """The sections cut where the cruise speed changes, each level capped by it."""
+        out = []
+        for section in sections:
+            cuts = [section.start_m] + [x for x in self.starts_m
+                                        if section.start_m < x < section.end_m] + [section.end_m]
+            for a, b in zip(cuts, cuts[1:]):
+                level = min(section.level_mps, self.speeds_mps[self.stretch(a)])
+                out.append(Section(a, b, level, section.climb_sine, section.descent_sine))
+        return out
+
+
+# Coasting is planned only where the resistance and the grade slow the train by at least this.
+MIN_COAST_DECELERATION_MPS2 = 0.01
+
+
+def coasting_deceleration(scenario: Scenario, sine: float):
+    """deceleration(v) of the train coasting (no traction, no brake) on a grade of sine
+    ``sine``: nominal Davis resistance over the mass plus g sin(theta) [m/s^2]."""
+    train = scenario.train
+
+    def deceleration(v: float) -> float:
+        return train.davis_nominal.force(v) / train.mass_kg + units.STANDARD_GRAVITY * sine
+    return deceleration
+
+
+def coast_distance(v_from: float, v_to: float, deceleration, jerk: float) -> float:
+    builder = TrajectoryBuilder()
+    builder.v = v_from
+    builder.coast_to(v_to, deceleration, jerk)
+    return builder.x
+
+
+def _mean_train_grade(scenario: Scenario, start_m: float, end_m: float) -> float:
+    line, length = scenario.line, scenario.train.length_m
+    xs = np.linspace(start_m, max(end_m, start_m), 9)
+    return float(np.mean([train_grade_sine(line, x, length) for x in xs]))
+
+
+def _coast_then_brake(builder: TrajectoryBuilder, scenario: Scenario, section: Section,
+                      coast_end: float, exit_speed: float, deceleration: float,
+                      jerk: float) -> bool:
+    """From the cruise at ``builder.v``: cruise, coast down to ``coast_end`` (or less far where
+    the section is too short) and brake to ``exit_speed`` exactly at the section's end. False
+    (nothing appended) where coasting does not slow the train there (a descent)."""
+    peak = builder.v
+    low = max(coast_end, exit_speed)
+    room = section.end_m - builder.x
+    braking = speed_change_distance(low, exit_speed, deceleration, jerk)
+    # The grade of the stretch the coast runs over, estimated from a first guess on the level.
+    guess = coast_distance(peak, low, coasting_deceleration(scenario, 0.0), jerk)
+    sine = _mean_train_grade(scenario, section.end_m - braking - guess, section.end_m - braking)
+    resisting = coasting_deceleration(scenario, sine)
+    if min(resisting(low), resisting(peak)) < MIN_COAST_DECELERATION_MPS2:
+        return False
+    coast = coast_distance(peak, low, resisting, jerk)
+    if coast + braking > room:
+        # Not enough room for the whole coast: coast from here to the highest speed from
+        # which the braking still ends at the section's end.
+        lo, hi = low, peak
+        for _ in range(40):
+            middle = 0.5 * (lo + hi)
+            total = (coast_distance(peak, middle, resisting, jerk)
+                     + speed_change_distance(middle, exit_speed, deceleration, jerk))
+            if total <= room:
+                hi = middle
+            else:
+                lo = middle
+        low = hi
+        coast = coast_distance(peak, low, resisting, jerk)
+        braking = speed_change_distance(low, exit_speed, deceleration, jerk)
+    cruise = room - coast - braking
+    if peak > 0.0 and cruise > 0.0:
+        builder.add(cruise / peak)
+    builder.coast_to(low, resisting, jerk)
+    builder.speed_change(exit_speed, deceleration, jerk)
+    return True
+
+
 def plan_leg(builder: TrajectoryBuilder, scenario: Scenario, sections: list[Section],
-             leg_deceleration_factor: float) -> None:
-    """Append one leg, from standstill at its first section's start to standstill at its last
-    section's end."""
+             leg_deceleration_factor: float, cruise: LegCruise | None = None) -> None:
+    """Append one leg, from the builder's state (standstill, or the measured speed of a
+    replan) at its first section's start to standstill at its last section's end.
+    ``cruise``: the ``timetable`` strategy's cruise speeds and coasting (None: the fastest
+    curve)."""
     planning = scenario.planning
     jerk = planning.max_jerk_mps3
+    if cruise is not None:
+        sections = cruise.capped(sections)
     decelerations = [leg_deceleration_factor * braking_deceleration(scenario, s.descent_sine)
                      for s in sections]
     # Backward pass: the highest speed allowed at each section's end.
@@ -240,6 +379,9 @@ def plan_leg(builder: TrajectoryBuilder, scenario: Scenario, sections: list[Sect
             min(sections[i].level_mps, following.level_mps))
     # Forward pass.
     for section, exit_speed, deceleration in zip(sections, exit_speeds, decelerations):
+        if builder.v > section.level_mps + 1e-9:
+            # A replan from a train faster than the level: down to it first.
+            builder.speed_change(section.level_mps, deceleration, jerk)
         entry = builder.v
         capability = traction_capability(scenario, section.climb_sine)
 
@@ -268,23 +410,37 @@ def plan_leg(builder: TrajectoryBuilder, scenario: Scenario, sections: list[Sect
                     high = middle
             peak = low
         builder.accelerate_to(peak, capability, jerk, MIN_PLANNED_ACCELERATION_MPS2)
+        if cruise is not None and exit_speed < peak - 1e-6:
+            coast_end = cruise.coast_end_mps[cruise.stretch(section.end_m - 1e-6)]
+            if coast_end < peak - 1e-6 and _coast_then_brake(
+                    builder, scenario, section, coast_end, exit_speed, deceleration, jerk):
+                continue
         braking = speed_change_distance(peak, exit_speed, deceleration, jerk)
-        cruise = section.end_m - braking - builder.x
-        if peak > 0.0 and cruise > 0.0:
-            builder.add(cruise / peak)
+        cruise_m = section.end_m - braking - builder.x
+        if peak > 0.0 and cruise_m > 0.0:
+            builder.add(cruise_m / peak)
         builder.speed_change(exit_speed, deceleration, jerk)
 
 
 def _build(scenario: Scenario, supervision: RunSupervision, stations: list[Station],
            anticipation_s: float, extra_m: dict[float, float], deceleration_factors: list[float],
-           start_s: float = 0.0):
+           start_s: float = 0.0, leg_planner=None, start_state: tuple[float, float] | None = None):
+    """The whole curve, leg by leg. ``leg_planner(leg, builder, sections, factor)`` appends a
+    leg (the ``timetable`` strategy); None: :func:`plan_leg`, the fastest curve.
+    ``start_state``: (speed, acceleration) the curve starts from (a replan), else rest."""
     builder = TrajectoryBuilder(x0=stations[0].position_m, t0=start_s)
+    if start_state is not None:
+        builder.v, builder.a = start_state
+        builder.ramp_acceleration_to_zero(scenario.planning.max_jerk_mps3)
     builder.add(stations[0].dwell_s)
     stops = []
     for leg, (origin, destination) in enumerate(zip(stations, stations[1:])):
-        sections = leg_sections(scenario, supervision.legs[leg].mrsp, origin.position_m,
+        sections = leg_sections(scenario, supervision.legs[leg].mrsp, builder.x,
                                 destination.position_m, anticipation_s, extra_m)
-        plan_leg(builder, scenario, sections, deceleration_factors[leg])
+        if leg_planner is None:
+            plan_leg(builder, scenario, sections, deceleration_factors[leg])
+        else:
+            leg_planner(leg, builder, sections, deceleration_factors[leg])
         builder.snap(destination.position_m)
         arrival = builder.t
         dwell = destination.dwell_s
@@ -362,7 +518,20 @@ def first_violation(trajectory: Trajectory, plan_stops, supervision: RunSupervis
 
 def plan_reference(scenario: Scenario, start_s: float = 0.0) -> Plan:
     """The target curve of a scenario, from its initial position at rest at run time
-    ``start_s`` (0: the start of the run)."""
+    ``start_s`` (0: the start of the run), driven as its ``timetable.strategy`` says:
+    ``fastest`` here, ``timetable`` by :mod:`profile_node.timetable`."""
+    if scenario.timetable.strategy == 'timetable':
+        from profile_node.timetable import plan_timetable
+        return plan_timetable(scenario, start_s)
+    from profile_node.timetable import forecast_energy_j
+    plan = plan_fastest(scenario, start_s)
+    return replace(plan, forecast_energy_j=forecast_energy_j(scenario, plan.trajectory))
+
+
+def plan_fastest(scenario: Scenario, start_s: float = 0.0, leg_planner=None,
+                 start_state: tuple[float, float] | None = None) -> Plan:
+    """The curve checked against the supervision: the fastest one, or with ``leg_planner``
+    the legs that planner appends (``_build``)."""
     stations = [s for s in scenario.line.stations
                 if s.position_m >= scenario.run.initial_position_m - 1e-9]
     supervision = RunSupervision.for_scenario(scenario)
@@ -372,7 +541,7 @@ def plan_reference(scenario: Scenario, start_s: float = 0.0) -> Plan:
     factors = [1.0] * (len(stations) - 1)
     for _ in range(30):
         trajectory, stops = _build(scenario, supervision, stations, anticipation, extra_m, factors,
-                                   start_s)
+                                   start_s, leg_planner, start_state)
         violation = first_violation(trajectory, stops, supervision)
         if violation is None:
             targets = tuple(sorted({t for leg in supervision.legs for t in leg.targets},
