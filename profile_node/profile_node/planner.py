@@ -291,71 +291,72 @@ class LegCruise:
         return out
 
 
-# Coasting is planned only where the resistance and the grade slow the train by at least this.
-MIN_COAST_DECELERATION_MPS2 = 0.01
+def coasting_deceleration(scenario: Scenario):
+    """deceleration(v, x) of the train coasting (no traction, no brake) with its front at x:
+    nominal Davis resistance over the mass plus g sin(grade over the train's length) [m/s^2]."""
+    train, line = scenario.train, scenario.line
 
-
-def coasting_deceleration(scenario: Scenario, sine: float):
-    """deceleration(v) of the train coasting (no traction, no brake) on a grade of sine
-    ``sine``: nominal Davis resistance over the mass plus g sin(theta) [m/s^2]."""
-    train = scenario.train
-
-    def deceleration(v: float) -> float:
-        return train.davis_nominal.force(v) / train.mass_kg + units.STANDARD_GRAVITY * sine
+    def deceleration(v: float, x: float) -> float:
+        return (train.davis_nominal.force(v) / train.mass_kg
+                + units.STANDARD_GRAVITY * train_grade_sine(line, x, train.length_m))
     return deceleration
 
 
-def coast_distance(v_from: float, v_to: float, deceleration, jerk: float) -> float:
-    builder = TrajectoryBuilder()
+# Coasting simulations: step, s, and the accuracy of the point where a coast starts, m.
+COAST_STEP_S = 3.0
+COAST_TOLERANCE_M = 0.5
+
+
+def _coast_end(scenario: Scenario, start_m: float, v_from: float, v_to: float, jerk: float,
+               limit_m: float) -> float:
+    """Where a coast from ``v_from`` at ``start_m`` reaches ``v_to`` (inf: not before
+    ``limit_m``)."""
+    builder = TrajectoryBuilder(x0=start_m)
     builder.v = v_from
-    builder.coast_to(v_to, deceleration, jerk)
+    if not builder.coast_to(v_to, coasting_deceleration(scenario), jerk, COAST_STEP_S, limit_m):
+        return math.inf
     return builder.x
-
-
-def _mean_train_grade(scenario: Scenario, start_m: float, end_m: float) -> float:
-    line, length = scenario.line, scenario.train.length_m
-    xs = np.linspace(start_m, max(end_m, start_m), 9)
-    return float(np.mean([train_grade_sine(line, x, length) for x in xs]))
 
 
 def _coast_then_brake(builder: TrajectoryBuilder, scenario: Scenario, section: Section,
                       coast_end: float, exit_speed: float, deceleration: float,
-                      jerk: float) -> bool:
+                      jerk: float) -> None:
     """From the cruise at ``builder.v``: cruise, coast down to ``coast_end`` (or less far where
-    the section is too short) and brake to ``exit_speed`` exactly at the section's end. False
-    (nothing appended) where coasting does not slow the train there (a descent)."""
+    the section is too short) and brake to ``exit_speed`` exactly at the section's end."""
     peak = builder.v
     low = max(coast_end, exit_speed)
-    room = section.end_m - builder.x
-    braking = speed_change_distance(low, exit_speed, deceleration, jerk)
-    # The grade of the stretch the coast runs over, estimated from a first guess on the level.
-    guess = coast_distance(peak, low, coasting_deceleration(scenario, 0.0), jerk)
-    sine = _mean_train_grade(scenario, section.end_m - braking - guess, section.end_m - braking)
-    resisting = coasting_deceleration(scenario, sine)
-    if min(resisting(low), resisting(peak)) < MIN_COAST_DECELERATION_MPS2:
-        return False
-    coast = coast_distance(peak, low, resisting, jerk)
-    if coast + braking > room:
-        # Not enough room for the whole coast: coast from here to the highest speed from
-        # which the braking still ends at the section's end.
+    end = section.end_m
+
+    def brake_start(speed: float) -> float:
+        return end - speed_change_distance(speed, exit_speed, deceleration, jerk)
+    if _coast_end(scenario, builder.x, peak, low, jerk, end) <= brake_start(low):
+        # Room for the whole coast: cruise until the point from which it ends where the
+        # braking starts (a later start ends later).
+        first, last = builder.x, brake_start(low)
+        while last - first > COAST_TOLERANCE_M:
+            middle = 0.5 * (first + last)
+            if _coast_end(scenario, middle, peak, low, jerk, end) <= brake_start(low):
+                first = middle
+            else:
+                last = middle
+        if peak > 0.0 and first > builder.x:
+            builder.add((first - builder.x) / peak)
+    else:
+        # Coast from here to the lowest speed from which the braking still ends in time.
         lo, hi = low, peak
-        for _ in range(40):
+        for _ in range(30):
             middle = 0.5 * (lo + hi)
-            total = (coast_distance(peak, middle, resisting, jerk)
-                     + speed_change_distance(middle, exit_speed, deceleration, jerk))
-            if total <= room:
+            if _coast_end(scenario, builder.x, peak, middle, jerk, end) <= brake_start(middle):
                 hi = middle
             else:
                 lo = middle
         low = hi
-        coast = coast_distance(peak, low, resisting, jerk)
-        braking = speed_change_distance(low, exit_speed, deceleration, jerk)
-    cruise = room - coast - braking
-    if peak > 0.0 and cruise > 0.0:
-        builder.add(cruise / peak)
-    builder.coast_to(low, resisting, jerk)
+    builder.coast_to(low, coasting_deceleration(scenario), jerk, COAST_STEP_S)
+    # The coast ends at most the tolerance before the braking point: cruise there.
+    gap = brake_start(low) - builder.x
+    if gap > 0.0 and low > 0.0:
+        builder.add(gap / low)
     builder.speed_change(exit_speed, deceleration, jerk)
-    return True
 
 
 def plan_leg(builder: TrajectoryBuilder, scenario: Scenario, sections: list[Section],
@@ -412,8 +413,9 @@ def plan_leg(builder: TrajectoryBuilder, scenario: Scenario, sections: list[Sect
         builder.accelerate_to(peak, capability, jerk, MIN_PLANNED_ACCELERATION_MPS2)
         if cruise is not None and exit_speed < peak - 1e-6:
             coast_end = cruise.coast_end_mps[cruise.stretch(section.end_m - 1e-6)]
-            if coast_end < peak - 1e-6 and _coast_then_brake(
-                    builder, scenario, section, coast_end, exit_speed, deceleration, jerk):
+            if coast_end < peak - 1e-6:
+                _coast_then_brake(builder, scenario, section, coast_end, exit_speed,
+                                  deceleration, jerk)
                 continue
         braking = speed_change_distance(peak, exit_speed, deceleration, jerk)
         cruise_m = section.end_m - braking - builder.x

@@ -100,15 +100,19 @@ class TrajectoryBuilder:
         self.v, self.a = target_speed, 0.0
 
     def coast_to(self, target_speed: float, deceleration, jerk: float,
-                 step_s: float = 2.0) -> None:
+                 step_s: float = 2.0, limit_x: float = math.inf) -> bool:
         """Coasting from the current speed (zero acceleration) down to ``target_speed`` <
-        current: the acceleration follows ``-deceleration(v)`` [m/s^2] (the running resistance
-        and the grade with no traction or brake, which the caller keeps positive over the speed
-        range) with |jerk| <= ``jerk``, ending with zero acceleration exactly at the target
-        speed. The mirror image of :meth:`accelerate_to`."""
+        current: the acceleration follows ``-deceleration(v, x)`` [m/s^2] (the running
+        resistance and the grade with no traction or brake, at least zero: where the grade
+        would speed the train up it holds its speed) with |jerk| <= ``jerk``, ending with zero
+        acceleration exactly at the target speed. The mirror image of :meth:`accelerate_to`.
+        False if the position passed ``limit_x`` before the target speed (the coast stops
+        there, unfinished)."""
         if target_speed >= self.v:
-            return
+            return True
         for _ in range(1_000_000):
+            if self.x > limit_x:
+                return False
             remaining = self.v - target_speed
             if remaining <= 1e-12:
                 break
@@ -117,7 +121,8 @@ class TrajectoryBuilder:
                 self.add(-self.a / ramp_jerk, ramp_jerk)
                 break
             predicted = self.v + self.a * step_s
-            wanted = -max(deceleration(predicted), deceleration(self.v))
+            ahead = self.x + self.v * step_s
+            wanted = -max(deceleration(predicted, ahead), deceleration(self.v, self.x), 0.0)
             j = min(max((wanted - self.a) / step_s, -jerk), jerk)
             a_end = self.a + j * step_s
             v_end = self.v + step_s * (self.a + 0.5 * j * step_s)
@@ -133,6 +138,7 @@ class TrajectoryBuilder:
                 break
             self.add(step_s, j)
         self.v, self.a = target_speed, 0.0
+        return True
 
     def ramp_acceleration_to_zero(self, jerk: float) -> None:
         """From a nonzero acceleration to zero at the jerk limit (the start of a replan)."""
