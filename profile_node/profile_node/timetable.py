@@ -212,10 +212,7 @@ def window_conflicts(scenario: Scenario, fastest: Plan) -> list[Conflict]:
     for j, later in enumerate(points):
         if later.latest_s is None:
             continue
-        if times[j] > later.latest_s + 1e-6:
-            conflicts.append(Conflict('the start of the run', _point_name(j, later),
-                                      times[j] - start, later.latest_s - start))
-            continue
+        found = len(conflicts)
         for i in range(j):
             earlier = points[i]
             if earlier.earliest_s is None or earlier.position_m == later.position_m:
@@ -225,6 +222,9 @@ def window_conflicts(scenario: Scenario, fastest: Plan) -> list[Conflict]:
             if allowed < shortest - 1e-6:
                 conflicts.append(Conflict(_point_name(i, earlier), _point_name(j, later),
                                           shortest, allowed))
+        if len(conflicts) == found and times[j] > later.latest_s + 1e-6:
+            conflicts.append(Conflict('the start of the run', _point_name(j, later),
+                                      times[j] - start, later.latest_s - start))
     return conflicts
 
 
@@ -238,6 +238,7 @@ class _LegSolver:
         self.eta = regenerative_efficiency
         self.targets = targets or {}   # leg -> target arrival time (a replan's)
         self.timings: list[LegTiming] = []
+        self.latest: dict[int, float] = {}   # leg -> latest arrival the later legs allow
 
     def _trial(self, builder: TrajectoryBuilder, sections, factor,
                cruise: LegCruise | None) -> TrajectoryBuilder:
@@ -312,6 +313,8 @@ class _LegSolver:
                       and origin_m < p.position_m < end_m]
         if target is None:
             target = departure + shortest * (1.0 + scenario.timetable.supplement_percent / 100.0)
+        # No later than what leaves the later legs their times (a later window's reserve).
+        target = min(target, self.latest.get(leg, math.inf))
         top = max(s.level_mps for s in sections)
         starts, speeds = [origin_m], [top]
         splits: list[tuple[float, float]] = []   # (position, time aimed at) of active windows
@@ -356,6 +359,30 @@ class _LegSolver:
         return None
 
 
+def _latest_arrivals(scenario: Scenario, fastest: Plan) -> dict[int, float]:
+    """leg -> the latest arrival at its stop from which every later stop's latest time is
+    still reachable (after the stop's dwell, at the fastest curve's running times)."""
+    journey, stops = scenario.journey, fastest.stops
+    latest: dict[int, float] = {}
+    bound = math.inf
+    for leg in range(len(stops) - 1, 0, -1):
+        stop = stops[leg]
+        arrival = next((p for p in journey.timing_points if p.is_stopping_point
+                        and abs(p.position_m - stop.station.position_m) < 1e-6), None)
+        if arrival is not None and arrival.latest_s is not None:
+            bound = min(bound, arrival.latest_s)
+        previous = stops[leg - 1]
+        running = stop.arrival_s - previous.departure_s
+        # The departure waits for its earliest time anyway: no need to arrive before that.
+        departure = bound - running
+        earliest = journey.earliest_departure_s(previous.station.position_m)
+        if earliest is not None:
+            departure = max(departure, earliest)
+        bound = departure - previous.station.dwell_s
+        latest[leg - 1] = bound
+    return latest
+
+
 def plan_timetable(scenario: Scenario, start_s: float = 0.0, start_state=None,
                    targets: dict[int, float] | None = None,
                    regenerative_efficiency: float = 0.0) -> Plan:
@@ -374,6 +401,8 @@ def plan_timetable(scenario: Scenario, start_s: float = 0.0, start_state=None,
                 + '; '.join(c.message() for c in conflicts)
                 + ' (timetable.run_infeasible: true runs it anyway, as close as possible)')
     solver = _LegSolver(scenario, regenerative_efficiency, targets)
+    if start_state is None and targets is None and scenario.journey is not None:
+        solver.latest = _latest_arrivals(scenario, fastest)
     plan = plan_fastest(scenario, start_s, solver, start_state)
     # plan_fastest may build the curve again (a supervision check); the last build's legs.
     timings = tuple(solver.timings[-len(plan.stops):])
