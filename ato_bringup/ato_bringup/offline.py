@@ -24,6 +24,7 @@ from ato_common.types import nanoseconds, seconds
 from ato_common.uncertainty import perturbed
 from ato_controller_node.host import ControllerHost
 from profile_node.planner import Plan, plan_reference
+from profile_node.replan import Replanner
 from train_plant_node.simulation import NORMAL, SensorSettings, TrainSimulation
 
 
@@ -56,18 +57,30 @@ class OfflineRun:
     saturated: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     #: the end of each control period in which the plant's ATP began an intervention, s
     atp_times_s: tuple[float, ...] = ()
+    #: the plans that replaced ``plan`` when the train was late (timetable strategy), in order
+    replans: tuple[Plan, ...] = ()
+
+    @property
+    def final_plan(self) -> Plan:
+        return self.replans[-1] if self.replans else self.plan
 
     def metrics(self) -> RunMetrics:
         return compute_metrics(self.times_s, self.positions, self.speeds, self.forces,
-                               self.ref_positions, self.ref_speeds, stop_samples(self.plan))
+                               self.ref_positions, self.ref_speeds,
+                               stop_samples(self.plan, self.replans))
 
     def estimate(self, key: str) -> np.ndarray:
         """One reported estimate over the run (NaN where the law did not report it)."""
         return np.array([e.get(key, np.nan) for e in self.estimates])
 
 
-def stop_samples(plan: Plan) -> list[StopSample]:
-    return [StopSample(s.station.name, s.station.position_m, s.departure_s) for s in plan.stops]
+def stop_samples(plan: Plan, replans: tuple[Plan, ...] = ()) -> list[StopSample]:
+    """Each stop sampled at its departure in the last plan that has it (a replan's)."""
+    stops = {s.station.name: s for s in plan.stops}
+    for later in replans:
+        stops.update((s.station.name, s) for s in later.stops)
+    return [StopSample(s.station.name, s.station.position_m, s.departure_s)
+            for s in sorted(stops.values(), key=lambda s: s.station.position_m)]
 
 
 def run_end_time_s(scenario: Scenario, plan: Plan) -> float:
@@ -86,6 +99,7 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
     (a law that must run faster than a node can, e.g. Mao et al.'s feedback linearisation);
     ``uncertainty``: the drawn values the plant's truth is perturbed by (None: nominal)."""
     plan = plan_reference(scenario)
+    replanner = Replanner(scenario, plan)  # the timetable strategy's replans when late
     period_ns = nanoseconds(1.0 / (controller_rate_hz or scenario.run.controller_rate_hz))
     truth_scenario = perturbed(scenario, uncertainty) if uncertainty is not None else scenario
     sim = TrainSimulation(truth_scenario, model, sensors=sensors, **model_options)
@@ -98,13 +112,19 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
     watchdog_events = 0
     saturated = []
     atp_times = []
-    for _ in range(steps + 1):
+    step = 0
+    while step <= steps:
+        step += 1
         t = sim.time_s
         while pending and pending[0][0] <= t:
             host.select(pending.pop(0)[1])
         truth = sim.truth()
         measured = sim.measured(truth)
-        reference = plan.trajectory.at(t)
+        if replanner.active and replanner.update(t, measured.positions[0],
+                                                 measured.speeds[0]) and end_time_s is None:
+            # A later arrival: the run goes on to the end of the new plan.
+            steps = max(steps, int(run_end_time_s(scenario, replanner.plan) * 1e9 // period_ns))
+        reference = replanner.plan.trajectory.at(t)
         measurement = host.measurement(t, measured)  # with the known mode, from the knowledge
         started = time.perf_counter()
         result = host.step(measurement, reference)
@@ -128,4 +148,4 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
     return OfflineRun(scenario, plan, *data.T, np.array(car_positions), np.array(car_speeds),
                       np.array(actuator_forces), np.array(step_times), laws, estimates, faults,
                       sim.atp_interventions, watchdog_events, np.array(saturated, dtype=bool),
-                      tuple(atp_times))
+                      tuple(atp_times), tuple(p for _, p in replanner.history))
