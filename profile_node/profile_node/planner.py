@@ -436,7 +436,7 @@ def _build(scenario: Scenario, supervision: RunSupervision, stations: list[Stati
         builder.ramp_acceleration_to_zero(scenario.planning.max_jerk_mps3)
     builder.add(stations[0].dwell_s)
     stops = []
-    for leg, (origin, destination) in enumerate(zip(stations, stations[1:])):
+    for leg, destination in enumerate(stations[1:]):
         sections = leg_sections(scenario, supervision.legs[leg].mrsp, builder.x,
                                 destination.position_m, anticipation_s, extra_m)
         if leg_planner is None:

@@ -140,7 +140,7 @@ def optimum_at(scenario, running_time_s: float, cruise_mps: float) -> float:
     around the planner's cruise speed's (lambda = m V^2 r'(V), only to start the search) and
     bisected."""
     programme = DynamicProgramme(scenario)
-    davis, mass = scenario.train.davis_nominal, scenario.train.mass_kg
+    davis = scenario.train.davis_nominal
     guess = cruise_mps ** 2 * (davis.b_n_s_per_m + 2.0 * davis.c_n_s2_per_m2 * cruise_mps)
     low, high = guess / 4.0, guess * 4.0
     e_low, t_low = programme.solve(low)
