@@ -21,15 +21,23 @@ A measured train standing still more than ``RESUME_GAP_M`` behind the reference 
 emergency or watchdog brake) gets the rest of its leg planned again from where it stands
 (``planner.resume_plan``), so the law does not chase a reference far ahead. The latched curve
 stays the original plan.
+
+The plan (strategy, forecast energy, expected delay, each stop's target and planned arrival and
+reserve, each journey timing point's planned time) is published on ``/diagnostics`` as the
+status ``profile_node: plan``, only when the plan changes: at the first tick, then at each
+replan or resume (no per-step message). Real time, ``timetable`` strategy: a moving train late
+by more than ``timetable.replan_delay_s`` gets the rest of its run planned again from its
+measured state (``profile_node.replan``).
 """
 
 from __future__ import annotations
 
 import math
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Float64
+from std_msgs.msg import Float64, Header
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_common.braking_curves import RunSupervision
@@ -37,6 +45,7 @@ from ato_common.params import Param, ParameterTable
 from ato_common.ros import (
     MessageError,
     RunNodeHooks,
+    diagnostic_status,
     freeze_startup_objects,
     from_duration,
     from_time,
@@ -44,11 +53,14 @@ from ato_common.ros import (
     reference_to_msg,
     run_node,
     state_from_msg,
+    to_time,
     topic,
 )
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import Reference, nanoseconds, seconds
 from profile_node.planner import RESUME_GAP_M, plan_reference, resume_plan
+from profile_node.replan import Replanner
+from profile_node.timetable import plan_summary
 
 PARAMS = (
     Param('scenario', DEFAULT_SCENARIO, 'built-in scenario name or path to a scenario YAML file'),
@@ -79,6 +91,10 @@ class ProfileNode(RunNodeHooks, Node):
         self.sent_ahead_ns: int | None = None
         self.last_run_time_ns = -1
         self.resumes = 0
+        self.replanner = Replanner(self.scenario, self.plan)
+        self.plan_reported = False
+        self.diag_pub = self.create_publisher(DiagnosticArray, topic('diagnostics').name,
+                                              qos_profile(topic('diagnostics').qos))
 
         self.reference_pub = self.create_publisher(JointTrajectory, topic('reference').name,
                                                    qos_profile(topic('reference').qos))
@@ -140,10 +156,21 @@ class ProfileNode(RunNodeHooks, Node):
         self.permitted_pub.publish(Float64(data=self.plan.permitted_speed(now.position,
                                                                           now.time_s)))
 
+    def publish_plan(self, stamp_ns: int, why: str) -> None:
+        """The plan on diagnostics: only when it changes (start, replan, resume)."""
+        self.plan_reported = True
+        status = diagnostic_status('profile_node: plan', self.scenario.name,
+                                   DiagnosticStatus.OK if self.plan.expected_delay_s <= 0.0
+                                   else DiagnosticStatus.WARN, why, plan_summary(self.plan))
+        self.diag_pub.publish(DiagnosticArray(header=Header(stamp=to_time(stamp_ns)),
+                                              status=[status]))
+
     def on_clock(self, msg: Clock) -> None:
         if self.reference_pub.get_subscription_count() < self.params['wait_for_subscribers']:
             return  # the plant re-sends the tick until the reference comes
         tick = from_time(msg.clock)
+        if not self.plan_reported:
+            self.publish_plan(tick, f'{self.plan.strategy} plan')
         if tick != self.sent_ahead_ns or tick == self.last_tick_ns:
             self.publish(tick)  # not sent ahead, or the plant re-sent the tick
         self.publish_supervision(tick)
@@ -163,6 +190,8 @@ class ProfileNode(RunNodeHooks, Node):
             if restarted:  # a new plant: its run starts again, and so does the curve
                 self.plan = plan_reference(self.scenario)
                 self.trajectory = self.plan.trajectory
+                self.replanner = Replanner(self.scenario, self.plan)
+                self.plan_reported = False
                 self.get_logger().warning('real time: the plant started again; the curve '
                                           'restarts from its origin')
             else:
@@ -177,16 +206,27 @@ class ProfileNode(RunNodeHooks, Node):
         except MessageError:
             return  # the controller reports a bad measurement
         position, speed = state.positions[0], state.speeds[0]
+        now_ns = self.get_clock().now().nanoseconds
+        time_s = seconds(now_ns - self.time_origin_ns)
+        if self.replanner.update(time_s, position, speed) is not None:
+            self.plan = self.replanner.plan
+            self.trajectory = self.plan.trajectory
+            self.get_logger().warning(
+                f'the train is late by {self.replanner.replans[-1][1]:.1f} s: the rest of the '
+                f'run is planned again from {position:.1f} m, expected delay '
+                f'{self.plan.expected_delay_s:.1f} s')
+            self.publish_plan(now_ns, 'replanned: the train was late')
+            return
         if not (math.isfinite(position) and math.isfinite(speed)) \
                 or abs(speed) > RunSupervision.STANDSTILL_MPS:
             return
-        time_s = seconds(self.get_clock().now().nanoseconds - self.time_origin_ns)
         if self.trajectory.at(time_s).position - position <= RESUME_GAP_M:
             return
         plan = resume_plan(self.scenario, position, time_s)
         if plan is None:
             return
         self.plan, self.trajectory = plan, plan.trajectory
+        self.replanner.plan = plan
         self.resumes += 1
         self.get_logger().warning(
             f'the train stands at {position:.1f} m, behind the reference by more than '
@@ -195,6 +235,8 @@ class ProfileNode(RunNodeHooks, Node):
     def on_timer(self) -> None:
         if self.time_origin_ns is not None:
             now = self.get_clock().now().nanoseconds
+            if not self.plan_reported:
+                self.publish_plan(now, f'{self.plan.strategy} plan')
             self.publish(now)
             self.publish_supervision(now)
 

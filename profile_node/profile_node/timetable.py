@@ -424,3 +424,28 @@ def shortest_running_time_s(scenario: Scenario) -> float:
 def energy_kwh(plan: Plan) -> float:
     return units.joules_to_kwh(plan.forecast_energy_j) if math.isfinite(
         plan.forecast_energy_j) else math.nan
+
+
+def plan_summary(plan: Plan) -> dict[str, object]:
+    """What the profile node reports of a plan on diagnostics (docs/guide/target-curve.md):
+    the strategy, the forecast traction energy, the expected delay, and per stop its target
+    and planned arrival, the shortest running time and the reserve; per journey timing point
+    its planned time and whether it is within its window."""
+    values: dict[str, object] = {
+        'strategy': plan.strategy,
+        'forecast_energy_kwh': (units.joules_to_kwh(plan.forecast_energy_j)
+                                if math.isfinite(plan.forecast_energy_j) else math.nan),
+        'expected_delay_s': plan.expected_delay_s,
+        'plan_start_s': plan.trajectory.start_time,
+        'plan_end_s': plan.trajectory.end_time}
+    for stop in plan.stops:
+        values[f'stop.{stop.station.name}.arrival_s'] = stop.arrival_s
+        values[f'stop.{stop.station.name}.departure_s'] = stop.departure_s
+    for leg in plan.legs:
+        values[f'stop.{leg.destination}.target_arrival_s'] = leg.target_arrival_s
+        values[f'stop.{leg.destination}.shortest_running_s'] = leg.shortest_running_s
+        values[f'stop.{leg.destination}.reserve_s'] = leg.reserve_s
+    for i, check in enumerate(plan.timing):
+        values[f'timing_point.{i}.planned_s'] = check.planned_s
+        values[f'timing_point.{i}.within_window'] = check.within_window
+    return values
