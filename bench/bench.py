@@ -10,6 +10,9 @@
 4. Campaign throughput (ato_bringup.campaign): runs per minute of a small campaign with 1 and 2
    Dask workers and their ratio, and the engine's overhead per run (Dask, the time limit, the
    Parquet row) against the bare offline loop of the same runs.
+5. Planning: CPU time to plan each built-in scenario's target curve, ``fastest`` and
+   ``timetable`` (profile_node.timetable), and the two strategies in closed loop offline (PID,
+   nominal plant): arrival against the target time and traction energy.
 """
 
 from __future__ import annotations
@@ -159,6 +162,57 @@ def _cpu_s() -> float:
     return time.process_time()
 
 
+def planning_times() -> list[str]:
+    """Median CPU time of 3 plannings of every built-in scenario, each strategy."""
+    from profile_node.planner import _traction_distance, plan_reference
+    rows = ['| scenario | fastest | timetable (7 %) |', '|---|---|---|']
+    for name in builtin_scenarios():
+        scenario = load_scenario(name)
+        cells = []
+        for strategy in ('fastest', 'timetable'):
+            variant = dataclasses.replace(scenario, timetable=dataclasses.replace(
+                scenario.timetable, strategy=strategy, supplement_percent=7.0))
+            times = []
+            for _ in range(3):
+                _traction_distance.cache_clear()  # each planning from scratch
+                started = _cpu_s()
+                plan_reference(variant)
+                times.append(_cpu_s() - started)
+            cells.append(f'{1e3 * float(np.median(times)):.0f} ms')
+        rows.append(f'| {name} | {cells[0]} | {cells[1]} |')
+        print(rows[-1], flush=True)
+    return rows
+
+
+def timetable_against_fastest() -> list[str]:
+    """Both strategies in closed loop offline on every built-in scenario (PID, nominal
+    plant): the last arrival against its target and the traction energy."""
+    rows = ['| scenario | fastest: arrival | fastest: traction energy | timetable (7 %): '
+            'target arrival | timetable: arrival | timetable: traction energy | saving |',
+            '|---|---|---|---|---|---|---|']
+    for name in builtin_scenarios():
+        scenario = load_scenario(name)
+        runs = {}
+        for strategy in ('fastest', 'timetable'):
+            variant = dataclasses.replace(scenario, timetable=dataclasses.replace(
+                scenario.timetable, strategy=strategy, supplement_percent=7.0))
+            runs[strategy] = run_offline(variant, 'pid')
+        end = scenario.line.stations[-1].position_m
+        arrivals = {}
+        for strategy, run in runs.items():
+            standing = (np.abs(run.positions - end) < 1.0) & (np.abs(run.speeds) < 0.01)
+            arrivals[strategy] = float(run.times_s[np.argmax(standing)]) if standing.any() \
+                else math.nan
+        energy = {k: r.metrics().traction_energy_kwh for k, r in runs.items()}
+        target = runs['timetable'].plan.legs[-1].target_arrival_s
+        rows.append(f'| {name} | {arrivals["fastest"]:.1f} s | {energy["fastest"]:.0f} kWh | '
+                    f'{target:.1f} s | {arrivals["timetable"]:.1f} s | '
+                    f'{energy["timetable"]:.0f} kWh | '
+                    f'{100 * (1 - energy["timetable"] / energy["fastest"]):.1f} % |')
+        print(rows[-1], flush=True)
+    return rows
+
+
 def campaign_throughput(scenario: str) -> list[str]:
     """Runs per minute with 1 and 2 workers, their ratio, and the engine's overhead per run, in
     wall time and in CPU time (this process, with the scheduler, plus every worker's): on a
@@ -212,7 +266,7 @@ def main() -> int:
     parser.add_argument('--results-page', type=Path, default=None,
                         help='also write the figures, with date, machine and commit, to this '
                         'results page of the docs (make bench: docs/results/benchmarks.md)')
-    parser.add_argument('--only', choices=('campaign',), default=None,
+    parser.add_argument('--only', choices=('campaign', 'planning'), default=None,
                         help='measure only this section (printed, no results page)')
     args = parser.parse_args()
     measured = (results_page_provenance(args.results_page)
@@ -228,9 +282,25 @@ def main() -> int:
         'on 2 cores: at least 1.8.', '',
         '| engine | runs | wall time | CPU time | runs per minute | overhead, wall | '
         'overhead, CPU |', '|---|---|---|---|---|---|---|']
+    planning_section = [
+        '## Planning', '',
+        'CPU time to plan the whole target curve of each built-in scenario from scratch (median '
+        'of 3; the '
+        'timetable strategy with a 7 % running-time supplement), '
+        'docs/guide/target-curve.md.', '']
+    comparison_section = [
+        '## Timetable against fastest, closed loop', '',
+        'Offline loop, PID law, nominal plant; arrival: the train standing within 1 m of the '
+        'last stopping point; traction energy: the work of the positive traction force.', '']
     if args.only == 'campaign':
         page.add(f'Scenario `{args.scenario}`.', '', *campaign_section)
         page.add(*campaign_throughput(args.scenario))
+        return 0
+    if args.only == 'planning':
+        page.add(*planning_section)
+        page.add(*planning_times())
+        page.add('', *comparison_section)
+        page.add(*timetable_against_fastest())
         return 0
     page.add(f'Scenario `{args.scenario}`.', '',
              '## Lockstep through the ROS graph', '',
@@ -271,6 +341,10 @@ def main() -> int:
              f'| `multi_car` | {plant_accuracy("multi_car", "crh2_4car_mao", 12e3):.2e} m/s |')
     page.add('', *campaign_section)
     page.add(*campaign_throughput(args.scenario))
+    page.add('', *planning_section)
+    page.add(*planning_times())
+    page.add('', *comparison_section)
+    page.add(*timetable_against_fastest())
     if args.results_page is not None:
         written = write_results_page(args.results_page, 'Benchmarks', 'make bench',
                                      '\n'.join(page.lines), measured)

@@ -26,8 +26,10 @@ supervision times), the braking into that target is planned further ahead and th
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -128,6 +130,24 @@ def braking_deceleration(scenario: Scenario, descent_sine: float) -> float:
                             'service brake less than '
                             f'{MIN_PLANNED_ACCELERATION_MPS2} m/s^2 of deceleration')
     return min(scenario.planning.service_deceleration_mps2, available)
+
+
+@functools.lru_cache(maxsize=100_000)
+def _traction_distance(traction, davis, mass_kg: float, planning, climb_sine: float,
+                       v_from: float, v_to: float) -> float:
+    """traction_phase_distance for a train and a climb, remembered: the timetable strategy
+    plans the same traction phases again for every cruise speed it tries."""
+    train = SimpleNamespace(traction=traction, davis_nominal=davis, mass_kg=mass_kg)
+    capability = traction_capability(SimpleNamespace(train=train, planning=planning),
+                                     climb_sine)
+    return traction_phase_distance(v_from, v_to, capability, planning.max_jerk_mps3)
+
+
+def section_traction_distance(scenario: Scenario, climb_sine: float, v_from: float,
+                              v_to: float) -> float:
+    train = scenario.train
+    return _traction_distance(train.traction, train.davis_nominal, train.mass_kg,
+                              scenario.planning, climb_sine, v_from, v_to)
 
 
 def traction_phase_distance(v_from: float, v_to: float, capability, jerk: float) -> float:
@@ -344,7 +364,7 @@ def _coast_then_brake(builder: TrajectoryBuilder, scenario: Scenario, section: S
     else:
         # Coast from here to the lowest speed from which the braking still ends in time.
         lo, hi = low, peak
-        for _ in range(30):
+        for _ in range(20):
             middle = 0.5 * (lo + hi)
             if _coast_end(scenario, builder.x, peak, middle, jerk, end) <= brake_start(middle):
                 hi = middle
@@ -387,14 +407,15 @@ def plan_leg(builder: TrajectoryBuilder, scenario: Scenario, sections: list[Sect
         capability = traction_capability(scenario, section.climb_sine)
 
         def needed(peak: float) -> float:
-            return (traction_phase_distance(entry, peak, capability, jerk)
+            return (section_traction_distance(scenario, section.climb_sine, entry, peak)
                     + speed_change_distance(peak, exit_speed, deceleration, jerk))
         if entry < exit_speed and needed(exit_speed) > section.length_m:
             # Too short to reach the highest exit speed: accelerate throughout.
             low, high = entry, exit_speed
             for _ in range(40):
                 middle = 0.5 * (low + high)
-                if traction_phase_distance(entry, middle, capability, jerk) <= section.length_m:
+                if section_traction_distance(scenario, section.climb_sine, entry,
+                                             middle) <= section.length_m:
                     low = middle
                 else:
                     high = middle
