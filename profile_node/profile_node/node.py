@@ -62,6 +62,9 @@ from profile_node.planner import RESUME_GAP_M, plan_reference, resume_plan
 from profile_node.replan import Replanner
 from profile_node.timetable import plan_summary
 
+# The plan's diagnostics warn from this expected delay on, s (below: the solver's accuracy).
+DELAY_WARNING_S = 1.0
+
 PARAMS = (
     Param('scenario', DEFAULT_SCENARIO, 'built-in scenario name or path to a scenario YAML file'),
     Param('lockstep', True, 'publish on every /clock tick (false: on a wall-clock timer)'),
@@ -160,7 +163,7 @@ class ProfileNode(RunNodeHooks, Node):
         """The plan on diagnostics: only when it changes (start, replan, resume)."""
         self.plan_reported = True
         status = diagnostic_status('profile_node: plan', self.scenario.name,
-                                   DiagnosticStatus.OK if self.plan.expected_delay_s <= 0.0
+                                   DiagnosticStatus.OK if self.plan.expected_delay_s <= DELAY_WARNING_S
                                    else DiagnosticStatus.WARN, why, plan_summary(self.plan))
         self.diag_pub.publish(DiagnosticArray(header=Header(stamp=to_time(stamp_ns)),
                                               status=[status]))
