@@ -162,9 +162,10 @@ class ProfileNode(RunNodeHooks, Node):
     def publish_plan(self, stamp_ns: int, why: str) -> None:
         """The plan on diagnostics: only when it changes (start, replan, resume)."""
         self.plan_reported = True
+        late = self.plan.expected_delay_s > DELAY_WARNING_S
         status = diagnostic_status('profile_node: plan', self.scenario.name,
-                                   DiagnosticStatus.OK if self.plan.expected_delay_s <= DELAY_WARNING_S
-                                   else DiagnosticStatus.WARN, why, plan_summary(self.plan))
+                                   DiagnosticStatus.WARN if late else DiagnosticStatus.OK, why,
+                                   plan_summary(self.plan))
         self.diag_pub.publish(DiagnosticArray(header=Header(stamp=to_time(stamp_ns)),
                                               status=[status]))
 
