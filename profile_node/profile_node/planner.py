@@ -32,12 +32,25 @@ from dataclasses import dataclass, replace
 from types import SimpleNamespace
 
 import numpy as np
+from scipy.optimize import brentq
 
 from ato_common import units
 from ato_common.braking_curves import RunSupervision, Target
 from ato_common.line import Station
 from ato_common.scenario import Scenario
 from ato_common.validation import ConfigError
+from profile_node.timetable import (
+    LOWEST_CRUISE_MPS,
+    SPEED_TOLERANCE_MPS,
+    TIME_TOLERANCE_S,
+    WINDOW_MARGIN_S,
+    LegTiming,
+    coast_end_speed,
+    forecast_energy_j,
+    train_grade_sine,
+    window_conflicts,
+    window_target,
+)
 from profile_node.trajectory import Trajectory, TrajectoryBuilder, speed_change_distance
 
 
@@ -185,24 +198,6 @@ class Section:
     @property
     def length_m(self) -> float:
         return self.end_m - self.start_m
-
-
-def train_grade_sine(line, front_m: float, length_m: float) -> float:
-    """The grade the whole train feels with its front at ``front_m``: sin(theta) averaged over
-    its length [front - length, front] (exact for piecewise-constant grades; before the line's
-    start the first grade holds)."""
-    if length_m <= 0.0:
-        return line.grade_sine(front_m)
-    rear = front_m - length_m
-    starts, values = line.grade_sine.starts, line.grade_sine.values
-    total = 0.0
-    for i, value in enumerate(values):
-        a = starts[i] if i > 0 else -math.inf
-        b = starts[i + 1] if i + 1 < len(starts) else math.inf
-        overlap = min(b, front_m) - max(a, rear)
-        if overlap > 0.0:
-            total += value * overlap
-    return total / length_m
 
 
 def train_grade_extremes(line, start_m: float, end_m: float, length_m: float
@@ -542,11 +537,9 @@ def first_violation(trajectory: Trajectory, plan_stops, supervision: RunSupervis
 def plan_reference(scenario: Scenario, start_s: float = 0.0) -> Plan:
     """The target curve of a scenario, from its initial position at rest at run time
     ``start_s`` (0: the start of the run), driven as its ``timetable.strategy`` says:
-    ``fastest`` here, ``timetable`` by :mod:`profile_node.timetable`."""
+    ``fastest`` (:func:`plan_fastest`) or ``timetable`` (:func:`plan_timetable`)."""
     if scenario.timetable.strategy == 'timetable':
-        from profile_node.timetable import plan_timetable
         return plan_timetable(scenario, start_s)
-    from profile_node.timetable import forecast_energy_j
     plan = plan_fastest(scenario, start_s)
     return replace(plan, forecast_energy_j=forecast_energy_j(scenario, plan.trajectory))
 
@@ -604,3 +597,192 @@ def resume_plan(scenario: Scenario, position_m: float, time_s: float) -> Plan | 
     resumed = replace(scenario, line=line, run=replace(scenario.run,
                                                        initial_position_m=position_m))
     return plan_reference(resumed, start_s=time_s)
+
+
+# The timetable strategy (profile_node.timetable gives its theory, the energy and the windows):
+# each leg's cruise speeds solved to its times.
+
+class _LegSolver:
+    """Appends each leg of the timetable strategy to the curve (``planner._build``'s
+    ``leg_planner``), solving its cruise speeds to its times."""
+
+    def __init__(self, scenario: Scenario, regenerative_efficiency: float = 0.0,
+                 targets: dict[int, float] | None = None):
+        self.scenario = scenario
+        self.eta = regenerative_efficiency
+        self.targets = targets or {}   # leg -> target arrival time (a replan's)
+        self.timings: list[LegTiming] = []
+        self.latest: dict[int, float] = {}   # leg -> latest arrival the later legs allow
+
+    def _trial(self, builder: TrajectoryBuilder, sections, factor,
+               cruise: LegCruise | None) -> TrajectoryBuilder:
+        trial = TrajectoryBuilder(x0=builder.x, t0=builder.t)
+        trial.v, trial.a = builder.v, builder.a
+        plan_leg(trial, self.scenario, sections, factor, cruise)
+        return trial
+
+    def _cruise(self, starts, speeds, coast_share: float = 0.0) -> LegCruise:
+        """``coast_share`` in [0, 1] raises every coast's end speed from eq (2)'s W towards
+        the cruise speed (1: no coasting): the times between the fastest curve and the
+        coasting curve at the highest cruise speed."""
+        ends = []
+        for v in speeds:
+            w = coast_end_speed(self.scenario, v, self.eta)
+            ends.append(w + coast_share * (v - w))
+        return LegCruise(tuple(starts), tuple(speeds), tuple(ends))
+
+    def _time_at(self, trial: TrajectoryBuilder, position: float | None) -> float:
+        if position is None:
+            return trial.t
+        return passing_time(trial.build(), position)
+
+    def _solve_speed(self, builder, sections, factor, starts, speeds, k, position, target,
+                     top):
+        """speeds[k] such that the curve reaches ``position`` (None: the leg's end) at
+        ``target``; the fastest it can where even ``top`` is too slow. Returns (speeds[k],
+        coast share): a target between the fastest curve and the coasting one at ``top``
+        is met by coasting less (``_cruise``)."""
+        memo = {}
+
+        def time_with(v, share=0.0):
+            if (v, share) not in memo:
+                trial_speeds = list(speeds)
+                trial_speeds[k] = v
+                cruise = self._cruise(starts, trial_speeds, share)
+                memo[v, share] = self._time_at(self._trial(builder, sections, factor, cruise),
+                                               position)
+            return memo[v, share]
+        low, high = LOWEST_CRUISE_MPS, top
+        if time_with(high) >= target:
+            if time_with(high, 1.0) >= target:
+                return high, 1.0
+            share = brentq(lambda c: time_with(high, c) - target, 0.0, 1.0, xtol=1e-3,
+                           maxiter=60)
+            return high, share
+        if time_with(low) <= target:
+            return low, 0.0
+        # The running time falls as the cruise speed rises: Brent's method on it.
+        return brentq(lambda v: time_with(v) - target, low, high,
+                      xtol=SPEED_TOLERANCE_MPS, maxiter=60), 0.0
+
+    def __call__(self, leg: int, builder: TrajectoryBuilder, sections, factor) -> None:
+        scenario = self.scenario
+        origin_m, end_m = builder.x, sections[-1].end_m
+        departure = builder.t
+        fastest = self._trial(builder, sections, factor, None)
+        shortest = fastest.t - departure
+        journey = scenario.journey
+        target = self.targets.get(leg)
+        points = []
+        if journey is not None:
+            arrival_point = next((p for p in journey.timing_points if p.is_stopping_point
+                                  and abs(p.position_m - end_m) < 1e-6), None)
+            if target is None and arrival_point is not None:
+                target = window_target(arrival_point.earliest_s, arrival_point.latest_s)
+                if target is None and arrival_point.earliest_s is not None:
+                    target = max(arrival_point.earliest_s,
+                                 departure + shortest
+                                 * (1.0 + scenario.timetable.supplement_percent / 100.0))
+            points = [p for p in journey.timing_points if not p.is_stopping_point
+                      and origin_m < p.position_m < end_m]
+        if target is None:
+            target = departure + shortest * (1.0 + scenario.timetable.supplement_percent / 100.0)
+        # No later than what leaves the later legs their times (a later window's reserve).
+        target = min(target, self.latest.get(leg, math.inf))
+        top = max(s.level_mps for s in sections)
+        starts, speeds = [origin_m], [top]
+        splits: list[tuple[float, float]] = []   # (position, time aimed at) of active windows
+        chosen = fastest
+        if target > fastest.t + TIME_TOLERANCE_S:
+            for _ in range(len(points) + 1):
+                goals = splits + [(None, target)]
+                share = 0.0
+                for _sweep in range(2 if splits else 1):
+                    for k, (position, goal) in enumerate(goals):
+                        speeds[k], share = self._solve_speed(builder, sections, factor, starts,
+                                                             speeds, k, position, goal, top)
+                chosen = self._trial(builder, sections, factor,
+                                     self._cruise(starts, speeds, share))
+                missed = self._first_missed(chosen.build(), points, splits)
+                if missed is None:
+                    break
+                position, goal = missed
+                splits = sorted(splits + [(position, goal)], key=lambda s: s[0])
+                starts = [origin_m] + [p for p, _ in splits]
+                speeds = [top] * len(starts)
+        builder.segments.extend(chosen.segments)
+        builder.t, builder.x, builder.v, builder.a = chosen.t, chosen.x, chosen.v, chosen.a
+        self.timings.append(LegTiming(f'{end_m:.0f} m', departure, target, chosen.t, shortest))
+
+    @staticmethod
+    def _first_missed(trajectory: Trajectory, points, splits):
+        """The first passing point outside its window (not yet a split), with the time to
+        aim at there."""
+        fixed = {p for p, _ in splits}
+        for point in points:
+            if point.position_m in fixed:
+                continue
+            t = passing_time(trajectory, point.position_m)
+            if point.earliest_s is not None and t < point.earliest_s - 1e-6:
+                late = point.latest_s
+                margin = WINDOW_MARGIN_S if late is None else min(
+                    WINDOW_MARGIN_S, 0.5 * (late - point.earliest_s))
+                return point.position_m, point.earliest_s + margin
+            if point.latest_s is not None and t > point.latest_s + 1e-6:
+                return point.position_m, window_target(point.earliest_s, point.latest_s)
+        return None
+
+
+def _latest_arrivals(scenario: Scenario, fastest: Plan) -> dict[int, float]:
+    """leg -> the latest arrival at its stop from which every later stop's latest time is
+    still reachable (after the stop's dwell, at the fastest curve's running times)."""
+    journey, stops = scenario.journey, fastest.stops
+    latest: dict[int, float] = {}
+    bound = math.inf
+    for leg in range(len(stops) - 1, 0, -1):
+        stop = stops[leg]
+        arrival = next((p for p in journey.timing_points if p.is_stopping_point
+                        and abs(p.position_m - stop.station.position_m) < 1e-6), None)
+        if arrival is not None and arrival.latest_s is not None:
+            bound = min(bound, arrival.latest_s)
+        previous = stops[leg - 1]
+        running = stop.arrival_s - previous.departure_s
+        # The departure waits for its earliest time anyway: no need to arrive before that.
+        departure = bound - running
+        earliest = journey.earliest_departure_s(previous.station.position_m)
+        if earliest is not None:
+            departure = max(departure, earliest)
+        bound = departure - previous.station.dwell_s
+        latest[leg - 1] = bound
+    return latest
+
+
+def plan_timetable(scenario: Scenario, start_s: float = 0.0, start_state=None,
+                   targets: dict[int, float] | None = None,
+                   regenerative_efficiency: float = 0.0) -> Plan:
+    """The ``timetable`` strategy's curve (module docstring). A journey whose windows cannot
+    all be met is refused (PlanningError naming them and the shortest running time between
+    them) unless ``scenario.timetable.run_infeasible``; then each time is aimed at as closely
+    as the train allows. ``start_state`` and ``targets`` (leg -> arrival time): a replan."""
+    if start_state is None and targets is None and scenario.journey is not None:
+        fastest = plan_fastest(replace(scenario, timetable=replace(scenario.timetable,
+                                                                   strategy='fastest')),
+                               start_s)
+        conflicts = window_conflicts(scenario, fastest)
+        if conflicts and not scenario.timetable.run_infeasible:
+            raise PlanningError(
+                f'{scenario.origin}: the journey\'s windows cannot all be met: '
+                + '; '.join(c.message() for c in conflicts)
+                + ' (timetable.run_infeasible: true runs it anyway, as close as possible)')
+    solver = _LegSolver(scenario, regenerative_efficiency, targets)
+    if start_state is None and targets is None and scenario.journey is not None:
+        solver.latest = _latest_arrivals(scenario, fastest)
+    plan = plan_fastest(scenario, start_s, solver, start_state)
+    # plan_fastest may build the curve again (a supervision check); the last build's legs.
+    timings = tuple(solver.timings[-len(plan.stops):])
+    timings = tuple(replace(t, destination=stop.station.name)
+                    for t, stop in zip(timings, plan.stops))
+    delay = timings[-1].expected_delay_s if timings else 0.0
+    return replace(plan, strategy='timetable', legs=timings, expected_delay_s=delay,
+                   forecast_energy_j=forecast_energy_j(scenario, plan.trajectory,
+                                                       regenerative_efficiency))

@@ -20,8 +20,7 @@ from dataclasses import replace
 from ato_common.braking_curves import RunSupervision
 from ato_common.line import Station
 from ato_common.scenario import Scenario
-from profile_node.planner import Plan, PlanningError, passing_time
-from profile_node.timetable import plan_timetable
+from profile_node.planner import Plan, PlanningError, passing_time, plan_timetable
 
 # Below this speed the train is standing (a dwell, or a stop the resume handles), m/s.
 MOVING_MPS = 1.0
