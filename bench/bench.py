@@ -162,6 +162,23 @@ def _cpu_s() -> float:
     return time.process_time()
 
 
+README_START = '<!-- timetable table: written by make bench, do not edit -->'
+README_END = '<!-- end of the timetable table -->'
+
+
+def update_readme(path: Path, rows: list[str], measured, command: str) -> Path:
+    """The closed-loop table of the two strategies between README_START and README_END."""
+    text = path.read_text()
+    if README_START not in text or README_END not in text:
+        raise SystemExit(f'{path}: no timetable table markers ({README_START!r} ... '
+                         f'{README_END!r}) to write between')
+    head, rest = text.split(README_START, 1)
+    _, tail = rest.split(README_END, 1)
+    body = '\n'.join([measured.markdown(command), '', *rows])
+    path.write_text(f'{head}{README_START}\n{body}\n{README_END}{tail}')
+    return path
+
+
 def planning_times() -> list[str]:
     """Median CPU time of 3 plannings of every built-in scenario, each strategy."""
     from profile_node.planner import _traction_distance, plan_reference
@@ -266,11 +283,16 @@ def main() -> int:
     parser.add_argument('--results-page', type=Path, default=None,
                         help='also write the figures, with date, machine and commit, to this '
                         'results page of the docs (make bench: docs/results/benchmarks.md)')
+    parser.add_argument('--readme', type=Path, default=None,
+                        help='also write the closed-loop table of the two strategies between '
+                        'its markers in this file (make bench: README.md)')
     parser.add_argument('--only', choices=('campaign', 'planning'), default=None,
                         help='measure only this section (printed, no results page)')
     args = parser.parse_args()
     measured = (results_page_provenance(args.results_page)
                 if args.results_page is not None else None)
+    readme_measured = (results_page_provenance(args.readme) if args.readme is not None
+                       else None)
     page = Page()
     campaign_section = [
         '## Campaign throughput', '',
@@ -300,7 +322,11 @@ def main() -> int:
         page.add(*planning_section)
         page.add(*planning_times())
         page.add('', *comparison_section)
-        page.add(*timetable_against_fastest())
+        table = timetable_against_fastest()
+        page.add(*table)
+        if args.readme is not None:
+            command = f'python bench/bench.py --only planning --readme {args.readme}'
+            print(f'\nwrote {update_readme(args.readme, table, readme_measured, command)}')
         return 0
     page.add(f'Scenario `{args.scenario}`.', '',
              '## Lockstep through the ROS graph', '',
@@ -344,7 +370,10 @@ def main() -> int:
     page.add('', *planning_section)
     page.add(*planning_times())
     page.add('', *comparison_section)
-    page.add(*timetable_against_fastest())
+    table = timetable_against_fastest()
+    page.add(*table)
+    if args.readme is not None:
+        print(f'\nwrote {update_readme(args.readme, table, readme_measured, "make bench")}')
     if args.results_page is not None:
         written = write_results_page(args.results_page, 'Benchmarks', 'make bench',
                                      '\n'.join(page.lines), measured)
