@@ -14,6 +14,7 @@ and distances of the braking-curve supervision (:mod:`ato_common.braking_curves`
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
@@ -65,12 +66,17 @@ class Timetable:
     time is its shortest one plus this share. ``run_infeasible``: a journey whose windows cannot
     all be met is refused unless this is true (then it is run as close as possible).
     ``replan_delay_s``: the rest of the leg is planned again from the measured state once the
-    train is this far behind the plan (0: never)."""
+    train is this far behind the plan (0: never). ``regenerative_efficiency``: the share of the
+    braking work the regenerative brake recovers, up to ``regenerative_power_w`` (the TTOBench
+    train's ``efficiency reg brake`` and ``max reg braking power`` where it gives them, else 0:
+    every braking loses its energy); the plan's energy is the traction work net of it."""
 
     strategy: str = 'fastest'
     supplement_percent: float = DEFAULT_SUPPLEMENT_PERCENT
     run_infeasible: bool = False
     replan_delay_s: float = DEFAULT_REPLAN_DELAY_S
+    regenerative_efficiency: float = 0.0
+    regenerative_power_w: float = math.inf
 
 
 @dataclass(frozen=True)
@@ -229,7 +235,8 @@ def _journey_gives_times(journey: ttobench.TTOBenchJourney | None) -> bool:
         p.earliest_s is not None or p.latest_s is not None for p in journey.timing_points[1:])
 
 
-def _parse_timetable(f: Fields, journey: ttobench.TTOBenchJourney | None) -> Timetable:
+def _parse_timetable(f: Fields, journey: ttobench.TTOBenchJourney | None,
+                     loaded: ttobench.TTOBenchTrain | None) -> Timetable:
     t = f.section('timetable')
     default = 'timetable' if _journey_gives_times(journey) else 'fastest'
     strategy = t.text('strategy', default)
@@ -245,7 +252,14 @@ def _parse_timetable(f: Fields, journey: ttobench.TTOBenchJourney | None) -> Tim
                                     minimum=0.0, maximum=100.0),
         run_infeasible=bool(flag),
         replan_delay_s=t.number('replan_delay_s', DEFAULT_REPLAN_DELAY_S, minimum=0.0,
-                                maximum=3600.0))
+                                maximum=3600.0),
+        regenerative_efficiency=t.number(
+            'regenerative_efficiency',
+            (loaded.efficiency_regenerative_brake or 0.0) if loaded is not None
+            and loaded.max_regenerative_braking_power_w > 0.0 else 0.0,
+            minimum=0.0, maximum=1.0),
+        regenerative_power_w=(loaded.max_regenerative_braking_power_w
+                              if loaded is not None else math.inf))
     t.reject_unknown()
     return timetable
 
@@ -288,6 +302,6 @@ def parse_scenario(data, origin: str = '<memory>', base: Path | None = None) -> 
         source=f.text('source', 'suite'), origin=origin, train=train, line=line,
         planning=planning, run=run, supervision=_parse_supervision(f, train, loaded_train),
         plant=parse_plant_setup(f.raw('plant'), train, 'plant'), journey=journey,
-        timetable=_parse_timetable(f, journey))
+        timetable=_parse_timetable(f, journey, loaded_train))
     f.reject_unknown()
     return scenario

@@ -759,11 +759,12 @@ def _latest_arrivals(scenario: Scenario, fastest: Plan) -> dict[int, float]:
 
 def plan_timetable(scenario: Scenario, start_s: float = 0.0, start_state=None,
                    targets: dict[int, float] | None = None,
-                   regenerative_efficiency: float = 0.0) -> Plan:
-    """The ``timetable`` strategy's curve (module docstring). A journey whose windows cannot
-    all be met is refused (PlanningError naming them and the shortest running time between
-    them) unless ``scenario.timetable.run_infeasible``; then each time is aimed at as closely
-    as the train allows. ``start_state`` and ``targets`` (leg -> arrival time): a replan."""
+                   regenerative_efficiency: float | None = None) -> Plan:
+    """The ``timetable`` strategy's curve (:mod:`profile_node.timetable`). A journey whose
+    windows cannot all be met is refused (PlanningError naming them and the shortest running
+    time between them) unless ``scenario.timetable.run_infeasible``; then each time is aimed
+    at as closely as the train allows. ``start_state`` and ``targets`` (leg -> arrival time):
+    a replan."""
     if start_state is None and targets is None and scenario.journey is not None:
         fastest = plan_fastest(replace(scenario, timetable=replace(scenario.timetable,
                                                                    strategy='fastest')),
@@ -774,6 +775,8 @@ def plan_timetable(scenario: Scenario, start_s: float = 0.0, start_state=None,
                 f'{scenario.origin}: the journey\'s windows cannot all be met: '
                 + '; '.join(c.message() for c in conflicts)
                 + ' (timetable.run_infeasible: true runs it anyway, as close as possible)')
+    if regenerative_efficiency is None:
+        regenerative_efficiency = scenario.timetable.regenerative_efficiency
     solver = _LegSolver(scenario, regenerative_efficiency, targets)
     if start_state is None and targets is None and scenario.journey is not None:
         solver.latest = _latest_arrivals(scenario, fastest)

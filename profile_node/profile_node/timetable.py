@@ -156,10 +156,11 @@ def sample(trajectory: Trajectory, times: np.ndarray):
 
 
 def forecast_energy_j(scenario: Scenario, trajectory: Trajectory,
-                      regenerative_efficiency: float = 0.0,
+                      regenerative_efficiency: float | None = None,
                       step_s: float = ENERGY_STEP_S) -> float:
     """Traction energy the nominal train needs to follow ``trajectory``, net of what its
-    regenerative brake recovers (``regenerative_efficiency`` times the braking work), J.
+    regenerative brake recovers (``regenerative_efficiency``, default the scenario's, times the
+    braking power up to ``timetable.regenerative_power_w``), J.
     Force = m a* + Davis(v*) + m g sin(grade over the train's length) + curves and tunnels."""
     train, line = scenario.train, scenario.line
     times = np.arange(trajectory.start_time, trajectory.end_time + step_s, step_s)
@@ -171,7 +172,10 @@ def forecast_energy_j(scenario: Scenario, trajectory: Trajectory,
     force = (train.mass_kg * (a + units.STANDARD_GRAVITY * grade + other)
              + davis.a_n + davis.b_n_s_per_m * v + davis.c_n_s2_per_m2 * v * v)
     power = force * v
-    net = np.where(power > 0.0, power, regenerative_efficiency * power)
+    if regenerative_efficiency is None:
+        regenerative_efficiency = scenario.timetable.regenerative_efficiency
+    recovered = np.maximum(power, -scenario.timetable.regenerative_power_w)
+    net = np.where(power > 0.0, power, regenerative_efficiency * recovered)
     return float(np.trapezoid(net, times))
 
 
