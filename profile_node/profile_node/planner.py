@@ -483,9 +483,9 @@ class TimingCheck:
 
 def timing_checks(scenario: Scenario, trajectory: Trajectory,
                   stops: tuple[StopEvent, ...]) -> tuple[TimingCheck, ...]:
-    """Each timing point of the scenario's journey against the plan: the curve is the fastest
-    one (it waits at stations for the earliest departure), so a missed upper bound is a
-    timetable the train cannot keep, reported here rather than planned around."""
+    """Each timing point of the scenario's journey against the plan (its planned time and
+    whether that is within the window): the ``fastest`` curve only reports the windows it
+    misses, the ``timetable`` one plans to meet them."""
     if scenario.journey is None:
         return ()
     checks = []
