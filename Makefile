@@ -72,7 +72,8 @@ test-integration: setup
 
 bench: setup
 	@$(ENV) python bench/bench.py \
-	  $(if $(SCENARIO),--scenario $(SCENARIO),--results-page docs/results/benchmarks.md)
+	  $(if $(SCENARIO),--scenario $(SCENARIO),--results-page docs/results/benchmarks.md \
+	  --readme README.md)
 
 curves: setup
 	@$(ENV) python -m profile_node.curves $(SCENARIO) -o runs/curves

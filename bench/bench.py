@@ -14,6 +14,9 @@
 5. Campaign throughput (ato_bringup.campaign): runs per minute of a small campaign with 1 and 2
    Dask workers and their ratio, and the engine's overhead per run (Dask, the time limit, the
    Parquet row) against the bare offline loop of the same runs.
+5. Planning: CPU time to plan each built-in scenario's target curve, ``fastest`` and
+   ``timetable`` (profile_node.timetable), and the two strategies in closed loop offline (PID,
+   nominal plant): arrival against the target time and traction energy.
 """
 
 from __future__ import annotations
@@ -230,23 +233,6 @@ def offline_loop_speed(repeats: int = 3) -> list[str]:
     return rows
 
 
-def planning_times(repeats: int = 3) -> list[str]:
-    """CPU time of ``plan_reference`` (profile_node.planner) per built-in scenario, median of
-    ``repeats``: what a run pays once per scenario content with the offline loop's plan cache,
-    and on every run without it. Markdown rows."""
-    from profile_node.planner import plan_reference
-    rows = ['| scenario | planning time | target curve |', '|---|---|---|']
-    print('\n'.join(rows), flush=True)
-    for name in builtin_scenarios():
-        scenario = load_scenario(name)
-        plan = plan_reference(scenario)
-        elapsed = _cpu_time_of(lambda scenario=scenario: plan_reference(scenario), repeats)
-        rows.append(f'| `{name}` | {1e3 * elapsed:.1f} ms | '
-                    f'{plan.trajectory.end_time - plan.trajectory.start_time:.0f} s |')
-        print(rows[-1], flush=True)
-    return rows
-
-
 def plant_accuracy(model: str, preset: str, total_n: float, seconds: float = 600.0) -> float:
     """Largest speed error against DOP853 (rtol 1e-12) over a run with varying commands (kept
     below the power limit, which the plant re-evaluates within a command period)."""
@@ -281,6 +267,74 @@ def _warm_up() -> None:
 
 def _cpu_s() -> float:
     return time.process_time()
+
+
+README_START = '<!-- timetable table: written by make bench, do not edit -->'
+README_END = '<!-- end of the timetable table -->'
+
+
+def update_readme(path: Path, rows: list[str], measured, command: str) -> Path:
+    """The closed-loop table of the two strategies between README_START and README_END."""
+    text = path.read_text()
+    if README_START not in text or README_END not in text:
+        raise SystemExit(f'{path}: no timetable table markers ({README_START!r} ... '
+                         f'{README_END!r}) to write between')
+    head, rest = text.split(README_START, 1)
+    _, tail = rest.split(README_END, 1)
+    body = '\n'.join([measured.markdown(command), '', *rows])
+    path.write_text(f'{head}{README_START}\n{body}\n{README_END}{tail}')
+    return path
+
+
+def planning_times() -> list[str]:
+    """Median CPU time of 3 plannings of every built-in scenario, each strategy."""
+    from profile_node.planner import _traction_distance, plan_reference
+    rows = ['| scenario | fastest | timetable (7 %) |', '|---|---|---|']
+    for name in builtin_scenarios():
+        scenario = load_scenario(name)
+        cells = []
+        for strategy in ('fastest', 'timetable'):
+            variant = dataclasses.replace(scenario, timetable=dataclasses.replace(
+                scenario.timetable, strategy=strategy, supplement_percent=7.0))
+            times = []
+            for _ in range(3):
+                _traction_distance.cache_clear()  # each planning from scratch
+                started = _cpu_s()
+                plan_reference(variant)
+                times.append(_cpu_s() - started)
+            cells.append(f'{1e3 * float(np.median(times)):.0f} ms')
+        rows.append(f'| {name} | {cells[0]} | {cells[1]} |')
+        print(rows[-1], flush=True)
+    return rows
+
+
+def timetable_against_fastest() -> list[str]:
+    """Both strategies in closed loop offline on every built-in scenario (PID, nominal
+    plant): the last arrival against its target and the traction energy."""
+    rows = ['| scenario | fastest: arrival | fastest: traction energy | timetable (7 %): '
+            'target arrival | timetable: arrival | timetable: traction energy | saving |',
+            '|---|---|---|---|---|---|---|']
+    for name in builtin_scenarios():
+        scenario = load_scenario(name)
+        runs = {}
+        for strategy in ('fastest', 'timetable'):
+            variant = dataclasses.replace(scenario, timetable=dataclasses.replace(
+                scenario.timetable, strategy=strategy, supplement_percent=7.0))
+            runs[strategy] = run_offline(variant, 'pid')
+        end = scenario.line.stations[-1].position_m
+        arrivals = {}
+        for strategy, run in runs.items():
+            standing = (np.abs(run.positions - end) < 1.0) & (np.abs(run.speeds) < 0.01)
+            arrivals[strategy] = float(run.times_s[np.argmax(standing)]) if standing.any() \
+                else math.nan
+        energy = {k: r.metrics().traction_energy_kwh for k, r in runs.items()}
+        target = runs['timetable'].plan.legs[-1].target_arrival_s
+        rows.append(f'| {name} | {arrivals["fastest"]:.1f} s | {energy["fastest"]:.0f} kWh | '
+                    f'{target:.1f} s | {arrivals["timetable"]:.1f} s | '
+                    f'{energy["timetable"]:.0f} kWh | '
+                    f'{100 * (1 - energy["timetable"] / energy["fastest"]):.1f} % |')
+        print(rows[-1], flush=True)
+    return rows
 
 
 def campaign_throughput(scenario: str) -> list[str]:
@@ -336,11 +390,16 @@ def main() -> int:
     parser.add_argument('--results-page', type=Path, default=None,
                         help='also write the figures, with date, machine and commit, to this '
                         'results page of the docs (make bench: docs/results/benchmarks.md)')
-    parser.add_argument('--only', choices=('campaign', 'offline'), default=None,
+    parser.add_argument('--readme', type=Path, default=None,
+                        help='also write the closed-loop table of the two strategies between '
+                        'its markers in this file (make bench: README.md)')
+    parser.add_argument('--only', choices=('campaign', 'offline', 'planning'), default=None,
                         help='measure only this section (printed, no results page)')
     args = parser.parse_args()
     measured = (results_page_provenance(args.results_page)
                 if args.results_page is not None else None)
+    readme_measured = (results_page_provenance(args.readme) if args.readme is not None
+                       else None)
     page = Page()
     campaign_section = [
         '## Campaign throughput', '',
@@ -363,13 +422,30 @@ def main() -> int:
     if args.only == 'offline':
         page.add(*offline_section)
         offline_loop_speed()
-        page.add('', 'Planning time per built-in scenario (`plan_reference`, CPU, median of 3):',
-                 '')
-        planning_times()
         return 0
+    planning_section = [
+        '## Planning', '',
+        'CPU time to plan the whole target curve of each built-in scenario from scratch (median '
+        'of 3; the '
+        'timetable strategy with a 7 % running-time supplement), '
+        'docs/guide/target-curve.md.', '']
+    comparison_section = [
+        '## Timetable against fastest, closed loop', '',
+        'Offline loop, PID law, nominal plant; arrival: the train standing within 1 m of the '
+        'last stopping point; traction energy: the work of the positive traction force.', '']
     if args.only == 'campaign':
         page.add(f'Scenario `{args.scenario}`.', '', *campaign_section)
         page.add(*campaign_throughput(args.scenario))
+        return 0
+    if args.only == 'planning':
+        page.add(*planning_section)
+        page.add(*planning_times())
+        page.add('', *comparison_section)
+        table = timetable_against_fastest()
+        page.add(*table)
+        if args.readme is not None:
+            command = f'python bench/bench.py --only planning --readme {args.readme}'
+            print(f'\nwrote {update_readme(args.readme, table, readme_measured, command)}')
         return 0
     page.add(f'Scenario `{args.scenario}`.', '',
              '## Lockstep through the ROS graph', '',
@@ -409,8 +485,6 @@ def main() -> int:
                  f'{plant_speed(args.scenario, model, train, batched=True):.0f}x |')
     page.add('', *offline_section)
     page.lines += offline_loop_speed()
-    page.add('', 'Planning time per built-in scenario (`plan_reference`, CPU, median of 3):', '')
-    page.lines += planning_times()
     page.add('', '## Plant accuracy', '',
              'Largest speed error against DOP853 (rtol 1e-12), 600 s, commands changing every '
              'second, across grade, curve and tunnel boundaries.', '',
@@ -419,6 +493,13 @@ def main() -> int:
              f'| `multi_car` | {plant_accuracy("multi_car", "crh2_4car_mao", 12e3):.2e} m/s |')
     page.add('', *campaign_section)
     page.add(*campaign_throughput(args.scenario))
+    page.add('', *planning_section)
+    page.add(*planning_times())
+    page.add('', *comparison_section)
+    table = timetable_against_fastest()
+    page.add(*table)
+    if args.readme is not None:
+        print(f'\nwrote {update_readme(args.readme, table, readme_measured, "make bench")}')
     if args.results_page is not None:
         written = write_results_page(args.results_page, 'Benchmarks', 'make bench',
                                      '\n'.join(page.lines), measured)

@@ -1,6 +1,7 @@
 """profile_node on its own over rclpy: it follows /clock in lockstep, publishes the distance to
-go and the permitted speed of each tick, a late subscriber still gets the whole curve, and a
-malformed TTOBench line file stops it before it starts."""
+go and the permitted speed of each tick, reports its plan once on diagnostics, a late
+subscriber still gets the whole curve, and a malformed TTOBench line file stops it before it
+starts."""
 
 import json
 import os
@@ -70,6 +71,14 @@ def test_profile_follows_the_clock_and_a_late_subscriber_gets_the_whole_curve(tm
             assert set(monitor.samples) - known <= {tick, tick + ahead}
             previous = tick
         assert min(permitted[-5:], key=lambda m: m.data).data > 0.0
+        # The plan is reported on diagnostics once (it did not change), with its times.
+        plans = [d for d in monitor.diagnostics if d[1] == 'profile_node: plan']
+        assert len(plans) == 1, plans
+        values = plans[0][2]
+        assert values['strategy'] == 'fastest'
+        assert float(values['stop.Terminus.arrival_s']) == float(
+            f'{plan.stops[-1].arrival_s:.9g}')
+        assert float(values['forecast_energy_kwh']) > 0.0
 
         # A subscriber that joins now still receives the curve published at start-up.
         curves = []

@@ -26,6 +26,7 @@ from ato_common.types import NS_PER_S, nanoseconds, seconds
 from ato_common.uncertainty import perturbed
 from ato_controller_node.host import ControllerHost
 from profile_node.planner import Plan, plan_reference
+from profile_node.replan import Replanner
 from train_plant_node.simulation import NORMAL, SensorSettings, TrainSimulation
 
 
@@ -58,18 +59,30 @@ class OfflineRun:
     saturated: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     #: the end of each control period in which the plant's ATP began an intervention, s
     atp_times_s: tuple[float, ...] = ()
+    #: the plans that replaced ``plan`` when the train was late (timetable strategy), in order
+    replans: tuple[Plan, ...] = ()
+
+    @property
+    def final_plan(self) -> Plan:
+        return self.replans[-1] if self.replans else self.plan
 
     def metrics(self) -> RunMetrics:
         return compute_metrics(self.times_s, self.positions, self.speeds, self.forces,
-                               self.ref_positions, self.ref_speeds, stop_samples(self.plan))
+                               self.ref_positions, self.ref_speeds,
+                               stop_samples(self.plan, self.replans))
 
     def estimate(self, key: str) -> np.ndarray:
         """One reported estimate over the run (NaN where the law did not report it)."""
         return np.array([e.get(key, np.nan) for e in self.estimates])
 
 
-def stop_samples(plan: Plan) -> list[StopSample]:
-    return [StopSample(s.station.name, s.station.position_m, s.departure_s) for s in plan.stops]
+def stop_samples(plan: Plan, replans: tuple[Plan, ...] = ()) -> list[StopSample]:
+    """Each stop sampled at its departure in the last plan that has it (a replan's)."""
+    stops = {s.station.name: s for s in plan.stops}
+    for later in replans:
+        stops.update((s.station.name, s) for s in later.stops)
+    return [StopSample(s.station.name, s.station.position_m, s.departure_s)
+            for s in sorted(stops.values(), key=lambda s: s.station.position_m)]
 
 
 def run_end_time_s(scenario: Scenario, plan: Plan) -> float:
@@ -162,9 +175,13 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
     law names selected then; ``end_time_s`` and ``controller_rate_hz`` override the scenario's
     (a law that must run faster than a node can, e.g. Mao et al.'s feedback linearisation);
     ``uncertainty``: the drawn values the plant's truth is perturbed by (None: nominal). The
-    plan comes from this process's cache of plans (``cached_plan``)."""
+    plan comes from this process's cache of plans (``cached_plan``); with the ``timetable``
+    strategy it is replanned when the train falls behind it (``profile_node.replan``), and the
+    run then follows the new plan (to its end, if that is later)."""
     key = scenario_key(scenario)
     plan = cached_plan(scenario, key)
+    replanner = Replanner(scenario, plan)
+    replanning = replanner.active
     period_ns = nanoseconds(1.0 / (controller_rate_hz or scenario.run.controller_rate_hz))
     truth_scenario = perturbed(scenario, uncertainty) if uncertainty is not None else scenario
     sim = TrainSimulation(truth_scenario, model, sensors=sensors, **model_options)
@@ -193,17 +210,31 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
     add_positions, add_speeds, add_forces = (car_positions.append, car_speeds.append,
                                              actuator_forces.append)
     add_law, add_estimates, add_fault = laws.append, estimates.append, faults.append
-    for k in range(count):
+    k = 0
+    while k < count:
         t = sim.time_s
         while pending and pending[0][0] <= t:
             host.select(pending.pop(0)[1])
         truth = truth_of()
+        measured = measured_of(truth)
+        if replanning and replanner.update(t, measured.positions[0], measured.speeds[0]):
+            # From now on the new plan's reference, sampled as the run goes.
+            at = replanner.plan.trajectory.at
+            if sampled:
+                references, sampled = references[:k], False
+                add_reference = references.append
+            if end_time_s is None:  # a later arrival: the run goes on to the new plan's end
+                later = int(run_end_time_s(scenario, replanner.plan) * 1e9 // period_ns) + 1
+                if later > count:
+                    times, forces, step_times, saturated = (
+                        np.resize(a, later) for a in (times, forces, step_times, saturated))
+                    count = later
         if sampled:
             reference = references[k]
         else:
             reference = at(t)
             add_reference(reference)
-        measurement = measurement_of(t, measured_of(truth))
+        measurement = measurement_of(t, measured)
         started = clock()
         result = step(measurement, reference)
         step_times[k] = clock() - started
@@ -223,9 +254,11 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
         advance(period_ns)
         if sim.atp_interventions > interventions:
             atp_times.append(sim.time_s)
+        k += 1
     positions, speeds = np.array(car_positions), np.array(car_speeds)
     ref = np.array([(r.position, r.speed, r.acceleration) for r in references])
     return OfflineRun(scenario, plan, times, positions[:, 0].copy(), speeds[:, 0].copy(),
                       forces, ref[:, 0].copy(), ref[:, 1].copy(), ref[:, 2].copy(), positions,
                       speeds, np.array(actuator_forces), step_times, laws, estimates, faults,
-                      sim.atp_interventions, watchdog_events, saturated, tuple(atp_times))
+                      sim.atp_interventions, watchdog_events, saturated, tuple(atp_times),
+                      tuple(p for _, p in replanner.history))

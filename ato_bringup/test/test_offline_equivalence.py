@@ -24,6 +24,7 @@ from ato_common.types import nanoseconds, seconds
 from ato_common.uncertainty import DEFAULTS, draw, perturbed
 from ato_controller_node.host import ControllerHost
 from profile_node.planner import plan_reference
+from profile_node.replan import Replanner
 from train_plant_node.simulation import NORMAL, SensorSettings, TrainSimulation
 
 #: liu_li runs at 200 Hz (185 770 steps on short_line): compared over its first 120 s
@@ -33,8 +34,10 @@ WINDOW_S = {'liu_li': 120.0}
 def reference_run(scenario, controller='pid', settings=None, switches=None,
                   sensors=SensorSettings(), model='point_mass', end_time_s=None,
                   controller_rate_hz=None, uncertainty=None, **model_options) -> OfflineRun:
-    """``run_offline`` before the optimisation, verbatim but for the names."""
+    """``run_offline`` before the optimisation, verbatim but for the names (with the
+    timetable's replanning, which came at the same time)."""
     plan = plan_reference(scenario)
+    replanner = Replanner(scenario, plan)
     period_ns = nanoseconds(1.0 / (controller_rate_hz or scenario.run.controller_rate_hz))
     truth_scenario = perturbed(scenario, uncertainty) if uncertainty is not None else scenario
     sim = TrainSimulation(truth_scenario, model, sensors=sensors, **model_options)
@@ -47,13 +50,18 @@ def reference_run(scenario, controller='pid', settings=None, switches=None,
     watchdog_events = 0
     saturated = []
     atp_times = []
-    for _ in range(steps + 1):
+    step = 0
+    while step <= steps:
+        step += 1
         t = sim.time_s
         while pending and pending[0][0] <= t:
             host.select(pending.pop(0)[1])
         truth = sim.truth()
         measured = sim.measured(truth)
-        reference = plan.trajectory.at(t)
+        if replanner.active and replanner.update(t, measured.positions[0],
+                                                 measured.speeds[0]) and end_time_s is None:
+            steps = max(steps, int(run_end_time_s(scenario, replanner.plan) * 1e9 // period_ns))
+        reference = replanner.plan.trajectory.at(t)
         measurement = host.measurement(t, measured)
         result = host.step(measurement, reference)
         step_times.append(0.0)
@@ -76,7 +84,7 @@ def reference_run(scenario, controller='pid', settings=None, switches=None,
     return OfflineRun(scenario, plan, *data.T, np.array(car_positions), np.array(car_speeds),
                       np.array(actuator_forces), np.array(step_times), laws, estimates, faults,
                       sim.atp_interventions, watchdog_events, np.array(saturated, dtype=bool),
-                      tuple(atp_times))
+                      tuple(atp_times), tuple(p for _, p in replanner.history))
 
 
 ARRAYS = ('times_s', 'positions', 'speeds', 'forces', 'ref_positions', 'ref_speeds',

@@ -141,3 +141,30 @@ def test_an_uncertainty_section_is_parsed_with_the_campaign_schema_and_named_err
     path.write_text(yaml.safe_dump(data))
     with pytest.raises(ConfigError, match=rf'{path}: uncertainty.odometer_scale: unknown'):
         load_scenario(str(path))
+
+
+def test_the_timetable_section_chooses_the_strategy_with_documented_defaults():
+    default = parse_scenario(base()).timetable
+    # no times given: the fastest curve, a 7 % supplement if timetable is asked for
+    assert (default.strategy, default.supplement_percent, default.run_infeasible,
+            default.replan_delay_s) == ('fastest', 7.0, False, 10.0)
+    data = base()
+    data['timetable'] = {'strategy': 'timetable', 'supplement_percent': 12,
+                         'run_infeasible': True, 'replan_delay_s': 0}
+    chosen = parse_scenario(data).timetable
+    assert (chosen.strategy, chosen.supplement_percent, chosen.run_infeasible,
+            chosen.replan_delay_s) == ('timetable', 12.0, True, 0.0)
+
+
+@pytest.mark.parametrize('section, message', [
+    ({'strategy': 'slowest'}, "timetable.strategy: unknown strategy 'slowest'; valid: fastest, "
+                              'timetable'),
+    ({'supplement_percent': -1}, 'timetable.supplement_percent: must be >= 0, got -1'),
+    ({'run_infeasible': 'yes'}, "timetable.run_infeasible: must be true or false, got 'yes'"),
+    ({'suplement_percent': 5}, 'did you mean supplement_percent'),
+])
+def test_a_malformed_timetable_section_names_the_field(section, message):
+    data = base()
+    data['timetable'] = section
+    with pytest.raises(ConfigError, match=message.replace('(', r'\(').replace(')', r'\)')):
+        parse_scenario(data)

@@ -26,15 +26,23 @@ Graph: ``wait_for_subscribers`` holds back only the first reference (an observer
 later does not stop the loop); the plant's latched identity must be the profile's own scenario,
 else the profile refuses to run (exit code 2, naming both); a failed publish is counted and
 logged, never fatal. A preview of more than ``MAX_PREVIEW_POINTS`` points is refused.
+
+The plan (strategy, forecast energy, expected delay, each stop's target and planned arrival and
+reserve, each journey timing point's planned time) is published on ``/diagnostics`` as the
+status ``<node>: plan``, only when the plan changes: at the first tick, then at each
+replan or resume (no per-step message). Real time, ``timetable`` strategy: a moving train late
+by more than ``timetable.replan_delay_s`` gets the rest of its run planned again from its
+measured state (``profile_node.replan``).
 """
 
 from __future__ import annotations
 
 import math
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Float64, String
+from std_msgs.msg import Float64, Header, String
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_common.braking_curves import RunSupervision
@@ -44,6 +52,7 @@ from ato_common.ros import (
     MessageError,
     Publishing,
     RunNodeHooks,
+    diagnostic_status,
     freeze_startup_objects,
     from_duration,
     from_time,
@@ -52,12 +61,19 @@ from ato_common.ros import (
     reference_to_msg,
     run_node,
     state_from_msg,
+    status_name,
+    to_time,
     topic,
 )
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import Reference, nanoseconds, seconds
 from ato_common.validation import ConfigError
 from profile_node.planner import RESUME_GAP_M, plan_reference, resume_plan
+from profile_node.replan import Replanner
+from profile_node.timetable import plan_summary
+
+# The plan's diagnostics warn from this expected delay on, s (below: the solver's accuracy).
+DELAY_WARNING_S = 1.0
 
 # Each preview point costs the profile a curve evaluation and every reader of ato/reference its
 # bytes, on every step: 60,001 of them (a 600 s horizon every 0.01 s) slowed a lockstep run from
@@ -112,6 +128,10 @@ class ProfileNode(RunNodeHooks, Node):
         self.subscribers_met = False
         self.publishing = Publishing(self)
         self.identity = scenario_identity(self.scenario)
+        self.replanner = Replanner(self.scenario, self.plan)
+        self.plan_reported = False
+        self.diag_pub = self.create_publisher(DiagnosticArray, topic('diagnostics').name,
+                                              qos_profile(topic('diagnostics').qos))
 
         self.reference_pub = self.create_publisher(JointTrajectory, topic('reference').name,
                                                    qos_profile(topic('reference').qos))
@@ -189,12 +209,24 @@ class ProfileNode(RunNodeHooks, Node):
         self.publishing(self.permitted_pub, Float64(data=self.plan.permitted_speed(now.position,
                                                                                    now.time_s)))
 
+    def publish_plan(self, stamp_ns: int, why: str) -> None:
+        """The plan on diagnostics: only when it changes (start, replan, resume)."""
+        self.plan_reported = True
+        late = self.plan.expected_delay_s > DELAY_WARNING_S
+        status = diagnostic_status(status_name(self, 'plan'), self.scenario.name,
+                                   DiagnosticStatus.WARN if late else DiagnosticStatus.OK, why,
+                                   plan_summary(self.plan))
+        self.publishing(self.diag_pub, DiagnosticArray(header=Header(stamp=to_time(stamp_ns)),
+                                                       status=[status]))
+
     def on_clock(self, msg: Clock) -> None:
         if not self.subscribers_met:
             if self.reference_pub.get_subscription_count() < self.params['wait_for_subscribers']:
                 return  # the plant re-sends the tick until the reference comes
             self.subscribers_met = True
         tick = from_time(msg.clock)
+        if not self.plan_reported:
+            self.publish_plan(tick, f'{self.plan.strategy} plan')
         if tick != self.sent_ahead_ns or tick == self.last_tick_ns:
             self.publish(tick)  # not sent ahead, or the plant re-sent the tick
         self.publish_supervision(tick)
@@ -214,6 +246,8 @@ class ProfileNode(RunNodeHooks, Node):
             if restarted:  # a new plant: its run starts again, and so does the curve
                 self.plan = plan_reference(self.scenario)
                 self.trajectory = self.plan.trajectory
+                self.replanner = Replanner(self.scenario, self.plan)
+                self.plan_reported = False
                 self.get_logger().warning('real time: the plant started again; the curve '
                                           'restarts from its origin')
             else:
@@ -228,16 +262,27 @@ class ProfileNode(RunNodeHooks, Node):
         except MessageError:
             return  # the controller reports a bad measurement
         position, speed = state.positions[0], state.speeds[0]
+        now_ns = self.get_clock().now().nanoseconds
+        time_s = seconds(now_ns - self.time_origin_ns)
+        if self.replanner.update(time_s, position, speed) is not None:
+            self.plan = self.replanner.plan
+            self.trajectory = self.plan.trajectory
+            self.get_logger().warning(
+                f'the train is late by {self.replanner.replans[-1][1]:.1f} s: the rest of the '
+                f'run is planned again from {position:.1f} m, expected delay '
+                f'{self.plan.expected_delay_s:.1f} s')
+            self.publish_plan(now_ns, 'replanned: the train was late')
+            return
         if not (math.isfinite(position) and math.isfinite(speed)) \
                 or abs(speed) > RunSupervision.STANDSTILL_MPS:
             return
-        time_s = seconds(self.get_clock().now().nanoseconds - self.time_origin_ns)
         if self.trajectory.at(time_s).position - position <= RESUME_GAP_M:
             return
         plan = resume_plan(self.scenario, position, time_s)
         if plan is None:
             return
         self.plan, self.trajectory = plan, plan.trajectory
+        self.replanner.plan = plan
         self.resumes += 1
         self.get_logger().warning(
             f'the train stands at {position:.1f} m, behind the reference by more than '
@@ -246,6 +291,8 @@ class ProfileNode(RunNodeHooks, Node):
     def on_timer(self) -> None:
         if self.time_origin_ns is not None:
             now = self.get_clock().now().nanoseconds
+            if not self.plan_reported:
+                self.publish_plan(now, f'{self.plan.strategy} plan')
             self.publish(now)
             self.publish_supervision(now)
 

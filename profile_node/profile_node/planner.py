@@ -26,16 +26,31 @@ supervision times), the braking into that target is planned further ahead and th
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
+from types import SimpleNamespace
 
 import numpy as np
+from scipy.optimize import brentq
 
 from ato_common import units
 from ato_common.braking_curves import RunSupervision, Target
 from ato_common.line import Station
 from ato_common.scenario import Scenario
 from ato_common.validation import ConfigError
+from profile_node.timetable import (
+    LOWEST_CRUISE_MPS,
+    SPEED_TOLERANCE_MPS,
+    TIME_TOLERANCE_S,
+    WINDOW_MARGIN_S,
+    LegTiming,
+    coast_end_speed,
+    forecast_energy_j,
+    train_grade_sine,
+    window_conflicts,
+    window_target,
+)
 from profile_node.trajectory import Trajectory, TrajectoryBuilder, speed_change_distance
 
 
@@ -58,6 +73,10 @@ class Plan:
     supervision: RunSupervision
     targets: tuple[Target, ...]   # every target of the run, by location
     timing: tuple = ()            # TimingCheck of each journey timing point, if any
+    strategy: str = 'fastest'     # how it is driven (Scenario.timetable.strategy)
+    legs: tuple = ()              # profile_node.timetable.LegTiming of each leg (timetable)
+    forecast_energy_j: float = math.nan  # traction energy to follow it, nominal train, J
+    expected_delay_s: float = 0.0  # at the last stop, against the timetable (after a replan)
 
     def next_stop(self, time_s: float) -> StopEvent:
         """The stop the reference is heading for or dwelling at; the last one at the end."""
@@ -126,6 +145,24 @@ def braking_deceleration(scenario: Scenario, descent_sine: float) -> float:
     return min(scenario.planning.service_deceleration_mps2, available)
 
 
+@functools.lru_cache(maxsize=100_000)
+def _traction_distance(traction, davis, mass_kg: float, planning, climb_sine: float,
+                       v_from: float, v_to: float) -> float:
+    """traction_phase_distance for a train and a climb, remembered: the timetable strategy
+    plans the same traction phases again for every cruise speed it tries."""
+    train = SimpleNamespace(traction=traction, davis_nominal=davis, mass_kg=mass_kg)
+    capability = traction_capability(SimpleNamespace(train=train, planning=planning),
+                                     climb_sine)
+    return traction_phase_distance(v_from, v_to, capability, planning.max_jerk_mps3)
+
+
+def section_traction_distance(scenario: Scenario, climb_sine: float, v_from: float,
+                              v_to: float) -> float:
+    train = scenario.train
+    return _traction_distance(train.traction, train.davis_nominal, train.mass_kg,
+                              scenario.planning, climb_sine, v_from, v_to)
+
+
 def traction_phase_distance(v_from: float, v_to: float, capability, jerk: float) -> float:
     builder = TrajectoryBuilder()
     builder.v = v_from
@@ -163,6 +200,21 @@ class Section:
         return self.end_m - self.start_m
 
 
+def train_grade_extremes(line, start_m: float, end_m: float, length_m: float
+                         ) -> tuple[float, float]:
+    """(steepest climb, steepest descent) of ``train_grade_sine`` with the front in
+    [start_m, end_m]: the average is piecewise linear in the front's position, with its kinks
+    where the front or the rear crosses a change of grade, so the extremes are there or at the
+    ends."""
+    points = {start_m, end_m}
+    for s in line.grade_sine.starts:
+        for x in (s, s + length_m):
+            if start_m < x < end_m:
+                points.add(x)
+    values = [train_grade_sine(line, x, length_m) for x in points]
+    return max(values), min(values)
+
+
 def _breakpoints(function, start: float, end: float) -> list[float]:
     return [s for s in function.starts if start < s < end]
 
@@ -186,25 +238,30 @@ def leg_sections(scenario: Scenario, mrsp, start: float, end: float,
     cuts = {start, end}
     cuts.update(x for s, e, _ in pieces for x in (s, e) if start < x < end)
     cuts.update(_breakpoints(line.grade_sine, start, end))
+    # Where the rear of the train leaves a grade: the grade it feels changes there too.
+    length = scenario.train.length_m
+    cuts.update(s + length for s in line.grade_sine.starts if start < s + length < end)
     cuts = sorted(cuts)
     sections: list[Section] = []
     for a, b in zip(cuts, cuts[1:]):
         if b - a < 1e-6:
             continue
-        sine = line.grade_sine(0.5 * (a + b))
+        # Grades act over the train's length: the steepest climb and descent the whole train
+        # feels while its front runs through the piece.
+        climb, descent = train_grade_extremes(line, a, b, scenario.train.length_m)
         where = f'{scenario.origin}: line at {a:.0f}-{b:.0f} m'
         limit = ceiling(a, b)
         if limit <= 0.0:
             raise PlanningError(f'{where}: the speed limit is not above the planning margin '
                                 f'({units.mps_to_kmh(margin):g} km/h)')
-        level = highest_reachable_speed(traction_capability(scenario, sine), limit, where)
+        level = highest_reachable_speed(traction_capability(scenario, climb), limit, where)
         if sections and sections[-1].level_mps == level:
             last = sections[-1]
             last.end_m = b
-            last.climb_sine = max(last.climb_sine, sine)
-            last.descent_sine = min(last.descent_sine, sine)
+            last.climb_sine = max(last.climb_sine, climb)
+            last.descent_sine = min(last.descent_sine, descent)
         else:
-            sections.append(Section(a, b, level, sine, sine))
+            sections.append(Section(a, b, level, climb, descent))
     return sections
 
 
@@ -223,12 +280,110 @@ def highest_speed_braking_within(distance: float, v_to: float, deceleration: flo
     return low
 
 
+@dataclass(frozen=True)
+class LegCruise:
+    """The ``timetable`` strategy's choice on one leg: from ``starts_m[i]`` on, the target
+    cruises at no more than ``speeds_mps[i]``, and a coast before a braking there ends at
+    ``coast_end_mps[i]`` (the braking speed of the optimal control, profile_node.timetable)."""
+
+    starts_m: tuple[float, ...]
+    speeds_mps: tuple[float, ...]
+    coast_end_mps: tuple[float, ...]
+
+    def stretch(self, position_m: float) -> int:
+        return max(i for i, start in enumerate(self.starts_m)
+                   if start <= position_m or i == 0)
+
+    def capped(self, sections: list[Section]) -> list[Section]:
+        """The sections cut where the cruise speed changes, each level capped by it."""
+        out = []
+        for section in sections:
+            cuts = [section.start_m] + [x for x in self.starts_m
+                                        if section.start_m < x < section.end_m] + [section.end_m]
+            for a, b in zip(cuts, cuts[1:]):
+                level = min(section.level_mps, self.speeds_mps[self.stretch(a)])
+                out.append(Section(a, b, level, section.climb_sine, section.descent_sine))
+        return out
+
+
+def coasting_deceleration(scenario: Scenario):
+    """deceleration(v, x) of the train coasting (no traction, no brake) with its front at x:
+    nominal Davis resistance over the mass plus g sin(grade over the train's length) [m/s^2]."""
+    train, line = scenario.train, scenario.line
+
+    def deceleration(v: float, x: float) -> float:
+        return (train.davis_nominal.force(v) / train.mass_kg
+                + units.STANDARD_GRAVITY * train_grade_sine(line, x, train.length_m))
+    return deceleration
+
+
+# Coasting simulations: step, s, and the accuracy of the point where a coast starts, m.
+COAST_STEP_S = 3.0
+COAST_TOLERANCE_M = 0.5
+
+
+def _coast_end(scenario: Scenario, start_m: float, v_from: float, v_to: float, jerk: float,
+               limit_m: float) -> float:
+    """Where a coast from ``v_from`` at ``start_m`` reaches ``v_to`` (inf: not before
+    ``limit_m``)."""
+    builder = TrajectoryBuilder(x0=start_m)
+    builder.v = v_from
+    if not builder.coast_to(v_to, coasting_deceleration(scenario), jerk, COAST_STEP_S, limit_m):
+        return math.inf
+    return builder.x
+
+
+def _coast_then_brake(builder: TrajectoryBuilder, scenario: Scenario, section: Section,
+                      coast_end: float, exit_speed: float, deceleration: float,
+                      jerk: float) -> None:
+    """From the cruise at ``builder.v``: cruise, coast down to ``coast_end`` (or less far where
+    the section is too short) and brake to ``exit_speed`` exactly at the section's end."""
+    peak = builder.v
+    low = max(coast_end, exit_speed)
+    end = section.end_m
+
+    def brake_start(speed: float) -> float:
+        return end - speed_change_distance(speed, exit_speed, deceleration, jerk)
+    if _coast_end(scenario, builder.x, peak, low, jerk, end) <= brake_start(low):
+        # Room for the whole coast: cruise until the point from which it ends where the
+        # braking starts (a later start ends later).
+        first, last = builder.x, brake_start(low)
+        while last - first > COAST_TOLERANCE_M:
+            middle = 0.5 * (first + last)
+            if _coast_end(scenario, middle, peak, low, jerk, end) <= brake_start(low):
+                first = middle
+            else:
+                last = middle
+        if peak > 0.0 and first > builder.x:
+            builder.add((first - builder.x) / peak)
+    else:
+        # Coast from here to the lowest speed from which the braking still ends in time.
+        lo, hi = low, peak
+        for _ in range(20):
+            middle = 0.5 * (lo + hi)
+            if _coast_end(scenario, builder.x, peak, middle, jerk, end) <= brake_start(middle):
+                hi = middle
+            else:
+                lo = middle
+        low = hi
+    builder.coast_to(low, coasting_deceleration(scenario), jerk, COAST_STEP_S)
+    # The coast ends at most the tolerance before the braking point: cruise there.
+    gap = brake_start(low) - builder.x
+    if gap > 0.0 and low > 0.0:
+        builder.add(gap / low)
+    builder.speed_change(exit_speed, deceleration, jerk)
+
+
 def plan_leg(builder: TrajectoryBuilder, scenario: Scenario, sections: list[Section],
-             leg_deceleration_factor: float) -> None:
-    """Append one leg, from standstill at its first section's start to standstill at its last
-    section's end."""
+             leg_deceleration_factor: float, cruise: LegCruise | None = None) -> None:
+    """Append one leg, from the builder's state (standstill, or the measured speed of a
+    replan) at its first section's start to standstill at its last section's end.
+    ``cruise``: the ``timetable`` strategy's cruise speeds and coasting (None: the fastest
+    curve)."""
     planning = scenario.planning
     jerk = planning.max_jerk_mps3
+    if cruise is not None:
+        sections = cruise.capped(sections)
     decelerations = [leg_deceleration_factor * braking_deceleration(scenario, s.descent_sine)
                      for s in sections]
     # Backward pass: the highest speed allowed at each section's end.
@@ -240,18 +395,22 @@ def plan_leg(builder: TrajectoryBuilder, scenario: Scenario, sections: list[Sect
             min(sections[i].level_mps, following.level_mps))
     # Forward pass.
     for section, exit_speed, deceleration in zip(sections, exit_speeds, decelerations):
+        if builder.v > section.level_mps + 1e-9:
+            # A replan from a train faster than the level: down to it first.
+            builder.speed_change(section.level_mps, deceleration, jerk)
         entry = builder.v
         capability = traction_capability(scenario, section.climb_sine)
 
         def needed(peak: float) -> float:
-            return (traction_phase_distance(entry, peak, capability, jerk)
+            return (section_traction_distance(scenario, section.climb_sine, entry, peak)
                     + speed_change_distance(peak, exit_speed, deceleration, jerk))
         if entry < exit_speed and needed(exit_speed) > section.length_m:
             # Too short to reach the highest exit speed: accelerate throughout.
             low, high = entry, exit_speed
             for _ in range(40):
                 middle = 0.5 * (low + high)
-                if traction_phase_distance(entry, middle, capability, jerk) <= section.length_m:
+                if section_traction_distance(scenario, section.climb_sine, entry,
+                                             middle) <= section.length_m:
                     low = middle
                 else:
                     high = middle
@@ -268,23 +427,38 @@ def plan_leg(builder: TrajectoryBuilder, scenario: Scenario, sections: list[Sect
                     high = middle
             peak = low
         builder.accelerate_to(peak, capability, jerk, MIN_PLANNED_ACCELERATION_MPS2)
+        if cruise is not None and exit_speed < peak - 1e-6:
+            coast_end = cruise.coast_end_mps[cruise.stretch(section.end_m - 1e-6)]
+            if coast_end < peak - 1e-6:
+                _coast_then_brake(builder, scenario, section, coast_end, exit_speed,
+                                  deceleration, jerk)
+                continue
         braking = speed_change_distance(peak, exit_speed, deceleration, jerk)
-        cruise = section.end_m - braking - builder.x
-        if peak > 0.0 and cruise > 0.0:
-            builder.add(cruise / peak)
+        cruise_m = section.end_m - braking - builder.x
+        if peak > 0.0 and cruise_m > 0.0:
+            builder.add(cruise_m / peak)
         builder.speed_change(exit_speed, deceleration, jerk)
 
 
 def _build(scenario: Scenario, supervision: RunSupervision, stations: list[Station],
            anticipation_s: float, extra_m: dict[float, float], deceleration_factors: list[float],
-           start_s: float = 0.0):
+           start_s: float = 0.0, leg_planner=None, start_state: tuple[float, float] | None = None):
+    """The whole curve, leg by leg. ``leg_planner(leg, builder, sections, factor)`` appends a
+    leg (the ``timetable`` strategy); None: :func:`plan_leg`, the fastest curve.
+    ``start_state``: (speed, acceleration) the curve starts from (a replan), else rest."""
     builder = TrajectoryBuilder(x0=stations[0].position_m, t0=start_s)
+    if start_state is not None:
+        builder.v, builder.a = start_state
+        builder.ramp_acceleration_to_zero(scenario.planning.max_jerk_mps3)
     builder.add(stations[0].dwell_s)
     stops = []
-    for leg, (origin, destination) in enumerate(zip(stations, stations[1:])):
-        sections = leg_sections(scenario, supervision.legs[leg].mrsp, origin.position_m,
+    for leg, destination in enumerate(stations[1:]):
+        sections = leg_sections(scenario, supervision.legs[leg].mrsp, builder.x,
                                 destination.position_m, anticipation_s, extra_m)
-        plan_leg(builder, scenario, sections, deceleration_factors[leg])
+        if leg_planner is None:
+            plan_leg(builder, scenario, sections, deceleration_factors[leg])
+        else:
+            leg_planner(leg, builder, sections, deceleration_factors[leg])
         builder.snap(destination.position_m)
         arrival = builder.t
         dwell = destination.dwell_s
@@ -309,9 +483,9 @@ class TimingCheck:
 
 def timing_checks(scenario: Scenario, trajectory: Trajectory,
                   stops: tuple[StopEvent, ...]) -> tuple[TimingCheck, ...]:
-    """Each timing point of the scenario's journey against the plan: the curve is the fastest
-    one (it waits at stations for the earliest departure), so a missed upper bound is a
-    timetable the train cannot keep, reported here rather than planned around."""
+    """Each timing point of the scenario's journey against the plan (its planned time and
+    whether that is within the window): the ``fastest`` curve only reports the windows it
+    misses, the ``timetable`` one plans to meet them."""
     if scenario.journey is None:
         return ()
     checks = []
@@ -362,7 +536,18 @@ def first_violation(trajectory: Trajectory, plan_stops, supervision: RunSupervis
 
 def plan_reference(scenario: Scenario, start_s: float = 0.0) -> Plan:
     """The target curve of a scenario, from its initial position at rest at run time
-    ``start_s`` (0: the start of the run)."""
+    ``start_s`` (0: the start of the run), driven as its ``timetable.strategy`` says:
+    ``fastest`` (:func:`plan_fastest`) or ``timetable`` (:func:`plan_timetable`)."""
+    if scenario.timetable.strategy == 'timetable':
+        return plan_timetable(scenario, start_s)
+    plan = plan_fastest(scenario, start_s)
+    return replace(plan, forecast_energy_j=forecast_energy_j(scenario, plan.trajectory))
+
+
+def plan_fastest(scenario: Scenario, start_s: float = 0.0, leg_planner=None,
+                 start_state: tuple[float, float] | None = None) -> Plan:
+    """The curve checked against the supervision: the fastest one, or with ``leg_planner``
+    the legs that planner appends (``_build``)."""
     stations = [s for s in scenario.line.stations
                 if s.position_m >= scenario.run.initial_position_m - 1e-9]
     supervision = RunSupervision.for_scenario(scenario)
@@ -372,7 +557,7 @@ def plan_reference(scenario: Scenario, start_s: float = 0.0) -> Plan:
     factors = [1.0] * (len(stations) - 1)
     for _ in range(30):
         trajectory, stops = _build(scenario, supervision, stations, anticipation, extra_m, factors,
-                                   start_s)
+                                   start_s, leg_planner, start_state)
         violation = first_violation(trajectory, stops, supervision)
         if violation is None:
             targets = tuple(sorted({t for leg in supervision.legs for t in leg.targets},
@@ -412,3 +597,195 @@ def resume_plan(scenario: Scenario, position_m: float, time_s: float) -> Plan | 
     resumed = replace(scenario, line=line, run=replace(scenario.run,
                                                        initial_position_m=position_m))
     return plan_reference(resumed, start_s=time_s)
+
+
+# The timetable strategy (profile_node.timetable gives its theory, the energy and the windows):
+# each leg's cruise speeds solved to its times.
+
+class _LegSolver:
+    """Appends each leg of the timetable strategy to the curve (``planner._build``'s
+    ``leg_planner``), solving its cruise speeds to its times."""
+
+    def __init__(self, scenario: Scenario, regenerative_efficiency: float = 0.0,
+                 targets: dict[int, float] | None = None):
+        self.scenario = scenario
+        self.eta = regenerative_efficiency
+        self.targets = targets or {}   # leg -> target arrival time (a replan's)
+        self.timings: list[LegTiming] = []
+        self.latest: dict[int, float] = {}   # leg -> latest arrival the later legs allow
+
+    def _trial(self, builder: TrajectoryBuilder, sections, factor,
+               cruise: LegCruise | None) -> TrajectoryBuilder:
+        trial = TrajectoryBuilder(x0=builder.x, t0=builder.t)
+        trial.v, trial.a = builder.v, builder.a
+        plan_leg(trial, self.scenario, sections, factor, cruise)
+        return trial
+
+    def _cruise(self, starts, speeds, coast_share: float = 0.0) -> LegCruise:
+        """``coast_share`` in [0, 1] raises every coast's end speed from eq (2)'s W towards
+        the cruise speed (1: no coasting): the times between the fastest curve and the
+        coasting curve at the highest cruise speed."""
+        ends = []
+        for v in speeds:
+            w = coast_end_speed(self.scenario, v, self.eta)
+            ends.append(w + coast_share * (v - w))
+        return LegCruise(tuple(starts), tuple(speeds), tuple(ends))
+
+    def _time_at(self, trial: TrajectoryBuilder, position: float | None) -> float:
+        if position is None:
+            return trial.t
+        return passing_time(trial.build(), position)
+
+    def _solve_speed(self, builder, sections, factor, starts, speeds, k, position, target,
+                     top):
+        """speeds[k] such that the curve reaches ``position`` (None: the leg's end) at
+        ``target``; the fastest it can where even ``top`` is too slow. Returns (speeds[k],
+        coast share): a target between the fastest curve and the coasting one at ``top``
+        is met by coasting less (``_cruise``)."""
+        memo = {}
+
+        def time_with(v, share=0.0):
+            if (v, share) not in memo:
+                trial_speeds = list(speeds)
+                trial_speeds[k] = v
+                cruise = self._cruise(starts, trial_speeds, share)
+                memo[v, share] = self._time_at(self._trial(builder, sections, factor, cruise),
+                                               position)
+            return memo[v, share]
+        low, high = LOWEST_CRUISE_MPS, top
+        if time_with(high) >= target:
+            if time_with(high, 1.0) >= target:
+                return high, 1.0
+            share = brentq(lambda c: time_with(high, c) - target, 0.0, 1.0, xtol=1e-3,
+                           maxiter=60)
+            return high, share
+        if time_with(low) <= target:
+            return low, 0.0
+        # The running time falls as the cruise speed rises: Brent's method on it.
+        return brentq(lambda v: time_with(v) - target, low, high,
+                      xtol=SPEED_TOLERANCE_MPS, maxiter=60), 0.0
+
+    def __call__(self, leg: int, builder: TrajectoryBuilder, sections, factor) -> None:
+        scenario = self.scenario
+        origin_m, end_m = builder.x, sections[-1].end_m
+        departure = builder.t
+        fastest = self._trial(builder, sections, factor, None)
+        shortest = fastest.t - departure
+        journey = scenario.journey
+        target = self.targets.get(leg)
+        points = []
+        if journey is not None:
+            arrival_point = next((p for p in journey.timing_points if p.is_stopping_point
+                                  and abs(p.position_m - end_m) < 1e-6), None)
+            if target is None and arrival_point is not None:
+                target = window_target(arrival_point.earliest_s, arrival_point.latest_s)
+                if target is None and arrival_point.earliest_s is not None:
+                    target = max(arrival_point.earliest_s,
+                                 departure + shortest
+                                 * (1.0 + scenario.timetable.supplement_percent / 100.0))
+            points = [p for p in journey.timing_points if not p.is_stopping_point
+                      and origin_m < p.position_m < end_m]
+        if target is None:
+            target = departure + shortest * (1.0 + scenario.timetable.supplement_percent / 100.0)
+        # No later than what leaves the later legs their times (a later window's reserve).
+        target = min(target, self.latest.get(leg, math.inf))
+        top = max(s.level_mps for s in sections)
+        starts, speeds = [origin_m], [top]
+        splits: list[tuple[float, float]] = []   # (position, time aimed at) of active windows
+        chosen = fastest
+        if target > fastest.t + TIME_TOLERANCE_S:
+            for _ in range(len(points) + 1):
+                goals = splits + [(None, target)]
+                share = 0.0
+                for _sweep in range(2 if splits else 1):
+                    for k, (position, goal) in enumerate(goals):
+                        speeds[k], share = self._solve_speed(builder, sections, factor, starts,
+                                                             speeds, k, position, goal, top)
+                chosen = self._trial(builder, sections, factor,
+                                     self._cruise(starts, speeds, share))
+                missed = self._first_missed(chosen.build(), points, splits)
+                if missed is None:
+                    break
+                position, goal = missed
+                splits = sorted(splits + [(position, goal)], key=lambda s: s[0])
+                starts = [origin_m] + [p for p, _ in splits]
+                speeds = [top] * len(starts)
+        builder.segments.extend(chosen.segments)
+        builder.t, builder.x, builder.v, builder.a = chosen.t, chosen.x, chosen.v, chosen.a
+        self.timings.append(LegTiming(f'{end_m:.0f} m', departure, target, chosen.t, shortest))
+
+    @staticmethod
+    def _first_missed(trajectory: Trajectory, points, splits):
+        """The first passing point outside its window (not yet a split), with the time to
+        aim at there."""
+        fixed = {p for p, _ in splits}
+        for point in points:
+            if point.position_m in fixed:
+                continue
+            t = passing_time(trajectory, point.position_m)
+            if point.earliest_s is not None and t < point.earliest_s - 1e-6:
+                late = point.latest_s
+                margin = WINDOW_MARGIN_S if late is None else min(
+                    WINDOW_MARGIN_S, 0.5 * (late - point.earliest_s))
+                return point.position_m, point.earliest_s + margin
+            if point.latest_s is not None and t > point.latest_s + 1e-6:
+                return point.position_m, window_target(point.earliest_s, point.latest_s)
+        return None
+
+
+def _latest_arrivals(scenario: Scenario, fastest: Plan) -> dict[int, float]:
+    """leg -> the latest arrival at its stop from which every later stop's latest time is
+    still reachable (after the stop's dwell, at the fastest curve's running times)."""
+    journey, stops = scenario.journey, fastest.stops
+    latest: dict[int, float] = {}
+    bound = math.inf
+    for leg in range(len(stops) - 1, 0, -1):
+        stop = stops[leg]
+        arrival = next((p for p in journey.timing_points if p.is_stopping_point
+                        and abs(p.position_m - stop.station.position_m) < 1e-6), None)
+        if arrival is not None and arrival.latest_s is not None:
+            bound = min(bound, arrival.latest_s)
+        previous = stops[leg - 1]
+        running = stop.arrival_s - previous.departure_s
+        # The departure waits for its earliest time anyway: no need to arrive before that.
+        departure = bound - running
+        earliest = journey.earliest_departure_s(previous.station.position_m)
+        if earliest is not None:
+            departure = max(departure, earliest)
+        bound = departure - previous.station.dwell_s
+        latest[leg - 1] = bound
+    return latest
+
+
+def plan_timetable(scenario: Scenario, start_s: float = 0.0, start_state=None,
+                   targets: dict[int, float] | None = None,
+                   regenerative_efficiency: float | None = None) -> Plan:
+    """The ``timetable`` strategy's curve (:mod:`profile_node.timetable`). A journey whose
+    windows cannot all be met is refused (PlanningError naming them and the shortest running
+    time between them) unless ``scenario.timetable.run_infeasible``; then each time is aimed
+    at as closely as the train allows. ``start_state`` and ``targets`` (leg -> arrival time):
+    a replan."""
+    if start_state is None and targets is None and scenario.journey is not None:
+        fastest = plan_fastest(replace(scenario, timetable=replace(scenario.timetable,
+                                                                   strategy='fastest')),
+                               start_s)
+        conflicts = window_conflicts(scenario, fastest)
+        if conflicts and not scenario.timetable.run_infeasible:
+            raise PlanningError(
+                f'{scenario.origin}: the journey\'s windows cannot all be met: '
+                + '; '.join(c.message() for c in conflicts)
+                + ' (timetable.run_infeasible: true runs it anyway, as close as possible)')
+    if regenerative_efficiency is None:
+        regenerative_efficiency = scenario.timetable.regenerative_efficiency
+    solver = _LegSolver(scenario, regenerative_efficiency, targets)
+    if start_state is None and targets is None and scenario.journey is not None:
+        solver.latest = _latest_arrivals(scenario, fastest)
+    plan = plan_fastest(scenario, start_s, solver, start_state)
+    # plan_fastest may build the curve again (a supervision check); the last build's legs.
+    timings = tuple(solver.timings[-len(plan.stops):])
+    timings = tuple(replace(t, destination=stop.station.name)
+                    for t, stop in zip(timings, plan.stops))
+    delay = timings[-1].expected_delay_s if timings else 0.0
+    return replace(plan, strategy='timetable', legs=timings, expected_delay_s=delay,
+                   forecast_energy_j=forecast_energy_j(scenario, plan.trajectory,
+                                                       regenerative_efficiency))

@@ -99,6 +99,53 @@ class TrajectoryBuilder:
             self.add(step_s, j)
         self.v, self.a = target_speed, 0.0
 
+    def coast_to(self, target_speed: float, deceleration, jerk: float,
+                 step_s: float = 2.0, limit_x: float = math.inf) -> bool:
+        """Coasting from the current speed (zero acceleration) down to ``target_speed`` <
+        current: the acceleration follows ``-deceleration(v, x)`` [m/s^2] (the running
+        resistance and the grade with no traction or brake, at least zero: where the grade
+        would speed the train up it holds its speed) with |jerk| <= ``jerk``, ending with zero
+        acceleration exactly at the target speed. The mirror image of :meth:`accelerate_to`.
+        False if the position passed ``limit_x`` before the target speed (the coast stops
+        there, unfinished)."""
+        if target_speed >= self.v:
+            return True
+        for _ in range(1_000_000):
+            if self.x > limit_x:
+                return False
+            remaining = self.v - target_speed
+            if remaining <= 1e-12:
+                break
+            if self.a < 0.0 and remaining <= self.a * self.a / (2.0 * jerk) + 1e-12:
+                ramp_jerk = self.a * self.a / (2.0 * remaining)
+                self.add(-self.a / ramp_jerk, ramp_jerk)
+                break
+            predicted = self.v + self.a * step_s
+            ahead = self.x + self.v * step_s
+            wanted = -max(deceleration(predicted, ahead), deceleration(self.v, self.x), 0.0)
+            j = min(max((wanted - self.a) / step_s, -jerk), jerk)
+            a_end = self.a + j * step_s
+            v_end = self.v + step_s * (self.a + 0.5 * j * step_s)
+            if v_end - target_speed <= a_end * a_end / (2.0 * jerk):
+                if self.a >= 0.0:
+                    peak = math.sqrt(remaining * jerk)
+                    self.add(peak / jerk, -jerk)
+                    self.add(peak / jerk, jerk)
+                else:
+                    hold = (remaining - self.a * self.a / (2.0 * jerk)) / -self.a
+                    self.add(max(hold, 0.0), 0.0)
+                    self.add(-self.a / jerk, jerk)
+                break
+            self.add(step_s, j)
+        self.v, self.a = target_speed, 0.0
+        return True
+
+    def ramp_acceleration_to_zero(self, jerk: float) -> None:
+        """From a nonzero acceleration to zero at the jerk limit (the start of a replan)."""
+        if self.a != 0.0:
+            self.add(abs(self.a) / jerk, -math.copysign(jerk, self.a))
+            self.a = 0.0
+
     def build(self) -> 'Trajectory':
         return Trajectory(self.segments, (self.t, self.x, self.v, self.a))
 

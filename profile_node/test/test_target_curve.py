@@ -182,5 +182,5 @@ def test_a_train_that_cannot_start_is_a_planning_error_naming_the_place():
                  'gradients': [{'start_m': 0, 'per_mille': 60}]},
         'planning': {'max_acceleration_mps2': 0.4, 'service_deceleration_mps2': 0.5,
                      'max_jerk_mps3': 0.1}})
-    with pytest.raises(PlanningError, match='line at 0-10000 m: the train cannot start'):
+    with pytest.raises(PlanningError, match=r'line at 0-\d+ m: the train cannot start'):
         plan_reference(scenario)

@@ -12,7 +12,7 @@ import yaml
 
 from ato_common.scenario import load_scenario, parse_scenario
 from ato_common.ttobench import load_train, scenario_data
-from profile_node.planner import plan_reference
+from profile_node.planner import PlanningError, plan_reference
 
 # The BSD-2 TTOBench samples ship with the tests (tests/data/ttobench, with their licence).
 SAMPLES = Path(__file__).resolve().parents[2] / 'tests' / 'data' / 'ttobench'
@@ -73,9 +73,26 @@ def test_a_journey_timetable_holds_departures_and_reports_its_windows(tmp_path):
                                           [6000, 300, 330, 0, 0], [6000, 600, None, 0, 0],
                                           [12000, 650, 700, 0, 0]]
     write(tmp_path, 'journey.json', journey)
-    scenario = load_scenario_file(tmp_path, {'line': {'ttobench': 'track.json'},
-                                             'journey': {'ttobench': 'journey.json'}})
-    plan = plan_reference(scenario)
+    given = {'line': {'ttobench': 'track.json'}, 'journey': {'ttobench': 'journey.json'}}
+    # The journey gives times: the timetable strategy by default, which refuses windows that
+    # cannot all be met, naming them and the shortest running time between them.
+    scenario = load_scenario_file(tmp_path, given)
+    assert scenario.timetable.strategy == 'timetable'
+    with pytest.raises(PlanningError) as refused:
+        plan_reference(scenario)
+    message = str(refused.value)
+    assert ('timing point 4 (stop at 12000 m, window [650, 700] s) cannot be reached from '
+            'timing point 3 (stop at 6000 m, window [600, -] s) in time: the shortest running '
+            'time between them is 23') in message
+    assert 'the windows leave 100.0 s' in message and 'timetable.run_infeasible' in message
+    # The flag runs it anyway, as close as possible: the fastest where a window is missed.
+    anyway = plan_reference(load_scenario_file(tmp_path, {
+        **given, 'timetable': {'run_infeasible': True}}))
+    fastest = plan_reference(load_scenario_file(tmp_path, {
+        **given, 'timetable': {'strategy': 'fastest'}}))
+    assert anyway.stops[-1].arrival_s == pytest.approx(fastest.stops[-1].arrival_s, abs=0.1)
+    # The fastest curve (today's) waits at stations and reports the windows it misses.
+    plan = fastest
     middle = plan.stops[0]
     # the dwell is the difference of the earliest times (300 s), and the departure waits for
     # its earliest time
