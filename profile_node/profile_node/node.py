@@ -6,15 +6,15 @@ speed limit's start, or the stop approached or dwelt at); the supervision's perm
 the reference position (the lowest of the static limits and the braking curves,
 :mod:`ato_common.braking_curves`).
 
-Lockstep: the reference (with a preview) is published for each control instant, stamped
-with it; the distance to go and the permitted speed too, while they have a subscriber (the
-loop does not read them: ``ato_common.conventions.OBSERVED_STEP``). The reference is a function of time only,
+Lockstep: the reference (with a preview) is published for each control instant, stamped with it;
+the distance to go and the permitted speed too, while they have a subscriber (the loop does not
+read them: ``ato_common.conventions.OBSERVED_STEP``). The reference is a function of time only,
 so once the clock period is known (two ticks) the profile publishes the next instant's reference
 one period ahead: the controller then finds it waiting when the plant's state arrives, which
 takes the profile off the loop's critical path. A tick whose reference was not sent ahead (the
-first ones, a changed period, a re-sent tick) gets it at once. Real time: the same on a
-wall-clock timer, with the curve's time origin taken from the plant's first state message
-(its stamp minus its run time). The whole curve is latched once at start-up.
+first ones, a changed period, a re-sent tick) gets it at once. Real time: the same on a wall-
+clock timer, with the curve's time origin taken from the plant's first state message (its stamp
+minus its run time). The whole curve is latched once at start-up.
 
 Resume (real time): a plant that starts again (its run time goes back) gives the curve its time
 origin again, so the reference starts from the start of the run, not the dead plant's origin.

@@ -1,14 +1,14 @@
 """train_plant_node: the rclpy adapter of :class:`TrainSimulation`.
 
-Lockstep (default): the plant owns simulated time. It publishes /clock and the measured state
-at t_k (and, while they have a subscriber, the true state and the commanded and applied
-actuator forces: ``ato_common.conventions.OBSERVED_STEP``), waits for the command stamped t_k,
-holds it while integrating to t_k+1, and publishes again. Until the first command arrives (and while waiting for one) it re-publishes the
-current step every ``resend_period_s`` of wall time, so start-up order and DDS discovery do not
-matter. A step whose command has not come after ``command_wait_limit_s`` of wall time (the
-controller or the profile gone) is reported as a WARN in the diagnostics and in the log, again
-each such period. Real time: the same simulation advanced by a wall-clock timer, commands held as
-they come.
+Lockstep (default): the plant owns simulated time. It publishes /clock and the measured state at
+t_k (and, while they have a subscriber, the true state and the commanded and applied actuator
+forces: ``ato_common.conventions.OBSERVED_STEP``), waits for the command stamped t_k, holds it
+while integrating to t_k+1, and publishes again. Until the first command arrives (and while
+waiting for one) it re-publishes the current step every ``resend_period_s`` of wall time, so
+start-up order and DDS discovery do not matter. A step whose command has not come after
+``command_wait_limit_s`` of wall time (the controller or the profile gone) is reported as a WARN
+in the diagnostics and in the log, again each such period. Real time: the same simulation
+advanced by a wall-clock timer, commands held as they come.
 
 The plant publishes the identity of what it simulates, latched (``train/identity``: the
 scenario's name and a hash of the resolved scenario); the controller and the profile refuse to
