@@ -17,7 +17,7 @@ The process ends when any of the nodes is finished (the plant at ``end_time_s``;
 the controller refusing another scenario's plant) or on SIGINT/SIGTERM; its exit code is the
 first non-zero one of the nodes (0 for a run that reached its end). A lockstep run composed
 gives the same state sequence, bit for bit, as the same run in three processes
-(``tests/test_composed.py``).
+(``tests/test_lockstep_graph.py``).
 """
 
 from __future__ import annotations
