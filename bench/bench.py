@@ -41,6 +41,7 @@ from ato_bringup.offline import clear_plan_cache, run_offline
 from ato_bringup.provenance import results_page_provenance, write_results_page
 from ato_bringup.runner import run_lockstep
 from ato_bringup.stack import StackConfig, executable_path
+from ato_common.domains import free_domain
 from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
 from ato_common.trains import train_preset
 from ato_common.types import NS_PER_S, nanoseconds
@@ -399,14 +400,22 @@ def campaign_throughput(scenario: str) -> list[str]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--scenario', default=DEFAULT_SCENARIO)
-    parser.add_argument('--domain-id', type=int, default=int(os.environ.get('ROS_DOMAIN_ID', 0)
-                                                             or 91))
+    parser.add_argument('--domain-id', type=int, default=None,
+                        help='ROS_DOMAIN_ID of the lockstep runs (default: a free one, that no '
+                             'other run or test session on this machine holds)')
     parser.add_argument('--results-page', type=Path, default=None,
                         help='also write the figures, with date, machine and commit, to this '
                         'results page of the docs (make bench: docs/results/benchmarks.md)')
     parser.add_argument('--only', choices=('campaign', 'offline', 'lockstep'), default=None,
                         help='measure only this section (printed, no results page)')
     args = parser.parse_args()
+    with contextlib.ExitStack() as held:
+        if args.domain_id is None:
+            args.domain_id = held.enter_context(free_domain())
+        return measure(args)
+
+
+def measure(args: argparse.Namespace) -> int:
     measured = (results_page_provenance(args.results_page)
                 if args.results_page is not None else None)
     page = Page()
