@@ -32,6 +32,7 @@ setup(
             'run_scenario = ato_bringup.run_scenario:main',
             'run_offline = ato_bringup.run_offline:main',
             'campaign = ato_bringup.campaign:main',
+            'ato_stack = ato_bringup.composed:main',
         ],
     },
 )

@@ -1,9 +1,12 @@
 """make bench: how fast the suite runs on this machine.
 
-1. Lockstep real-time factor of a scenario through the ROS graph (three node processes plus the
-   run monitor), overall (start-up included) and steady (10 % to 90 % of the run), with the
-   EventsExecutor the nodes use and, for comparison, the SingleThreadedExecutor; then with the
-   recorder recording every topic (its throughput in messages per second).
+1. Lockstep real-time factor of a scenario through the ROS graph (the run monitor of
+   ``run_scenario`` beside three node processes, or the three nodes composed in one), overall
+   (start-up included) and steady (10 % to 90 % of the run), the start-up (starting the
+   processes to the first step) and the CPU time per step of each process in the steady window
+   (from /proc/<pid>/stat), with the EventsExecutor the nodes use and, for comparison, the
+   SingleThreadedExecutor; then with the recorder recording every topic (its throughput in
+   messages per second and how much slower the run is).
 2. Controller step time (p50, p99, max) of every law on the same scenario, offline.
 3. Plant simulation speed standalone (simulated seconds per CPU second, one core), driven period
    by period and given all its commands at once (``TrainSimulation.run_commands``).
@@ -41,6 +44,7 @@ from ato_bringup.offline import clear_plan_cache, run_offline
 from ato_bringup.provenance import results_page_provenance, write_results_page
 from ato_bringup.runner import run_lockstep
 from ato_bringup.stack import StackConfig, executable_path
+from ato_common.domains import free_domain
 from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
 from ato_common.trains import train_preset
 from ato_common.types import NS_PER_S, nanoseconds
@@ -50,15 +54,24 @@ from train_plant_node.accuracy import accuracy_scenario, worst_speed_error
 from train_plant_node.simulation import TrainSimulation
 
 
+@dataclasses.dataclass
+class GraphRun:
+    overall: float        # real-time factor, start-up included
+    steady: float         # real-time factor between 10 % and 90 % of the run
+    steps: int
+    startup_s: float      # starting the processes to the first step
+    cpu_ms_per_step: dict[str, float]  # per process, in the steady window
+    count: int            # messages recorded, or received by the live view's client
+
+
 def graph_rtf(scenario: str, executor: str, domain_id: int, record: bool = False,
-              live: bool = False) -> tuple[float, float, int, int]:
-    """(overall and steady real-time factor, steps, messages recorded, or with ``live``
-    messages the live view's client received)."""
+              live: bool = False, composed: bool = False) -> GraphRun:
+    """One lockstep run through the graph as ``run_scenario`` runs it (the lean monitor)."""
     os.environ['ATO_EXECUTOR'] = executor
     with tempfile.TemporaryDirectory() as logs:
         bag = Path(logs) / 'bag' if record else None
         config = StackConfig(scenario=scenario, domain_id=domain_id, log_dir=Path(logs),
-                             record_to=bag)
+                             record_to=bag, composed=composed, monitor='lean')
         if live:
             with watched_live_view(domain_id, Path(logs)) as (watch, received):
                 outcome = run_lockstep(config, actions={0.0: watch})
@@ -66,8 +79,64 @@ def graph_rtf(scenario: str, executor: str, domain_id: int, record: bool = False
         else:
             outcome = run_lockstep(config)
             count = bag_info(bag).message_count if record else 0
-    overall = outcome.metrics.simulated_time_s / outcome.wall_time_s
-    return overall, outcome.steady_real_time_factor(), outcome.metrics.samples, count
+    cpu = {name: 1e3 * used / max(outcome.window_steps, 1)
+           for name, used in outcome.window_cpu_s.items()}
+    return GraphRun(outcome.metrics.simulated_time_s / outcome.wall_time_s,
+                    outcome.steady_real_time_factor(), outcome.metrics.samples,
+                    outcome.startup_s, cpu, count)
+
+
+PROCESS_ORDER = ('plant', 'profile', 'controller', 'loop', 'recorder', 'monitor')
+
+
+def cpu_cell(run: GraphRun) -> str:
+    """CPU ms per step of each process, and their total."""
+    parts = [f'{name} {run.cpu_ms_per_step[name]:.2f}' for name in PROCESS_ORDER
+             if name in run.cpu_ms_per_step]
+    return ', '.join(parts) + f'; total {sum(run.cpu_ms_per_step.values()):.2f}'
+
+
+def graph_row(label: str, run: GraphRun, extra: str = '-') -> str:
+    return (f'| {label} | {run.steps} | {run.overall:.1f}x | {run.steady:.1f}x | '
+            f'{1e3 / (10 * run.steady):.2f} ms | {run.startup_s:.2f} s | {cpu_cell(run)} | '
+            f'{extra} |')
+
+
+def lockstep_section(scenario: str, domain_id: int) -> list[str]:
+    lines = ['## Lockstep through the ROS graph', '',
+             'The run monitor of `run_scenario` (the truth per step and the diagnostics) beside '
+             'the three node processes, or the three nodes composed in one (`--composed`, '
+             '`ato_stack`); real-time factor = simulated time / wall time, overall (start-up '
+             'included) and steady (10 % to 90 % of the run); start-up = starting the processes '
+             'to the first step; CPU per step of each process (user + system, /proc/<pid>/stat) '
+             'in the steady window. Goals: separate at least 150x steady, composed at least '
+             '250x, the recorder at most 10 % slower.', '',
+             '| run | steps | overall | steady | per 0.1 s step | start-up | CPU ms per step | '
+             'recorded |', '|---|---|---|---|---|---|---|---|']
+    print('\n'.join(lines), flush=True)
+    rows = []
+
+    def add(row: str) -> None:
+        rows.append(row)
+        print(row, flush=True)
+
+    separate = graph_rtf(scenario, 'events', domain_id)
+    add(graph_row('separate processes, EventsExecutor', separate))
+    composed = graph_rtf(scenario, 'events', domain_id, composed=True)
+    add(graph_row('composed (one process, one EventsExecutor)', composed))
+    for label, base, is_composed in (('separate, with the recorder', separate, False),
+                                     ('composed, with the recorder', composed, True)):
+        run = graph_rtf(scenario, 'events', domain_id, True, composed=is_composed)
+        add(graph_row(label, run, f'{run.count} messages, '
+                      f'{run.count * run.steady / (run.steps / 10):.0f} per second; '
+                      f'{100 * (1 - run.steady / base.steady):+.0f} % slower steady'))
+    single = graph_rtf(scenario, 'single', domain_id)
+    add(graph_row('separate processes, SingleThreadedExecutor', single))
+    watched = graph_rtf(scenario, 'events', domain_id, live=True)
+    add(graph_row(f'separate, with the live view (`recorder live`) and one Foxglove client '
+                  f'watching the layout\'s {len(layout_topics())} topics', watched,
+                  f'{watched.count} messages to the client'))
+    return lines + rows
 
 
 def layout_topics() -> list[str]:
@@ -385,17 +454,26 @@ def campaign_throughput(scenario: str) -> list[str]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--scenario', default=DEFAULT_SCENARIO)
-    parser.add_argument('--domain-id', type=int, default=int(os.environ.get('ROS_DOMAIN_ID', 0)
-                                                             or 91))
+    parser.add_argument('--domain-id', type=int, default=None,
+                        help='ROS_DOMAIN_ID of the lockstep runs (default: a free one, that no '
+                             'other run or test session on this machine holds)')
     parser.add_argument('--results-page', type=Path, default=None,
                         help='also write the figures, with date, machine and commit, to this '
                         'results page of the docs (make bench: docs/results/benchmarks.md)')
     parser.add_argument('--readme', type=Path, default=None,
                         help='also write the closed-loop table of the two strategies between '
                         'its markers in this file (make bench: README.md)')
-    parser.add_argument('--only', choices=('campaign', 'offline', 'planning'), default=None,
+    parser.add_argument('--only', choices=('campaign', 'offline', 'planning', 'lockstep'),
+                        default=None,
                         help='measure only this section (printed, no results page)')
     args = parser.parse_args()
+    with contextlib.ExitStack() as held:
+        if args.domain_id is None:
+            args.domain_id = held.enter_context(free_domain())
+        return measure(args)
+
+
+def measure(args: argparse.Namespace) -> int:
     measured = (results_page_provenance(args.results_page)
                 if args.results_page is not None else None)
     readme_measured = (results_page_provenance(args.readme) if args.readme is not None
@@ -447,27 +525,11 @@ def main() -> int:
             command = f'python bench/bench.py --only planning --readme {args.readme}'
             print(f'\nwrote {update_readme(args.readme, table, readme_measured, command)}')
         return 0
-    page.add(f'Scenario `{args.scenario}`.', '',
-             '## Lockstep through the ROS graph', '',
-             'Three node processes plus the run monitor of `run_scenario`; real-time factor = '
-             'simulated time / wall time, overall (start-up included) and steady (10 % to 90 % '
-             'of the run).', '',
-             '| executor | steps | overall | steady | per 0.1 s step | recorded |',
-             '|---|---|---|---|---|---|')
-    for executor in ('events', 'single'):
-        overall, steady, steps, _ = graph_rtf(args.scenario, executor, args.domain_id)
-        name = 'EventsExecutor' if executor == 'events' else 'SingleThreadedExecutor'
-        page.add(f'| {name} | {steps} | {overall:.1f}x | {steady:.1f}x | '
-                 f'{1e3 / (10 * steady):.2f} ms | - |')
-    overall, steady, steps, recorded = graph_rtf(args.scenario, 'events', args.domain_id, True)
-    page.add(f'| EventsExecutor, with the recorder | {steps} | {overall:.1f}x | {steady:.1f}x | '
-             f'{1e3 / (10 * steady):.2f} ms | {recorded} messages, '
-             f'{recorded * steady / (steps / 10):.0f} per second at the steady rate |')
-    overall, steady, steps, watched = graph_rtf(args.scenario, 'events', args.domain_id,
-                                                live=True)
-    page.add(f'| EventsExecutor, with the live view (`recorder live`) and one Foxglove client '
-             f'watching the layout\'s {len(layout_topics())} topics | {steps} | {overall:.1f}x | '
-             f'{steady:.1f}x | {1e3 / (10 * steady):.2f} ms | {watched} messages to the client |')
+    if args.only == 'lockstep':
+        lockstep_section(args.scenario, args.domain_id)
+        return 0
+    page.add(f'Scenario `{args.scenario}`.', '')
+    page.lines += lockstep_section(args.scenario, args.domain_id)
     page.add('', '## Controller step time', '',
              'Offline, the law and its host (saturation, bumpless transfer); target p99 < 1 ms. '
              f'A law sampled faster than its scenario is timed over {LAW_BENCH_STEPS} steps at '

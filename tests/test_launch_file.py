@@ -105,3 +105,36 @@ def test_the_namespace_argument_gives_each_node_its_clock(launch_file):
         assert node.kwargs['remappings'] == [('/clock', '/train1/clock')]
     with pytest.raises(ValueError, match='namespace'):
         stack_entities(launch_file, 'train 1')
+
+
+def test_composed_starts_one_process_with_a_section_per_node(launch_file):
+    import yaml
+    description = launch_file.generate_launch_description()
+    declared = {e.kwargs['name']: e for e in description.kwargs['initial_entities']
+                if type(e).__name__ == 'DeclareLaunchArgument'}
+    assert declared['composed'].kwargs['default_value'] == 'false'
+    (opaque,) = [e for e in description.kwargs['initial_entities']
+                 if type(e).__name__ == 'OpaqueFunction']
+    configurations = {'namespace': 'train1', 'composed': 'true', 'controller': 'luo_xu',
+                      'scenario': 'short_line', 'lockstep': 'true', 'rate_hz': '0.0',
+                      'end_time_s': '12.5'}
+    entities = opaque.kwargs['function'](types.SimpleNamespace(
+        launch_configurations=configurations))
+    (node,) = [e for e in entities if type(e).__name__ == 'Node']
+    (handler,) = [e.kwargs['event_handler'] for e in entities
+                  if type(e).__name__ == 'RegisterEventHandler']
+    assert (node.kwargs['package'], node.kwargs['executable']) == ('ato_bringup', 'ato_stack')
+    assert 'name' not in node.kwargs  # a name would rename all three nodes of the process
+    assert node.kwargs['namespace'] == '/train1'
+    assert node.kwargs['remappings'] == [('/clock', '/train1/clock')]
+    assert handler.kwargs['target_action'] is node
+    with pytest.raises(launch_file.NodeFailed, match='ato_stack .* exited with code 2'):
+        handler.kwargs['on_exit'](types.SimpleNamespace(returncode=2), None)
+    (path,) = node.kwargs['parameters']
+    sections = yaml.safe_load(Path(path).read_text())
+    Path(path).unlink()
+    assert set(sections) == {f'/**/{name}' for name in launch_file.NODES}
+    controller = sections['/**/ato_controller_node']['ros__parameters']
+    assert controller['controller'] == 'luo_xu' and controller['lockstep'] is True
+    plant = sections['/**/train_plant_node']['ros__parameters']
+    assert plant['end_time_s'] == 12.5 and 'controller' not in plant

@@ -69,6 +69,27 @@ def test_two_lockstep_runs_give_identical_state_sequences(pid_run, tmp_path, dom
         assert a == b, attribute  # bit-identical floats
 
 
+def test_composed_lean_run_gives_the_state_sequence_of_separate_processes(pid_run, tmp_path,
+                                                                          domain_id):
+    """The three nodes in one process (ato_stack) watched by the lean monitor of run_scenario
+    (the truth per step, the reference from the plan): the same steps, bit for bit, as three
+    processes watched by the full monitor, the same metrics, the laws from the diagnostics."""
+    composed = run_lockstep(config(domain_id, tmp_path, 'composed', composed=True,
+                                   monitor='lean', plant_params=dict(NOISY_PLANT)))
+    assert composed.exit_codes == {'loop': 0}
+    assert composed.counts == {'state': composed.counts['state'],
+                               'diagnostics': composed.counts['diagnostics']}  # lean
+    assert [k for k, _ in composed.samples] == [k for k, _ in pid_run.samples]
+    for attribute in ('positions', 'speeds', 'accelerations', 'forces', 'ref_position',
+                      'ref_speed'):
+        a = [getattr(s, attribute) for _, s in pid_run.samples]
+        b = [getattr(s, attribute) for _, s in composed.samples]
+        assert a == b, attribute  # bit-identical floats
+    assert composed.metrics == pid_run.metrics
+    assert composed.laws == pid_run.laws == ['pid']
+    assert composed.window_steps > 0 and composed.window_cpu_s['loop'] > 0.0
+
+
 def test_controller_swap_mid_run_and_rejected_swaps(tmp_path, domain_id):
     def set_params(values):
         return lambda stack: stack.set_parameters('ato_controller_node', values)

@@ -41,7 +41,9 @@ def test_recording_holds_every_message_the_run_published(recorded):
     published = int([values for _, name, values, _ in outcome.diagnostics
                      if name == 'train_plant_node: simulation'][-1]['steps_published'])
     assert published >= 2001
-    for topic in ('/clock', '/train/state', '/train/state/measured'):
+    # The observation topics (published only while subscribed) too: the recorder gets each step.
+    for topic in ('/clock', '/train/state', '/train/state/measured',
+                  '/train/actuators/commanded', '/train/actuators/applied'):
         assert info.topics[topic].message_count == published, topic
     assert info.topics['/ato/reference'].message_count == outcome.counts['reference']
     assert info.topics['/ato/command'].message_count == outcome.counts['command']

@@ -46,10 +46,11 @@ def topics_page() -> str:
              'All quantities are SI. The suite\'s own topic names are relative, so a stack '
              'pushed into a namespace (`-r __ns:=/train1`) keeps them under it; `/clock` and '
              '`/diagnostics` are global. Every type is a standard `common_interfaces` message.',
-             '', '| topic | type | QoS | units | publisher | subscribers | content |',
-             '|---|---|---|---|---|---|---|']
+             '', '| topic | type | QoS | rate | units | publisher | subscribers | content |',
+             '|---|---|---|---|---|---|---|---|']
     for t in TOPICS.values():
-        lines.append(f'| `{t.name}` | `{t.type_name}` | {t.qos.describe()} | {_cell(t.units)} '
+        lines.append(f'| `{t.name}` | `{t.type_name}` | {t.qos.describe()} | {_cell(t.rate)} '
+                     f'| {_cell(t.units)} '
                      f'| {_cell(t.publisher)} | {_cell(t.subscribers)} | '
                      f'{_cell(t.description)} |')
     lines += ['', 'QoS: the per-step streams are reliable and keep-all, so a subscriber that '

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -9,13 +10,12 @@ from typing import Callable
 
 import numpy as np
 
-from ato_bringup.offline import run_end_time_s, stop_samples
+from ato_bringup.offline import cached_plan, run_end_time_s, stop_samples
 from ato_bringup.run_events import PLATFORM_TOLERANCE_M, RunEvents, run_events, stations_of
 from ato_bringup.stack import Sample, Stack, StackConfig
 from ato_common.metrics import RunMetrics, compute_metrics
 from ato_common.scenario import Scenario, load_scenario
 from ato_common.types import NS_PER_S
-from profile_node.planner import plan_reference
 
 
 class RunFailed(RuntimeError):
@@ -36,6 +36,11 @@ class RunOutcome:
     arrivals: list[tuple[float, int]] = field(default_factory=list)
     counts: dict[str, int] = field(default_factory=dict)  # messages the monitor received
     events: RunEvents = field(default_factory=RunEvents)  # what went wrong (run_events)
+    startup_s: float = float('nan')  # wall time from starting the processes to the first state
+    # CPU seconds of each process (and 'monitor', this one) spent in the steady window
+    # (STEADY_WINDOW of the run's simulated time), and the control steps in it
+    window_cpu_s: dict[str, float] = field(default_factory=dict)
+    window_steps: int = 0
 
     def steady_real_time_factor(self, start: float = 0.1, end: float = 0.9) -> float:
         """Simulated over wall time between two fractions of the run (start-up excluded)."""
@@ -51,6 +56,31 @@ class RunOutcome:
     @property
     def times_s(self) -> np.ndarray:
         return np.array([k / NS_PER_S for k, _ in self.samples])
+
+
+STEADY_WINDOW = (0.1, 0.9)
+"""The fractions of a run's simulated time between which its steady speed and CPU are measured
+(start-up and the end excluded)."""
+
+
+def process_cpu_s(pid: int | None = None) -> float:
+    """CPU time (user + system) a process has used so far, s, from /proc/<pid>/stat (None: this
+    process); nan if it is gone."""
+    if pid is None:
+        return time.process_time()
+    try:
+        with open(f'/proc/{pid}/stat') as handle:
+            fields = handle.read().rsplit(')', 1)[1].split()
+    except OSError:
+        return float('nan')
+    # after the command name: state is field 3 of the line, utime 14 and stime 15
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def cpu_snapshot(stack: Stack) -> dict[str, float]:
+    snapshot = {name: process_cpu_s(p.pid) for name, p in stack.processes.items()}
+    snapshot['monitor'] = process_cpu_s()
+    return snapshot
 
 
 def progress_bar(end_time_s: float):
@@ -70,12 +100,12 @@ def last_reports(stack: Stack) -> str:
     lines = [f'  {name}: {message}' for name, message in sorted(newest.items())]
     alive = [n for n in stack.processes if not stack.exited(n)]
     lines.append(f'  running: {", ".join(alive) or "none"}')
-    return '\n'.join(lines) + '\n' + stack.log_tail('plant', 10)
+    return '\n'.join(lines) + '\n' + stack.log_tail(stack.plant_process, 10)
 
 
 def prepare(config: StackConfig) -> tuple[Scenario, float]:
     scenario = load_scenario(config.scenario)
-    plan = plan_reference(scenario)
+    plan = cached_plan(scenario)
     if not config.end_time_s:
         config.end_time_s = run_end_time_s(scenario, plan)
     return scenario, config.end_time_s
@@ -89,16 +119,18 @@ def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], obj
     outcome's ``events`` are the ATP interventions and watchdog brakes the plant reported, and
     the missed journey windows and stopping errors beyond ``stop_tolerance_m`` measured."""
     scenario, end_time_s = prepare(config)
-    plan = plan_reference(scenario)
+    plan = cached_plan(scenario)
     pending = sorted((actions or {}).items())
     results = []
+    window = [w * end_time_s for w in STEADY_WINDOW]
+    cpu: list[tuple[int, dict[str, float]]] = []  # (stamp ns, snapshot) at the window's ends
     with Stack(config) as stack:
         stack.start()
         started = time.monotonic()
         last_report = started
         monitor = stack.monitor
         bar = progress_bar(end_time_s) if progress else None
-        while not stack.exited('plant'):
+        while not stack.exited(stack.plant_process):
             if time.monotonic() - started > timeout_s:
                 raise RunFailed(f'the run did not end within {timeout_s:.0f} s of wall time '
                                 f'(simulated {max(monitor.last_stamp_ns, 0) / NS_PER_S:.1f} s '
@@ -113,6 +145,8 @@ def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], obj
                                 f'({stack.logs[name]}) ends:\n{stack.log_tail(name)}')
             stack.executor.spin_once(timeout_sec=0.05)
             t = max(monitor.last_stamp_ns, 0) / NS_PER_S
+            if len(cpu) < 2 and t >= window[len(cpu)]:
+                cpu.append((monitor.last_stamp_ns, cpu_snapshot(stack)))
             while pending and t >= pending[0][0]:
                 results.append(pending.pop(0)[1](stack))
             if bar is not None and time.monotonic() - last_report > 0.5:
@@ -124,7 +158,7 @@ def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], obj
         wall = time.monotonic() - started
         stack.spin_for(0.3)  # the last messages in flight
         codes = stack.stop()
-        codes['plant'] = stack.processes['plant'].returncode
+        codes[stack.plant_process] = stack.processes[stack.plant_process].returncode
         bad = {k: v for k, v in codes.items() if v != 0}
         if bad:
             raise RunFailed(f'processes exited with errors {bad}:\n' +
@@ -133,6 +167,12 @@ def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], obj
         diagnostics = list(monitor.diagnostics)
         arrivals = list(monitor.arrivals)
         counts = dict(monitor.counts)
+        startup = monitor.arrivals[0][0] - started if monitor.arrivals else float('nan')
+    window_cpu, window_steps = {}, 0
+    if len(cpu) == 2:
+        (s0, c0), (s1, c1) = cpu
+        window_cpu = {name: c1[name] - c0[name] for name in c1 if name in c0}
+        window_steps = round((s1 - s0) / (NS_PER_S / scenario.run.controller_rate_hz))
     if not samples:
         raise RunFailed('the monitor received no state')
     times = [k / NS_PER_S for k, _ in samples]
@@ -142,9 +182,15 @@ def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], obj
                               [s.speeds[0] for _, s in samples], applied[1:] + applied[-1:],
                               [s.ref_position for _, s in samples],
                               [s.ref_speed for _, s in samples], stop_samples(plan))
-    laws = sorted({s.law for _, s in samples if s.law})
+    laws = sorted({s.law for _, s in samples if s.law} or laws_in(diagnostics))
     events = run_events(scenario, metrics, stations_of(plan), times,
                         [s.positions[0] for _, s in samples], diagnostics=diagnostics,
                         tolerance_m=stop_tolerance_m)
     return RunOutcome(scenario, config, samples, diagnostics, wall, codes, metrics, laws, results,
-                      arrivals, counts, events)
+                      arrivals, counts, events, startup, window_cpu, window_steps)
+
+
+def laws_in(diagnostics) -> set[str]:
+    """The laws the controller's diagnostics name (a monitor that does not watch the command)."""
+    return {values['law'] for _, name, values, _ in diagnostics
+            if name == 'ato_controller_node: law' and 'law' in values}

@@ -2,7 +2,15 @@
 
 This is what ``make demo``, ``make bench`` and the integration tests use. The executables are
 found the way ``ros2 run`` finds them (``<prefix>/lib/<package>/<executable>`` of the package's
-ament prefix), so the tests exercise exactly what a user starts.
+ament prefix), so the tests exercise exactly what a user starts. The loop runs as three
+processes (plant, profile, controller) or, composed (``StackConfig.composed``), as one
+(``ato_stack``: the three nodes on one executor, ``ato_bringup.composed``).
+
+The run monitor watches either everything the tests look at (``FULL``: the truth, the
+reference, the command and the diagnostics, each per step) or only what a run's summary needs
+(``LEAN``: the truth per step and the diagnostics; the reference of each step is the plan's,
+which is what the profile streams in lockstep, and the laws are read from the controller's
+diagnostics), so that watching costs the loop little.
 """
 
 from __future__ import annotations
@@ -16,6 +24,7 @@ from pathlib import Path
 from typing import Callable
 
 import rclpy
+import yaml
 from ament_index_python.packages import get_package_prefix
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
@@ -32,7 +41,16 @@ EXECUTABLES = {
     'profile': ('profile_node', 'profile_node'),
     'controller': ('ato_controller_node', 'ato_controller_node'),
     'recorder': ('recorder', 'recorder'),
+    'loop': ('ato_bringup', 'ato_stack'),  # the three loop nodes composed in one process
 }
+NODE_NAMES = {'plant': 'train_plant_node', 'profile': 'profile_node',
+              'controller': 'ato_controller_node'}
+
+FULL = ('state', 'reference', 'command', 'diagnostics')
+"""What the monitor watches for the tests: every per-step topic of the loop it reports."""
+LEAN = ('state', 'diagnostics')
+"""What a run's summary needs: the truth per step and the diagnostics."""
+MONITORS = {'full': FULL, 'lean': LEAN}
 
 
 def executable_path(package: str, executable: str) -> str:
@@ -71,27 +89,36 @@ class Sample:
 
 @dataclass
 class Monitor:
-    """Subscriptions of the runner: truth, reference, command and diagnostics, keyed by stamp."""
+    """Subscriptions of the runner, keyed by stamp: those of ``watch`` (``FULL`` or ``LEAN``).
+
+    ``reference``: with a watch that leaves the reference topic out, the reference of a stamp
+    (ns -> (position m, speed m/s)), filled into each sample as its state arrives."""
 
     node: Node
     namespace: str = '/'  # of the stack: statuses of other stacks' nodes are left out
+    watch: tuple[str, ...] = FULL
+    reference: Callable[[int], tuple[float, float]] | None = None
     samples: dict[int, Sample] = field(default_factory=dict)
     diagnostics: list[tuple[int, str, dict[str, str], str]] = field(default_factory=list)
     last_stamp_ns: int = -1  # of the newest state
     arrivals: list[tuple[float, int]] = field(default_factory=list)  # (monotonic s, stamp ns)
-    counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
-        ('state', 'reference', 'command', 'diagnostics'), 0))  # messages received per topic
+    counts: dict[str, int] = field(default_factory=dict)  # messages received per watched topic
 
     def __post_init__(self):
+        unknown = set(self.watch) - set(FULL)
+        if unknown or 'state' not in self.watch:
+            raise ValueError(f'monitor watch {self.watch}: must hold state and only topics of '
+                             f'{FULL}')
+        self.counts = dict.fromkeys(self.watch, 0)
         n = self.node
-        n.create_subscription(JointTrajectory, topic('state').name, self.on_state,
-                              qos_profile(topic('state').qos))
-        n.create_subscription(JointTrajectory, topic('reference').name, self.on_reference,
-                              qos_profile(topic('reference').qos))
-        n.create_subscription(JointState, topic('command').name, self.on_command,
-                              qos_profile(topic('command').qos))
-        n.create_subscription(DiagnosticArray, topic('diagnostics').name, self.on_diagnostics,
-                              qos_profile(topic('diagnostics').qos))
+        callbacks = {'state': (JointTrajectory, self.on_state),
+                     'reference': (JointTrajectory, self.on_reference),
+                     'command': (JointState, self.on_command),
+                     'diagnostics': (DiagnosticArray, self.on_diagnostics)}
+        for key in self.watch:
+            msg_type, callback = callbacks[key]
+            n.create_subscription(msg_type, topic(key).name, callback,
+                                  qos_profile(topic(key).qos))
 
     def _sample(self, stamp) -> Sample:
         key = from_time(stamp)
@@ -103,11 +130,14 @@ class Monitor:
     def on_state(self, msg: JointTrajectory) -> None:
         self.counts['state'] += 1
         p = msg.points[0]
+        stamp_ns = from_time(msg.header.stamp)
         s = self._sample(msg.header.stamp)
-        self.last_stamp_ns = max(self.last_stamp_ns, from_time(msg.header.stamp))
+        self.last_stamp_ns = max(self.last_stamp_ns, stamp_ns)
         self.arrivals.append((time.monotonic(), self.last_stamp_ns))
         s.positions, s.speeds = tuple(p.positions), tuple(p.velocities)
         s.accelerations, s.forces = tuple(p.accelerations), tuple(p.effort)
+        if self.reference is not None:
+            s.ref_position, s.ref_speed = self.reference(stamp_ns)
 
     def on_reference(self, msg: JointTrajectory) -> None:
         self.counts['reference'] += 1
@@ -146,10 +176,13 @@ class StackConfig:
     controller_params: dict = field(default_factory=dict)
     record_to: Path | None = None  # bag folder: run the recorder too
     namespace: str = ''  # push the stack into it, with its own /clock ('' : the root)
+    composed: bool = False  # the three loop nodes in one process (ato_stack) instead of three
+    monitor: str = 'full'  # what the run monitor watches: 'full' (FULL) or 'lean' (LEAN)
 
 
 class Stack:
-    """The three nodes as processes plus an in-process monitor node, in one DDS domain."""
+    """The three nodes as processes (or composed, as one) plus an in-process monitor node, in
+    one DDS domain."""
 
     def __init__(self, config: StackConfig):
         self.config = config
@@ -164,7 +197,13 @@ class Stack:
         self.namespace = normalised_namespace(config.namespace)
         rclpy.init(context=self.context, domain_id=config.domain_id)
         self.node = Node('ato_run_monitor', namespace=self.namespace, context=self.context)
-        self.monitor = Monitor(self.node, self.namespace)
+        if config.monitor not in MONITORS:
+            raise ValueError(f'monitor {config.monitor!r}: one of {", ".join(MONITORS)}')
+        watch = MONITORS[config.monitor]
+        self.monitor = Monitor(self.node, self.namespace, watch,
+                               None if 'reference' in watch else planned_reference(config))
+        # The process that runs the plant (and so ends the run at end_time_s).
+        self.plant_process = 'loop' if config.composed else 'plant'
         self.parameter_clients: dict[str, object] = {}
         self.executor = make_executor(self.context)
         self.executor.add_node(self.node)
@@ -172,22 +211,23 @@ class Stack:
     def node_params(self) -> dict[str, dict]:
         c = self.config
         common = {'scenario': c.scenario, 'lockstep': c.lockstep}
-        if c.lockstep:
-            common_sim = {'use_sim_time': True}
-        else:
-            common_sim = {}
         # Nobody publishes into the loop before the observers (the monitor, the recorder) are
-        # matched: they must see every step.
-        observers = 1 + (c.record_to is not None)
+        # matched: they must see every step. The profile and the controller are driven by the
+        # stamps of /clock and of the messages in lockstep: they need no use_sim_time (which
+        # would cost each a /clock subscription taking every step).
+        recorder = int(c.record_to is not None)
+        watch = self.monitor.watch
         return {
             'plant': {**common, 'end_time_s': float(c.end_time_s),
-                      'wait_for_subscribers': observers, 'start_delay_s': 1.0,
+                      'wait_for_subscribers': 1 + recorder, 'start_delay_s': 1.0,
                       **c.plant_params},
-            'profile': {**common, **common_sim, 'wait_for_subscribers': 1 + observers,
+            'profile': {**common, 'wait_for_subscribers': 1 + recorder + ('reference' in watch),
                         **c.profile_params},
-            'controller': {**common, **common_sim, 'controller': c.controller,
-                           'wait_for_subscribers': 1 + observers, **c.controller_params},
-            'recorder': common_sim,
+            'controller': {**common, 'controller': c.controller,
+                           'wait_for_subscribers': 1 + recorder + ('command' in watch),
+                           **c.controller_params},
+            # unstamped topics are logged at the recorder's ROS time: simulated in lockstep
+            'recorder': {'use_sim_time': True} if c.lockstep else {},
         }
 
     def start(self, order=('controller', 'profile', 'plant')) -> None:
@@ -196,17 +236,30 @@ class Stack:
         if self.config.record_to is not None:
             self.start_process('recorder', params['recorder'],
                                ['-o', str(self.config.record_to)])
+        if self.config.composed:
+            self.start_composed(params)
+            return
         for name in order:
             self.start_process(name, params[name])
 
-    def start_process(self, name: str, params: dict, args: list[str] = ()) -> subprocess.Popen:
+    def start_composed(self, params: dict[str, dict]) -> subprocess.Popen:
+        """The three loop nodes in one process (``ato_stack``), each with its own parameters
+        from a parameters file with a section per node (the file is kept in the log folder)."""
+        sections = {f'/**/{NODE_NAMES[key]}': {'ros__parameters': params[key]}
+                    for key in NODE_NAMES}
+        path = self.config.log_dir / 'loop_parameters.yaml'
+        path.write_text(yaml.safe_dump(sections, sort_keys=True))
+        return self.start_process('loop', {}, extra_ros_args=['--params-file', str(path)])
+
+    def start_process(self, name: str, params: dict, args: list[str] = (),
+                      extra_ros_args: list[str] = ()) -> subprocess.Popen:
         package, executable = EXECUTABLES[name]
         self.config.log_dir.mkdir(parents=True, exist_ok=True)
         log = self.config.log_dir / f'{name}.log'
         self.logs[name] = log
         with open(log, 'ab') as out:
             process = subprocess.Popen([executable_path(package, executable), *args,
-                                        *ros_args(params, self.namespace)],
+                                        *ros_args(params, self.namespace), *extra_ros_args],
                                        stdout=out, stderr=subprocess.STDOUT, env=self.env,
                                        stdin=subprocess.DEVNULL)
         self.processes[name] = process
@@ -228,9 +281,11 @@ class Stack:
     def exited(self, name: str) -> bool:
         return self.processes[name].poll() is not None
 
-    def ended(self, expected=('plant',)) -> tuple[str, int] | None:
+    def ended(self, expected=None) -> tuple[str, int] | None:
         """The first process that has ended, other than the ``expected`` ones that end the run
-        by themselves with code 0 (the plant at its end time): (name, exit code), or None."""
+        by themselves with code 0 (default: the plant's process, at its end time): (name, exit
+        code), or None."""
+        expected = (self.plant_process,) if expected is None else expected
         for name, process in self.processes.items():
             code = process.poll()
             if code is not None and (name not in expected or code != 0):
@@ -335,6 +390,21 @@ class Stack:
             return '\n'.join(self.logs[name].read_text(errors='replace').splitlines()[-lines:])
         except OSError:
             return ''
+
+
+def planned_reference(config: StackConfig) -> Callable[[int], tuple[float, float]]:
+    """The reference of each stamp as the profile streams it in lockstep: the plan's target
+    curve at that time (``profile_node.planner.plan_reference``, planned once per scenario in
+    this process; the profile's time origin is 0 in lockstep), (position m, speed m/s)."""
+    from ato_bringup.offline import cached_plan
+    from ato_common.scenario import load_scenario
+    from ato_common.types import seconds
+    trajectory = cached_plan(load_scenario(config.scenario)).trajectory
+
+    def reference(stamp_ns: int) -> tuple[float, float]:
+        point = trajectory.at(seconds(stamp_ns))
+        return point.position, point.speed
+    return reference
 
 
 def parameter_value(value: object) -> ParameterValue:

@@ -7,7 +7,11 @@ Arguments: controller (a law of ``ato_controller_node.laws.LAWS``; launch refuse
 name before it starts a node), scenario (built-in name or YAML path), lockstep (true: the plant owns
 /clock and the other nodes use it), rate_hz (control rate; 0: the scenario's), end_time_s (the
 plant ends the run there and the launch shuts down; 0: run until Ctrl-C), namespace (push the
-stack into it, with a /clock of its own, so several stacks run side by side in one domain).
+stack into it, with a /clock of its own, so several stacks run side by side in one domain),
+composed (true: the three nodes in one process on one executor, ``ros2 run ato_bringup
+ato_stack``, with the same names, topics and results; Python nodes cannot be loaded into an
+rclcpp component container, which takes only C++ components, so the suite composes them itself:
+``ato_bringup.composed``).
 
 Any node's exit ends the launch. A node that ends with code 0 (the plant at end_time_s) shuts the
 launch down with that reason; one that fails (any other code) is reported as an error naming
@@ -16,6 +20,9 @@ the node and its exit code, and ``ros2 launch`` then exits with 1 (the handler r
 and returns 1, the only way a launch file sets its exit code).
 """
 
+import tempfile
+
+import yaml
 from launch import LaunchDescription
 from launch.actions import (
     DeclareLaunchArgument,
@@ -51,23 +58,55 @@ def exit_handler(name: str):
     return on_exit
 
 
+COMPOSED = ('ato_bringup', 'ato_stack')
+
+
+def composed_parameters(configurations: dict[str, str]) -> dict[str, dict]:
+    """A parameters file's content for the composed process: a section per node (the one
+    process takes a single file; each node reads its own section)."""
+    value = {key: yaml.safe_load(configurations[key])
+             for key in ('lockstep', 'rate_hz', 'end_time_s')}
+    scenario, lockstep = configurations['scenario'], bool(value['lockstep'])
+    parameters = {
+        'ato_controller_node': {'scenario': scenario, 'controller': configurations['controller'],
+                                'lockstep': lockstep, 'rate_hz': float(value['rate_hz'])},
+        'profile_node': {'scenario': scenario, 'lockstep': lockstep},
+        'train_plant_node': {'scenario': scenario, 'lockstep': lockstep,
+                             'control_rate_hz': float(value['rate_hz']),
+                             'end_time_s': float(value['end_time_s'])},
+    }
+    return {f'/**/{name}': {'ros__parameters': parameters[name]} for name in NODES}
+
+
 def stack(context):
-    """The three nodes in the namespace, each watched: its exit ends the launch."""
+    """The three nodes in the namespace, each watched: its exit ends the launch (composed: the
+    one process, watched the same way)."""
     namespace = normalised_namespace(context.launch_configurations['namespace'])
     # /clock into the namespace too (ato_common.conventions.stack_remaps): every use_sim_time
     # node follows the /clock it hears, so stacks side by side need a clock each.
     remappings = [(source, target) for source, target in stack_remaps(namespace)
                   if source != '__ns']
+    if yaml.safe_load(context.launch_configurations.get('composed', 'false')):
+        with tempfile.NamedTemporaryFile('w', prefix='ato_stack_', suffix='.yaml',
+                                         delete=False) as handle:
+            yaml.safe_dump(composed_parameters(context.launch_configurations), handle)
+        package, executable = COMPOSED
+        # No name: it would rename all three nodes of the process to one.
+        node = Node(package=package, executable=executable, namespace=namespace,
+                    output='screen', parameters=[handle.name], remappings=remappings)
+        return [node, RegisterEventHandler(OnProcessExit(
+            target_action=node, on_exit=exit_handler(f'{executable} (the composed stack)')))]
     controller = LaunchConfiguration('controller')
     scenario = LaunchConfiguration('scenario')
     lockstep = ParameterValue(LaunchConfiguration('lockstep'), value_type=bool)
     rate_hz = ParameterValue(LaunchConfiguration('rate_hz'), value_type=float)
     end_time_s = ParameterValue(LaunchConfiguration('end_time_s'), value_type=float)
+    # The profile and the controller follow the stamps of /clock and of the messages in
+    # lockstep: no use_sim_time (it would cost each a /clock subscription taking every step).
     parameters = {
         'ato_controller_node': {'scenario': scenario, 'controller': controller,
-                                'lockstep': lockstep, 'rate_hz': rate_hz,
-                                'use_sim_time': lockstep},
-        'profile_node': {'scenario': scenario, 'lockstep': lockstep, 'use_sim_time': lockstep},
+                                'lockstep': lockstep, 'rate_hz': rate_hz},
+        'profile_node': {'scenario': scenario, 'lockstep': lockstep},
         'train_plant_node': {'scenario': scenario, 'lockstep': lockstep,
                              'control_rate_hz': rate_hz, 'end_time_s': end_time_s},
     }
@@ -96,5 +135,8 @@ def generate_launch_description():
         DeclareLaunchArgument('namespace', default_value='',
                               description='push the stack into this namespace, with its own '
                                           '/clock (several stacks in one domain)'),
+        DeclareLaunchArgument('composed', default_value='false',
+                              description='true: the three nodes in one process on one '
+                                          'executor (ato_stack) instead of three processes'),
         OpaqueFunction(function=stack),
     ])

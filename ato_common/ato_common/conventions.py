@@ -36,6 +36,17 @@ CLOCK = QosSpec(reliable=True, transient_local=False, depth=10)
 DIAGNOSTICS = QosSpec(reliable=True, transient_local=False, depth=10)
 
 
+# How often each topic is published. Per lockstep step the loop needs only the measured state,
+# the reference, the command and /clock; on a 2-core machine every other per-step message costs
+# CPU in rclpy (about 0.1 ms per publish and per take), so the observation topics are published
+# only while someone subscribes (``ato_common.ros.observed``): a recorder or a visualiser that
+# subscribes gets every step, and a run nobody watches does not pay for them.
+EVERY_STEP = 'every control step'
+OBSERVED_STEP = ('every control step while it has a subscriber (nothing is published while '
+                 'nobody subscribes)')
+ONCE = 'once at start-up (latched)'
+
+
 @dataclass(frozen=True)
 class Topic:
     name: str
@@ -45,54 +56,71 @@ class Topic:
     publisher: str
     subscribers: str
     description: str
+    rate: str = ''  # how often it is published (the topics reference page shows it)
 
 
 TOPICS = {
     'clock': Topic('/clock', 'rosgraph_msgs/msg/Clock', CLOCK, 's',
-                   'train_plant_node (lockstep)', 'every node with use_sim_time',
-                   'simulated time; advances one control period per command'),
+                   'train_plant_node (lockstep)',
+                   'profile_node (its lockstep ticks), every node with use_sim_time',
+                   'simulated time; advances one control period per command',
+                   rate=EVERY_STEP + ' (lockstep only)'),
     'state': Topic('train/state', 'trajectory_msgs/msg/JointTrajectory', STREAM,
-                   'm, m/s, m/s^2, N', 'train_plant_node', 'run_scenario, recorder',
+                   'm, m/s, m/s^2, N', 'train_plant_node',
+                   'the run monitor of run_scenario, recorder',
                    'true state of every car: one point, positions/velocities/accelerations/'
-                   'effort per car (joint_names = car names, lead car first)'),
+                   'effort per car (joint_names = car names, lead car first)',
+                   rate=OBSERVED_STEP),
     'state_measured': Topic('train/state/measured', 'trajectory_msgs/msg/JointTrajectory', STREAM,
                             'm, m/s, m/s^2, N', 'train_plant_node', 'ato_controller_node',
-                            'what the on-board sensors report, same layout as train/state'),
+                            'what the on-board sensors report, same layout as train/state',
+                            rate=EVERY_STEP),
     'reference': Topic('ato/reference', 'trajectory_msgs/msg/JointTrajectory', STREAM,
                        'm, m/s, m/s^2, m/s^3', 'profile_node',
                        'ato_controller_node, run_scenario',
                        'target position/speed/acceleration now (points[0]) and a preview '
-                       '(time_from_start); jerk in effort; joint_names = ["train"]'),
+                       '(time_from_start); jerk in effort; joint_names = ["train"]',
+                       rate=EVERY_STEP + ' (in lockstep one step ahead)'),
     'curve': Topic('ato/reference/curve', 'trajectory_msgs/msg/JointTrajectory', LATCHED,
                    'm, m/s, m/s^2', 'profile_node', 'visualisers, late joiners',
-                   'the whole time-parameterised target curve, sampled'),
+                   'the whole time-parameterised target curve, sampled',
+                   rate=ONCE),
     'distance_to_go': Topic('ato/distance_to_go', 'std_msgs/msg/Float64', STREAM, 'm',
                             'profile_node', 'visualisers',
                             'distance from the reference position to the next target (a lower '
-                            'speed limit or the next stop)'),
+                            'speed limit or the next stop)',
+                            rate=OBSERVED_STEP),
     'permitted_speed': Topic('ato/permitted_speed', 'std_msgs/msg/Float64', STREAM, 'm/s',
                              'profile_node', 'visualisers',
                              'permitted speed at the reference position (static limits and '
-                             'braking curves)'),
+                             'braking curves)',
+                             rate=OBSERVED_STEP),
     'command': Topic('ato/command', 'sensor_msgs/msg/JointState', STREAM, 'N',
                      'ato_controller_node', 'train_plant_node, run_scenario',
                      'force per actuated unit in effort (name = actuator names); '
-                     'header.frame_id = registry name of the law that produced it'),
+                     'header.frame_id = registry name of the law that produced it',
+                     rate=EVERY_STEP),
     'actuators_commanded': Topic('train/actuators/commanded', 'sensor_msgs/msg/JointState', STREAM,
                                  'N', 'train_plant_node', 'recorder, evaluation',
                                  'force per actuated unit as commanded (the held ATO command), '
-                                 'effort per name = actuator names; stamped like train/state'),
+                                 'effort per name = actuator names; stamped like train/state',
+                                 rate=OBSERVED_STEP),
     'actuators_applied': Topic('train/actuators/applied', 'sensor_msgs/msg/JointState', STREAM,
                                'N', 'train_plant_node', 'recorder, evaluation',
                                'force per actuated unit as delivered (limits, lag, rate limit, '
-                               'safety brakes and failures applied), same layout'),
+                               'safety brakes and failures applied), same layout',
+                               rate=OBSERVED_STEP),
     'identity': Topic('train/identity', 'std_msgs/msg/String', LATCHED, '-', 'train_plant_node',
                       'ato_controller_node, profile_node',
                       'what the plant simulates, once: JSON {"scenario": name, "sha256": hash of '
-                      'the resolved scenario} (ato_common.identity)'),
+                      'the resolved scenario} (ato_common.identity)',
+                      rate=ONCE),
     'diagnostics': Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', DIAGNOSTICS, '-',
                          'all nodes', 'run_scenario, rqt_robot_monitor',
-                         'active law, tracking errors, parameter estimates, rejected input'),
+                         'active law, tracking errors, parameter estimates, rejected input',
+                         rate='every 1 s of simulated time per node (the controller: its '
+                         'diagnostics_period_s), and at once on a safety change or a rejected '
+                         'input'),
 }
 
 REFERENCE_JOINT = 'train'

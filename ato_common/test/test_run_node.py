@@ -6,7 +6,7 @@ import signal
 import pytest
 from rclpy.node import Node
 
-from ato_common.ros import RunNodeHooks, run_node
+from ato_common.ros import RunNodeHooks, run_node, run_nodes
 
 
 @pytest.fixture(autouse=True)
@@ -71,3 +71,34 @@ def test_a_declared_node_closes_its_outputs_and_gives_its_exit_code():
         return made[0]
     assert run_node(make, args=[]) == 3
     assert made[0].closed == 1
+
+
+class RunningNode(RunNodeHooks, Node):
+    """Not finished by itself, exit code 0, counts its closes."""
+
+    def __init__(self, name='running_node'):
+        super().__init__(name)
+        self.closed = 0
+
+    def close_outputs(self) -> None:
+        self.closed += 1
+
+
+def test_several_nodes_in_one_process_stop_when_one_is_finished_and_each_closes():
+    """run_nodes (the composed stack): one node finished ends the spin for all; each closes its
+    outputs once; the exit code is the first non-zero one."""
+    made = []
+
+    def maker(cls):
+        def make():
+            made.append(cls())
+            return made[-1]
+        return make
+    assert run_nodes((maker(RunningNode), maker(DoneNode)), args=[]) == 3
+    assert [type(n).__name__ for n in made] == ['RunningNode', 'DoneNode']
+    assert [n.closed for n in made] == [1, 1]
+
+
+def test_several_nodes_refuse_one_that_does_not_declare_the_hooks():
+    with pytest.raises(TypeError, match=r'test_run_node\.UndeclaredNode does not declare'):
+        run_nodes((RunningNode, UndeclaredNode), args=[])

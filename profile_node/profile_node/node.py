@@ -6,14 +6,15 @@ speed limit's start, or the stop approached or dwelt at); the supervision's perm
 the reference position (the lowest of the static limits and the braking curves,
 :mod:`ato_common.braking_curves`).
 
-Lockstep: the reference (with a preview), the distance to go and the permitted speed are
-published for each control instant, stamped with it. The reference is a function of time only,
+Lockstep: the reference (with a preview) is published for each control instant, stamped with it;
+the distance to go and the permitted speed too, while they have a subscriber (the loop does not
+read them: ``ato_common.conventions.OBSERVED_STEP``). The reference is a function of time only,
 so once the clock period is known (two ticks) the profile publishes the next instant's reference
 one period ahead: the controller then finds it waiting when the plant's state arrives, which
 takes the profile off the loop's critical path. A tick whose reference was not sent ahead (the
-first ones, a changed period, a re-sent tick) gets it at once. Real time: the same on a
-wall-clock timer, with the curve's time origin taken from the plant's first state message
-(its stamp minus its run time). The whole curve is latched once at start-up.
+first ones, a changed period, a re-sent tick) gets it at once. Real time: the same on a wall-
+clock timer, with the curve's time origin taken from the plant's first state message (its stamp
+minus its run time). The whole curve is latched once at start-up.
 
 Resume (real time): a plant that starts again (its run time goes back) gives the curve its time
 origin again, so the reference starts from the start of the run, not the dead plant's origin.
@@ -57,6 +58,7 @@ from ato_common.ros import (
     from_duration,
     from_time,
     node_usage,
+    observed,
     qos_profile,
     reference_to_msg,
     run_node,
@@ -202,12 +204,18 @@ class ProfileNode(RunNodeHooks, Node):
         self.publishing(self.reference_pub, reference_to_msg(self.reference_at(stamp_ns)))
 
     def publish_supervision(self, stamp_ns: int) -> None:
-        """Distance to go and permitted speed now (unstamped: only ever for the current tick)."""
+        """Distance to go and permitted speed now (unstamped: only ever for the current tick),
+        each computed and published only while it has a subscriber (``ros.observed``)."""
+        dtg, permitted = observed(self.dtg_pub), observed(self.permitted_pub)
+        if not (dtg or permitted):
+            return
         now = self.trajectory.at(seconds(stamp_ns - self.time_origin_ns))
-        target = self.plan.next_target(now.position, now.time_s)
-        self.publishing(self.dtg_pub, Float64(data=target.location_m - now.position))
-        self.publishing(self.permitted_pub, Float64(data=self.plan.permitted_speed(now.position,
-                                                                                   now.time_s)))
+        if dtg:
+            target = self.plan.next_target(now.position, now.time_s)
+            self.publishing(self.dtg_pub, Float64(data=target.location_m - now.position))
+        if permitted:
+            self.publishing(self.permitted_pub,
+                            Float64(data=self.plan.permitted_speed(now.position, now.time_s)))
 
     def publish_plan(self, stamp_ns: int, why: str) -> None:
         """The plan on diagnostics: only when it changes (start, replan, resume)."""

@@ -1,13 +1,14 @@
 """train_plant_node: the rclpy adapter of :class:`TrainSimulation`.
 
-Lockstep (default): the plant owns simulated time. It publishes /clock, the true and the measured
-state at t_k, waits for the command stamped t_k, holds it while integrating to t_k+1, and
-publishes again. Until the first command arrives (and while waiting for one) it re-publishes the
-current step every ``resend_period_s`` of wall time, so start-up order and DDS discovery do not
-matter. A step whose command has not come after ``command_wait_limit_s`` of wall time (the
-controller or the profile gone) is reported as a WARN in the diagnostics and in the log, again
-each such period. Real time: the same simulation advanced by a wall-clock timer, commands held as
-they come.
+Lockstep (default): the plant owns simulated time. It publishes /clock and the measured state at
+t_k (and, while they have a subscriber, the true state and the commanded and applied actuator
+forces: ``ato_common.conventions.OBSERVED_STEP``), waits for the command stamped t_k, holds it
+while integrating to t_k+1, and publishes again. Until the first command arrives (and while
+waiting for one) it re-publishes the current step every ``resend_period_s`` of wall time, so
+start-up order and DDS discovery do not matter. A step whose command has not come after
+``command_wait_limit_s`` of wall time (the controller or the profile gone) is reported as a WARN
+in the diagnostics and in the log, again each such period. Real time: the same simulation
+advanced by a wall-clock timer, commands held as they come.
 
 The plant publishes the identity of what it simulates, latched (``train/identity``: the
 scenario's name and a hash of the resolved scenario); the controller and the profile refuse to
@@ -41,6 +42,7 @@ from ato_common.ros import (
     freeze_startup_objects,
     from_time,
     node_usage,
+    observed,
     qos_profile,
     run_node,
     state_to_msg,
@@ -222,23 +224,30 @@ class TrainPlantNode(RunNodeHooks, Node):
             # Once per step: a re-sent step must repeat the same measurement (sensor noise is
             # drawn here), or lockstep runs would depend on how often a step was re-sent.
             truth = self.sim.truth()
-            names = self.sim.actuator_names
-            self.step_messages = (stamp, Clock(clock=to_time(stamp)), self._msg(truth, stamp),
-                                  self._msg(self.sim.measured(truth), stamp),
-                                  actuator_forces_to_msg(stamp, names, self.sim.commanded),
-                                  actuator_forces_to_msg(stamp, names, self.sim.applied))
+            self.step_messages = [stamp, Clock(clock=to_time(stamp)), truth,
+                                  self._msg(self.sim.measured(truth), stamp), None, None, None]
             self.step_since_wall = time.monotonic()
             if self.waiting:
                 self.get_logger().info(f'commands again after {self.waiting}')
                 self.waiting = ''
-        _, clock, truth_msg, measured_msg, commanded_msg, applied_msg = self.step_messages
+        messages = self.step_messages
         publish = self.publishing
         if self.clock_pub is not None:
-            publish(self.clock_pub, clock)
-        publish(self.truth_pub, truth_msg)
-        publish(self.measured_pub, measured_msg)
-        publish(self.commanded_pub, commanded_msg)
-        publish(self.applied_pub, applied_msg)
+            publish(self.clock_pub, messages[1])
+        publish(self.measured_pub, messages[3])
+        # The observation topics (conventions.OBSERVED_STEP): built and published only while
+        # someone subscribes; the loop itself needs only the measured state and /clock.
+        names = self.sim.actuator_names
+        for index, publisher, build in (
+                (4, self.truth_pub, lambda: self._msg(messages[2], stamp)),
+                (5, self.commanded_pub,
+                 lambda: actuator_forces_to_msg(stamp, names, self.sim.commanded)),
+                (6, self.applied_pub,
+                 lambda: actuator_forces_to_msg(stamp, names, self.sim.applied))):
+            if observed(publisher):
+                if messages[index] is None:
+                    messages[index] = build()
+                publish(publisher, messages[index])
         self.steps_published += 1
         self.last_publish_wall = time.monotonic()
         safety_state = (self.sim.watchdog, self.sim.atp_intervention)
