@@ -182,7 +182,9 @@ def test_two_lockstep_stacks_in_one_domain_keep_to_themselves(tmp_path, domain_i
             assert np.all(np.diff(stamps) == PERIOD_NS)  # one plant's steps, none of the other's
             assert {s.law for _, s in monitor.complete_samples()[:-1]} == {laws[ns]}
             names = {name for _, name, _, _ in monitor.diagnostics}
-            assert names == {'train_plant_node: simulation', 'ato_controller_node: law'}
+            # the stack's own statuses only (the monitor keeps those of its namespace)
+            assert names == {'train_plant_node: simulation', 'ato_controller_node: law',
+                             'profile_node: plan'}
             # the profile followed its own plant's clock only: one reference per step (ticks
             # of the other plant's clock would each get one more)
             assert monitor.counts['reference'] <= monitor.counts['state'] + 3, monitor.counts
