@@ -5,7 +5,7 @@ unless --no-fail-on-events is given."""
 from pathlib import Path
 
 from ato_bringup import run_scenario
-from ato_bringup.run_events import EVENTS_EXIT_CODE
+from ato_common.run_events import EVENTS_EXIT_CODE
 
 #: a traction drive stuck at 300 kN from 60 to 200 s (tests/data/synthetic)
 STUCK = (Path(__file__).resolve().parents[1] / 'tests' / 'data' / 'synthetic'

@@ -49,9 +49,9 @@ from typing import Any, Callable, Iterable, Mapping
 import numpy as np
 import yaml
 
-from ato_bringup.run_events import run_events, stations_of
 from ato_common import uncertainty
 from ato_common.knowledge import knowledge_of
+from ato_common.run_events import run_events, stations_of
 from ato_common.scenario import Scenario, load_scenario
 from ato_common.validation import ConfigError, Fields
 from ato_controller_node.laws import LAWS
@@ -411,7 +411,7 @@ def run_metrics(run, dt: float) -> dict:
         'saturated_fraction': float(np.mean(run.saturated)) if run.saturated.size else 0.0,
         'atp_interventions': float(run.atp_interventions),
         'watchdog_events': float(run.watchdog_events),
-        # what went wrong, with the first occurrence of each kind (ato_bringup.run_events)
+        # what went wrong, with the first occurrence of each kind (ato_common.run_events)
         'events': events_of(run, m),
     }
 
@@ -419,7 +419,7 @@ def run_metrics(run, dt: float) -> dict:
 def events_of(run, metrics) -> str:
     """What went wrong in an OfflineRun, each kind with its first occurrence (ATP
     interventions, missed windows, stopping errors beyond the platform tolerance;
-    ``ato_bringup.run_events``), in brief."""
+    ``ato_common.run_events``), in brief."""
     return run_events(run.scenario, metrics, stations_of(run.plan), run.times_s, run.positions,
                       atp_times_s=run.atp_times_s).brief()
 

@@ -302,7 +302,7 @@ def markdown(results: list[dict], skipped: list[dict], scenarios: list[str], sta
              '|x - station| (m), traction energy (kWh), max jerk max|dF|/(M dt) (m/s^3), host '
              'step time p99 (us, measured while the runs share the cores), events (ATP '
              'interventions, missed journey windows and stop errors beyond the platform '
-             'tolerance, each with its first occurrence; ato_bringup.run_events). Best: lowest RMS '
+             'tolerance, each with its first occurrence; ato_common.run_events). Best: lowest RMS '
              f'speed error among the `ok` runs over the whole scenario at its control rate with a '
              f'stop error <= {STOP_ERROR_LIMIT_M} m (a law that needs a faster rate is listed, not '
              'ranked).', '']

@@ -22,9 +22,9 @@ import time
 from pathlib import Path
 
 from ato_bringup.offline import run_offline
-from ato_bringup.run_events import PLATFORM_TOLERANCE_M, final_exit_code, run_events, stations_of
 from ato_common.knowledge import knowledge_of
 from ato_common.metrics import format_summary
+from ato_common.run_events import PLATFORM_TOLERANCE_M, final_exit_code, run_events, stations_of
 from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
 from ato_common.validation import ConfigError
 from ato_controller_node.laws import LAWS

@@ -14,7 +14,7 @@ Without --controller the law is the one that ``make compare`` ranked best on jin
 (runs/compare/compare.json, see ato_bringup.compare), else pid; a ranked law that cannot drive
 the scenario's train falls back to pid, with the reason printed.
 
-The summary ends with what went wrong (ato_bringup.run_events): ATP interventions, watchdog
+The summary ends with what went wrong (ato_common.run_events): ATP interventions, watchdog
 brakes, missed journey windows and stopping errors beyond the platform tolerance, each with its
 count and first occurrence. Exit code: 0 for a clean run (or any completed run with
 --no-fail-on-events), 3 for a completed run with such events, 1 for a failed run, 2 for bad
@@ -36,12 +36,12 @@ from datetime import datetime
 from pathlib import Path
 
 from ato_bringup.compare import DEFAULT_DEMO_LAW, DEFAULT_OUT, ranked_demo_law
-from ato_bringup.run_events import PLATFORM_TOLERANCE_M, final_exit_code
 from ato_bringup.runner import RunFailed, run_lockstep
 from ato_bringup.stack import StackConfig
 from ato_common.domains import NoFreeDomain, free_domain
 from ato_common.knowledge import knowledge_of
 from ato_common.metrics import format_summary
+from ato_common.run_events import PLATFORM_TOLERANCE_M, final_exit_code
 from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
 from ato_common.validation import ConfigError
 from ato_controller_node.laws import LAWS

@@ -125,7 +125,7 @@ def test_every_sample_track_with_every_sample_train_brakes_within_the_bound(trai
     measured deceleration, less resistance and the line's forces, never beyond the bound; and
     every run is clean (no ATP intervention, no stop error beyond 0.5 m)."""
     from ato_bringup.offline import run_offline
-    from ato_bringup.run_events import run_events, stations_of
+    from ato_common.run_events import run_events, stations_of
     from ato_common.ttobench import scenario_data
     bound = documented_bound({'ttobench': str(train)}, 'dry')
     for track in TRACKS:

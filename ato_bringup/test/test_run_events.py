@@ -12,7 +12,8 @@ import yaml
 
 from ato_bringup import run_offline, run_scenario
 from ato_bringup.offline import run_offline as run_offline_loop
-from ato_bringup.run_events import (
+from ato_common.metrics import RunMetrics
+from ato_common.run_events import (
     ATP,
     EVENTS_EXIT_CODE,
     JOURNEY,
@@ -25,7 +26,6 @@ from ato_bringup.run_events import (
     safety_events,
     stop_events,
 )
-from ato_common.metrics import RunMetrics
 from ato_common.scenario import parse_scenario
 
 SAMPLES = Path(__file__).resolve().parents[2] / 'tests' / 'data' / 'ttobench'

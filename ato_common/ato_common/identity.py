@@ -90,14 +90,14 @@ def parse_identity(text: str) -> dict[str, str]:
     return {k: data[k] for k in IDENTITY_FIELDS}
 
 
-def identity_mismatch(own: str, plant: str) -> str:
+def identity_mismatch(own: str, plant: str, who: str = 'this node') -> str:
     """'' if the plant simulates the scenario of ``own`` (both identity texts), else why not,
-    naming both."""
+    naming both (``who``: what was given ``own``)."""
     mine, theirs = parse_identity(own), parse_identity(plant)
     if mine == theirs:
         return ''
     same_name = mine['scenario'] == theirs['scenario']
     return (f"the plant simulates scenario {theirs['scenario']} (sha256 "
-            f"{theirs['sha256'][:12]}), this node was given {mine['scenario']} (sha256 "
+            f"{theirs['sha256'][:12]}), {who} was given {mine['scenario']} (sha256 "
             f"{mine['sha256'][:12]})" + (': same name, different content' if same_name else '')
             + '; start both with the same scenario parameter')

@@ -26,6 +26,7 @@ true state; the law's estimates. Every axis is labelled with its quantity and un
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,14 +36,18 @@ from mcap_ros2.decoder import DecoderFactory
 
 from ato_common import units
 from ato_common.conventions import TOPICS
+from ato_common.identity import identity_mismatch, parse_identity, scenario_identity
 from ato_common.metrics import RunMetrics, StopSample, compute_metrics, format_summary
 from ato_common.ros import status_in_namespace
+from ato_common.run_events import PLATFORM_TOLERANCE_M, journey_events
+from ato_common.scenario import builtin_scenarios, load_scenario
+from ato_common.validation import ConfigError
 from recorder.bag import BagError, bag_info, read_messages
 
 REPORTED = ('state', 'reference', 'command', 'curve', 'diagnostics')
 """The keys of the conventions' topics the report needs."""
 OPTIONAL = ('state_measured', 'permitted_speed', 'distance_to_go', 'actuators_commanded',
-            'actuators_applied')
+            'actuators_applied', 'identity')
 """The keys of the topics it plots when the recording holds them."""
 
 # Unit suffixes of the suite's keys (SI, `ato_common.units`) -> how a reader writes them.
@@ -138,6 +143,7 @@ class RunData:
     actuators_commanded: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
     actuators_applied: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
     events: list[tuple[float, str, str]] = field(default_factory=list)  # (s, kind, message)
+    identity: str = ''  # the plant's identity of its scenario (ato_common.identity), if recorded
 
 
 def _decoder():
@@ -210,6 +216,8 @@ def load_run(bag: Path, namespace: str | None = None) -> RunData:
                 'actuators_commanded') else extra.actuators_applied
             for name, force in zip(msg.name, msg.effort):
                 into.setdefault(name, []).append((_stamp(msg.header) / 1e9, force))
+        elif message.topic == topics.get('identity'):
+            extra.identity = msg.data
         elif message.topic == topics['reference']:
             p = msg.points[0]
             references[_stamp(msg.header)] = (p.positions[0], p.velocities[0])
@@ -251,7 +259,7 @@ def load_run(bag: Path, namespace: str | None = None) -> RunData:
         data.car_speeds = np.array([cars_of[k][2] for k in stamps])
         data.car_forces = np.array([cars_of[k][3] for k in stamps])
     for name in ('measured', 'permitted', 'distance_to_go', 'actuators_commanded',
-                 'actuators_applied', 'events'):
+                 'actuators_applied', 'events', 'identity'):
         setattr(data, name, getattr(extra, name))
     data.events.sort()
     return data
@@ -284,10 +292,14 @@ def run_metrics(data: RunData) -> RunMetrics:
 
 
 def _mark_events(axis, events) -> None:
-    """ATP interventions (red) and watchdog or controller events (orange) on the time axis."""
+    """ATP interventions (red), watchdog or controller events (orange) and missed time windows
+    (blue) on the time axis (a timing point never reached has no time to mark)."""
     shown = set()
     for t, kind, _ in events:
-        colour = 'red' if kind.startswith('ATP') else 'orange'
+        if not math.isfinite(t):
+            continue
+        colour = 'red' if kind.startswith('ATP') else 'tab:blue' if kind.startswith('missed') \
+            else 'orange'
         axis.axvline(t, color=colour, lw=1, ls='--', alpha=0.8,
                      label=kind if kind not in shown else None)
         shown.add(kind)
@@ -439,16 +451,41 @@ def plot(data: RunData, folder: Path) -> list[Path]:
     return written
 
 
-#: the platform-stop tolerance (m) beyond which a stopping error is an event to report (the
-#: runner's, ato_bringup.run_events.PLATFORM_TOLERANCE_M, is the same figure)
-STOP_TOLERANCE_M = 0.5
+def scenario_of_run(data: RunData, given: str | None, bag: Path):
+    """The scenario the recorded plant simulated: ``given`` (a name or a file), checked against
+    the identity the plant published, or else the built-in scenario the identity names. None
+    when neither is known (a recording without the plant's identity, and no scenario given);
+    BagError when the given scenario is not the one the plant simulated."""
+    if given is None and not data.identity:
+        return None
+    try:
+        name = given or parse_identity(data.identity)['scenario']
+        if given is None and name not in builtin_scenarios():
+            return None  # a scenario from a file: the report cannot know which file
+        scenario = load_scenario(name)
+    except (ValueError, ConfigError) as error:
+        raise BagError(f'{bag}: {error}') from None
+    if data.identity:
+        mismatch = identity_mismatch(scenario_identity(scenario), data.identity, 'the report')
+        if mismatch:
+            raise BagError(f'{bag}: {mismatch}')
+    return scenario
 
 
-def event_rows(metrics: RunMetrics, events) -> list[tuple[str, str]]:
+def journey_rows(data: RunData, scenario) -> list[tuple[float, str, str]]:
+    """The journey's timing points the run missed (outside their windows, or never reached),
+    as events."""
+    if scenario is None or scenario.journey is None:
+        return []
+    missed = journey_events(scenario, data.stamps_ns / 1e9, data.positions)
+    return [(e.time_s, 'missed time window', e.detail) for e in missed.events]
+
+
+def event_rows(metrics: RunMetrics, events, journey=None) -> list[tuple[str, str]]:
     """What went wrong, each kind with its count and its first occurrence: ATP interventions
-    and command-watchdog brakes (from the plant's diagnostics) and stopping errors beyond the
-    platform tolerance. (Missed journey windows need the scenario's journey, which a recording
-    does not carry: `run_scenario` and `run_offline` report them.)"""
+    and command-watchdog brakes (from the plant's diagnostics), stopping errors beyond the
+    platform tolerance, and the journey's missed time windows when the scenario (``journey``,
+    see :func:`scenario_of_run`) is known."""
     def row(label, times, detail=''):
         if not times:
             return (label, '0')
@@ -457,14 +494,22 @@ def event_rows(metrics: RunMetrics, events) -> list[tuple[str, str]]:
     dog = [t for t, kind, _ in events
            if kind.startswith('watchdog: ') and kind != 'watchdog: normal']
     beyond = {name: e for name, e in metrics.stop_errors_m.items()
-              if abs(e) > STOP_TOLERANCE_M}
+              if abs(e) > PLATFORM_TOLERANCE_M}
     stops = [('stop errors beyond 0.5 m', '0')] if not beyond else [
         ('stop errors beyond 0.5 m', f'{len(beyond)}: '
          + ', '.join(f'{name} {e:+.2f} m' for name, e in beyond.items()))]
-    return [row('ATP interventions', atp), row('watchdog brakes', dog), *stops]
+    missed = [t for t, kind, _ in events if kind == 'missed time window']
+    windows = [('missed time windows', 'not checked (the scenario is unknown: --scenario)')] \
+        if journey is None else [] if journey.journey is None else [
+            row('missed time windows', [t for t in missed if math.isfinite(t)],
+                '' if all(map(math.isfinite, missed)) else
+                f' ({sum(not math.isfinite(t) for t in missed)} never reached)')
+            if missed else ('missed time windows', '0')]
+    return [row('ATP interventions', atp), row('watchdog brakes', dog), *stops, *windows]
 
 
-def summary_rows(metrics: RunMetrics, laws: list[str], events=()) -> list[tuple[str, str]]:
+def summary_rows(metrics: RunMetrics, laws: list[str], events=(), journey=None
+                 ) -> list[tuple[str, str]]:
     """The summary table: quantity (with its unit) and value, then what went wrong."""
     rows = [('controller', ', '.join(laws)),
             ('speed error, RMS (km/h)', f'{metrics.rms_speed_error_kmh:.4f}'),
@@ -476,19 +521,20 @@ def summary_rows(metrics: RunMetrics, laws: list[str], events=()) -> list[tuple[
     rows += [('traction energy (kWh)', f'{metrics.traction_energy_kwh:.2f}'),
              ('simulated time (s)', f'{metrics.simulated_time_s:.1f}'),
              ('samples', str(metrics.samples))]
-    return rows + event_rows(metrics, events)
+    return rows + event_rows(metrics, events, journey)
 
 
 def write_html(path: Path, title: str, metrics: RunMetrics, data: RunData,
-               plots: list[Path]) -> Path:
+               plots: list[Path], journey=None) -> Path:
     """One self-contained page: the summary table, the events, and every plot embedded (no
     file beside it needed, no script)."""
     import base64
     from html import escape
     rows = ''.join(f'<tr><th scope="row">{escape(k)}</th><td>{escape(v)}</td></tr>'
-                   for k, v in summary_rows(metrics, data.laws, data.events))
-    events = ''.join(f'<tr><td>{t:.2f}</td><td>{escape(kind)}</td><td>{escape(message)}</td>'
-                     '</tr>' for t, kind, message in data.events)
+                   for k, v in summary_rows(metrics, data.laws, data.events, journey))
+    events = ''.join(f'<tr><td>{f"{t:.2f}" if math.isfinite(t) else "never"}</td>'
+                     f'<td>{escape(kind)}</td><td>{escape(message)}</td></tr>'
+                     for t, kind, message in data.events)
     figures = ''.join(
         f'<figure id="{escape(p.stem)}"><img alt="{escape(p.stem)}" src="data:image/png;base64,'
         f'{base64.b64encode(p.read_bytes()).decode()}"><figcaption>{escape(p.stem)}'
@@ -499,7 +545,7 @@ def write_html(path: Path, title: str, metrics: RunMetrics, data: RunData,
         'table{border-collapse:collapse}th,td{border:1px solid #ccc;padding:0.2em 0.6em;'
         'text-align:left}img{max-width:100%}</style></head><body>'
         f'<h1>{escape(title)}</h1><h2>Summary</h2><table id="summary">{rows}</table>'
-        '<h2>ATP interventions and watchdog events</h2>'
+        '<h2>ATP interventions, watchdog events and missed time windows</h2>'
         + (f'<table id="events"><tr><th>time (s)</th><th>event</th><th>message</th></tr>'
            f'{events}</table>' if data.events else '<p id="events">none</p>')
         + f'<h2>Plots</h2>{figures}</body></html>\n')
@@ -515,24 +561,32 @@ def main(argv=None) -> int:
     parser.add_argument('--namespace', default=None,
                         help="namespace the stack ran in (-r __ns:=...), '/' for the root "
                              "(default: the one namespace holding the suite's topics)")
+    parser.add_argument('--scenario', default=None,
+                        help='the scenario the run simulated (a name or a file), to check its '
+                             "journey's time windows (default: the built-in scenario the "
+                             "plant's recorded identity names; checked against it)")
     options = parser.parse_args(argv)
     try:
         data = load_run(options.bag, options.namespace)
+        journey = scenario_of_run(data, options.scenario, options.bag)
     except BagError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
+    data.events = sorted(data.events + journey_rows(data, journey),
+                         key=lambda e: (not math.isfinite(e[0]), e[0]))
     metrics = run_metrics(data)
     print(format_summary(metrics, str(options.bag), ', '.join(data.laws)))
-    for label, value in event_rows(metrics, data.events):
+    for label, value in event_rows(metrics, data.events, journey):
         print(f'{label:22s}{value}')
     for t, kind, message in data.events:
-        print(f'event at {t:9.2f} s: {kind}: {message}')
+        print(f'event at {t:9.2f} s: {kind}: {message}' if math.isfinite(t)
+              else f'event (never):    {kind}: {message}')
     folder = options.output or Path(options.bag) / 'report'
     plots = plot(data, folder)
     for path in plots:
         print(f'plot: {path}')
     page = write_html(folder / 'report.html', f'Run report: {Path(options.bag).name}', metrics,
-                      data, plots)
+                      data, plots, journey)
     print(f'html: {page}')
     return 0
 

@@ -1,6 +1,7 @@
 """The report reads the suite's topics by the conventions' names, in the namespace the stack ran
 in: found when the recording holds one, chosen with --namespace when it holds several."""
 
+import math
 from dataclasses import replace
 
 import pytest
@@ -246,3 +247,86 @@ def test_each_stack_of_a_recording_has_its_own_events(tmp_path):
     for namespace, start in (('/train1', 3.0), ('/train2', 6.0)):
         data = load_run(tmp_path / 'run', namespace)
         assert [(t, kind) for t, kind, _ in data.events] == [(start, 'ATP intervention')]
+
+
+def journey_run(tmp_path, windows, identity_of=None):
+    """A recording of a train running a TTOBench sample track at 20 m/s, its scenario file
+    with a journey of ``windows`` at its start, middle and end, and the plant's identity of
+    ``identity_of`` (default: that scenario)."""
+    import json
+    from pathlib import Path
+
+    from std_msgs.msg import String
+    tmp_path.mkdir(parents=True, exist_ok=True)
+
+    from ato_common.identity import scenario_identity
+    from ato_common.scenario import load_scenario
+    samples = Path(__file__).resolve().parents[2] / 'tests' / 'data' / 'ttobench'
+    track = json.loads((samples / 'tracks' / '00_reference.json').read_text())
+    length = track['stops']['values'][-1]
+    journey = {'metadata': {'id': f"{track['metadata']['id']}_J",
+                            'associated track': track['metadata']['id'],
+                            'library version': 'TTOBench v1.5'},
+               'timing points': {'units': {'position': 'm', 'lower time constraint': 's',
+                                           'upper time constraint': 's',
+                                           'lower speed constraint': 'km/h',
+                                           'upper speed constraint': 'km/h'},
+                                 'values': [[0, *windows[0], 0, 0],
+                                            [length / 2, *windows[1], None, None],
+                                            [length, *windows[2], 0, 0]]}}
+    (tmp_path / 'j.json').write_text(json.dumps(journey))
+    scenario_file = tmp_path / 'journey.yaml'
+    scenario_file.write_text(
+        f"name: journey\ntrain: {{ttobench: {samples / 'trains' / 'CN_Beijing_Subway.json'}}}\n"
+        f"line: {{ttobench: {samples / 'tracks' / '00_reference.json'}}}\n"
+        f"journey: {{ttobench: {tmp_path / 'j.json'}}}\n"
+        'planning: {max_acceleration_mps2: 0.5, service_deceleration_mps2: 0.5, '
+        'max_jerk_mps3: 0.5}\n')
+    writer = BagWriter(tmp_path / 'run')
+    for key in ('state', 'reference', 'command', 'curve', 'identity'):
+        writer.add_topic('/' + TOPICS[key].name, TOPICS[key].type_name)
+    writer.write('/train/identity', 0, serialize_message(String(data=scenario_identity(
+        load_scenario(str(identity_of or scenario_file))))))
+    seconds = int(length / 20.0) + 2
+    for k in range(seconds):
+        stamp, x = k * 1_000_000_000, min(20.0 * k, length)
+        v = 20.0 if x < length else 0.0
+        state = TrainState(stamp, ('car_1',), (x,), (v,), (0.0,), (1000.0,))
+        reference = Reference(stamp, (ReferencePoint(float(k), x, v, 0.0),))
+        writer.write('/train/state', stamp, serialize_message(state_to_msg(state)))
+        writer.write('/ato/reference', stamp, serialize_message(reference_to_msg(reference)))
+        writer.write('/ato/command', stamp, serialize_message(command_to_msg(
+            Command(stamp, ('car_1',), (1000.0,), 'pid'))))
+    writer.close()
+    return tmp_path / 'run', scenario_file, length
+
+
+def test_the_journey_windows_the_run_missed_are_reported(tmp_path, capsys):
+    """With the scenario (checked against the plant's recorded identity), the report lists the
+    timing points the run passed outside their windows."""
+    bag, scenario_file, length = journey_run(tmp_path, [(0, 5), (None, 10), (None, None)])
+    assert main([str(bag), '--scenario', str(scenario_file), '--output',
+                 str(tmp_path / 'plots')]) == 0
+    out = capsys.readouterr().out
+    passing = math.ceil(length / 2 / 20.0)
+    assert f'missed time windows   1, first at {passing:.1f} s' in out
+    assert f'passing at {passing:.1f} s, outside [-, 10] s' in out
+    assert 'missed time windows' in (tmp_path / 'plots' / 'report.html').read_text()
+
+
+def test_a_scenario_that_is_not_the_recorded_plant_s_is_refused_and_none_is_not_checked(
+        tmp_path, capsys):
+    bag, scenario_file, _ = journey_run(tmp_path, [(0, 5), (None, 10), (None, None)],
+                                        identity_of='short_line')
+    assert main([str(bag), '--scenario', str(scenario_file)]) == 2
+    err = capsys.readouterr().err
+    assert 'the plant simulates scenario short_line' in err
+    assert 'the report was given journey' in err
+    # the plant's built-in scenario is found by its name (short_line has no journey)
+    assert main([str(bag), '--output', str(tmp_path / 'plots')]) == 0
+    assert 'missed time windows' not in capsys.readouterr().out
+    # a scenario from a file, not given: the windows are not checked, and the report says so
+    bag, _, _ = journey_run(tmp_path / 'file', [(0, 5), (None, 10), (None, None)])
+    assert main([str(bag), '--output', str(tmp_path / 'plots2')]) == 0
+    assert 'missed time windows   not checked (the scenario is unknown: --scenario)' in \
+        capsys.readouterr().out
