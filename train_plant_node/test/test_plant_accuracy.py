@@ -4,6 +4,8 @@ segment boundaries. bench/bench.py runs the multi-car check over 600 s as well."
 
 import math
 
+import pytest
+
 from train_plant_node.accuracy import accuracy_scenario, worst_speed_error
 
 
@@ -29,3 +31,12 @@ def test_multi_car_speed_error_below_1e_6():
                                        (8e3 + 6e3 * math.cos(0.2 * t))))
     assert min(sim.truth().positions) > 1100, sim.truth().positions
     assert worst < 1e-6
+
+
+def test_a_run_the_atp_stops_is_not_taken_for_an_accuracy_figure():
+    """The DOP853 reference has no supervision: commands that drive the train into an ATP
+    intervention (past its 250 km/h design speed) are refused, not measured."""
+    def command(t, n):
+        return (30e3 / n,) * n
+    with pytest.raises(ValueError, match='the ATP intervened'):
+        worst_speed_error(accuracy_scenario('crh2_4car_mao'), 'multi_car', 600.0, 1.0, command)

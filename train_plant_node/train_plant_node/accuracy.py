@@ -40,7 +40,8 @@ def worst_speed_error(scenario: Scenario, model: str, seconds: float, command_pe
                       control_period_ns: int = 100_000_000) -> tuple[float, TrainSimulation]:
     """Largest speed error of any car at the end of each command period, m/s, and the
     simulation (commands must stay within the traction characteristic: the plant re-evaluates
-    its power limit at every step, the reference holds the force)."""
+    its power limit at every step, the reference holds the force; and within the supervision:
+    an ATP intervention is a ValueError, as the reference has none)."""
     sim = TrainSimulation(scenario, model)
     sim.state = sim.model.initial_state(scenario.run.initial_position_m, initial_speed_mps)
     env = sim.surroundings()
@@ -82,4 +83,10 @@ def worst_speed_error(scenario: Scenario, model: str, seconds: float, command_pe
         reference = solution.y[:, -1]
         error = np.asarray(sim.state)[n:] - to_state(reference)[n:]
         worst = max(worst, float(np.max(np.abs(error))))
+        if sim.atp_interventions or sim.emergency_brake:
+            # The reference has no supervision: past this the comparison measures the ATP.
+            raise ValueError(f'the ATP intervened at {sim.time_s:.1f} s ('
+                             f'{sim.lead_speed() * 3.6:.1f} km/h at {sim.lead_position():.0f} m): '
+                             'the commands drive the train beyond its supervision, which the '
+                             'DOP853 reference does not model; keep them lower')
     return worst, sim
