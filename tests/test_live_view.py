@@ -140,3 +140,49 @@ def test_a_client_watches_a_lockstep_run(tmp_path, domain_id, rate):
             client.close()
         live.send_signal(2)
         assert live.wait(timeout=30) == 0, log.read_text(errors='replace')
+
+
+def test_an_observation_topic_is_sampled_for_a_sampling_subscriber_only(domain_id):
+    """The plant and the profile publish an observation topic every step to a subscriber that
+    keeps its messages (a recorder: reliable), and at most every SAMPLED_PERIOD_S of wall time
+    while every subscriber only samples it (the live view: best effort)."""
+    import rclpy
+    from rclpy.node import Node
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import Float64
+
+    from ato_common.ros import SAMPLED_PERIOD_S, Observation
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    try:
+        node = Node('observed', context=context)
+        publisher = node.create_publisher(Float64, '/observed_topic', 10)
+        observation = Observation(node, publisher)
+        assert not observation.due()  # nobody subscribes
+
+        def wait_for(count):
+            deadline = time.monotonic() + 10
+            while publisher.get_subscription_count() != count:
+                assert time.monotonic() < deadline
+                time.sleep(0.01)
+
+        def due_over(seconds):
+            end, dues, calls = time.monotonic() + seconds, 0, 0
+            while time.monotonic() < end:
+                dues += observation.due()
+                calls += 1
+            return dues, calls
+
+        sampling = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                              reliability=ReliabilityPolicy.BEST_EFFORT)
+        node.create_subscription(Float64, '/observed_topic', lambda m: None, sampling)
+        wait_for(1)
+        dues, calls = due_over(0.2)
+        assert 1 <= dues <= 0.2 / SAMPLED_PERIOD_S + 2 < calls
+        node.create_subscription(Float64, '/observed_topic', lambda m: None, 10)  # keeps them
+        wait_for(2)
+        dues, calls = due_over(0.05)
+        assert dues == calls
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)

@@ -39,11 +39,14 @@ DIAGNOSTICS = QosSpec(reliable=True, transient_local=False, depth=10)
 # How often each topic is published. Per lockstep step the loop needs only the measured state,
 # the reference, the command and /clock; on a 2-core machine every other per-step message costs
 # CPU in rclpy (about 0.1 ms per publish and per take), so the observation topics are published
-# only while someone subscribes (``ato_common.ros.observed``): a recorder or a visualiser that
-# subscribes gets every step, and a run nobody watches does not pay for them.
+# only while someone subscribes (``ato_common.ros.Observation``): a recorder or any subscriber
+# that keeps its messages (reliable) gets every step, one that only samples (best effort: the
+# live view) gets the latest at most every 0.02 s of wall time, and a run nobody
+# watches does not pay for them.
 EVERY_STEP = 'every control step'
 OBSERVED_STEP = ('every control step while it has a subscriber (nothing is published while '
-                 'nobody subscribes)')
+                 'nobody subscribes; at most every 0.02 s of wall time while every subscriber '
+                 'only samples: best effort)')
 ONCE = 'once at start-up (latched)'
 
 

@@ -232,12 +232,52 @@ class Publishing:
                 'last_failed_publish': self.last_failure or 'none'}
 
 
-def observed(publisher) -> bool:
-    """Whether ``publisher`` has a matched subscriber now. The observation topics
-    (``conventions.OBSERVED_STEP``: the truth, the actuator forces, the distance to go and the
-    permitted speed) are built and published only then: on a 2-core machine each per-step
-    publish costs about 0.1 ms of CPU in rclpy, and the loop does not read them."""
-    return publisher.get_subscription_count() > 0
+#: how often an observation topic is published to subscribers that only sample it, s of wall
+#: time (above the live view's default 20 Hz)
+SAMPLED_PERIOD_S = 0.02
+
+
+def samples_only(profile) -> bool:
+    """A subscription that only samples its topic: best effort, which accepts to lose messages
+    (the live view's, ``recorder.live.sampling_qos``; rmw reports no history or depth of a
+    remote subscriber, so the reliability is what tells). Every reliable subscriber (a
+    recorder, ``ros2 topic echo``, a monitor) is given every message."""
+    return profile.reliability == ReliabilityPolicy.BEST_EFFORT
+
+
+class Observation:
+    """When to publish an observation topic (``conventions.OBSERVED_STEP``: the truth, the
+    actuator forces, the distance to go and the permitted speed), which the loop does not read:
+    on a 2-core machine each per-step publish costs about 0.1 ms of CPU in rclpy. ``due()`` is
+    False without a subscriber; True at every step while any subscriber wants every message; and
+    at most every ``SAMPLED_PERIOD_S`` of wall time while every subscriber only samples
+    (:func:`samples_only`: best effort, e.g. a live view). The subscribers' profiles are read
+    again only when their number changes."""
+
+    def __init__(self, node, publisher, period_s: float = SAMPLED_PERIOD_S):
+        self.node, self.publisher, self.period_s = node, publisher, period_s
+        self.count = 0
+        self.every_step = True
+        self.last_s = -math.inf
+
+    def due(self) -> bool:
+        count = self.publisher.get_subscription_count()
+        if count == 0:
+            self.count = 0
+            return False
+        if count != self.count:
+            infos = self.node.get_subscriptions_info_by_topic(self.publisher.topic_name)
+            # a subscriber not yet in the graph's view counts as one that wants every message
+            self.every_step = len(infos) < count or not all(
+                samples_only(i.qos_profile) for i in infos)
+            self.count = count
+        if self.every_step:
+            return True
+        now = time.monotonic()
+        if now - self.last_s >= self.period_s:
+            self.last_s = now
+            return True
+        return False
 
 
 def wait_until_delivered(publishers, timeout_s: float) -> bool:

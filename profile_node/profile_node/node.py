@@ -51,6 +51,7 @@ from ato_common.identity import identity_mismatch, scenario_identity
 from ato_common.params import Param, ParameterTable
 from ato_common.ros import (
     MessageError,
+    Observation,
     Publishing,
     RunNodeHooks,
     diagnostic_status,
@@ -58,7 +59,6 @@ from ato_common.ros import (
     from_duration,
     from_time,
     node_usage,
-    observed,
     qos_profile,
     reference_to_msg,
     run_node,
@@ -141,6 +141,8 @@ class ProfileNode(RunNodeHooks, Node):
                                              qos_profile(topic('distance_to_go').qos))
         self.permitted_pub = self.create_publisher(Float64, topic('permitted_speed').name,
                                                    qos_profile(topic('permitted_speed').qos))
+        self.dtg_observation = Observation(self, self.dtg_pub)
+        self.permitted_observation = Observation(self, self.permitted_pub)
         curve_pub = self.create_publisher(JointTrajectory, topic('curve').name,
                                           qos_profile(topic('curve').qos))
         self.publishing(curve_pub, self.curve_msg())
@@ -205,8 +207,8 @@ class ProfileNode(RunNodeHooks, Node):
 
     def publish_supervision(self, stamp_ns: int) -> None:
         """Distance to go and permitted speed now (unstamped: only ever for the current tick),
-        each computed and published only while it has a subscriber (``ros.observed``)."""
-        dtg, permitted = observed(self.dtg_pub), observed(self.permitted_pub)
+        each computed and published only while it has a subscriber (``ros.Observation``)."""
+        dtg, permitted = self.dtg_observation.due(), self.permitted_observation.due()
         if not (dtg or permitted):
             return
         now = self.trajectory.at(seconds(stamp_ns - self.time_origin_ns))

@@ -34,6 +34,7 @@ from ato_common.params import Param, ParameterTable
 from ato_common.plant_setup import parse_failure_injection
 from ato_common.ros import (
     MessageError,
+    Observation,
     Publishing,
     RunNodeHooks,
     actuator_forces_to_msg,
@@ -42,7 +43,6 @@ from ato_common.ros import (
     freeze_startup_objects,
     from_time,
     node_usage,
-    observed,
     qos_profile,
     run_node,
     state_to_msg,
@@ -186,6 +186,8 @@ class TrainPlantNode(RunNodeHooks, Node):
         self.applied_pub = self.create_publisher(
             JointState, topic('actuators_applied').name,
             qos_profile(topic('actuators_applied').qos))
+        self.observations = tuple(Observation(self, p) for p in (
+            self.truth_pub, self.commanded_pub, self.applied_pub))
         self.identity_pub = self.create_publisher(String, topic('identity').name,
                                                   qos_profile(topic('identity').qos))
         self.identity = scenario_identity(self.scenario)
@@ -238,13 +240,13 @@ class TrainPlantNode(RunNodeHooks, Node):
         # The observation topics (conventions.OBSERVED_STEP): built and published only while
         # someone subscribes; the loop itself needs only the measured state and /clock.
         names = self.sim.actuator_names
-        for index, publisher, build in (
-                (4, self.truth_pub, lambda: self._msg(messages[2], stamp)),
-                (5, self.commanded_pub,
-                 lambda: actuator_forces_to_msg(stamp, names, self.sim.commanded)),
-                (6, self.applied_pub,
-                 lambda: actuator_forces_to_msg(stamp, names, self.sim.applied))):
-            if observed(publisher):
+        truth, commanded, applied = self.observations
+        for index, observation, build in (
+                (4, truth, lambda: self._msg(messages[2], stamp)),
+                (5, commanded, lambda: actuator_forces_to_msg(stamp, names, self.sim.commanded)),
+                (6, applied, lambda: actuator_forces_to_msg(stamp, names, self.sim.applied))):
+            publisher = observation.publisher
+            if observation.due():
                 if messages[index] is None:
                     messages[index] = build()
                 publish(publisher, messages[index])
