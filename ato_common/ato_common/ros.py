@@ -280,6 +280,27 @@ class Observation:
         return False
 
 
+def watch_plant_identity(node, own_identity: str, refusal: str):
+    """Subscribe ``node`` to the plant's latched identity (``train/identity``): a plant that
+    simulates another scenario than ``own_identity``'s (or an identity that is not one) makes
+    the node log ``refusal`` with both scenarios named and stop with exit code 2."""
+    from std_msgs.msg import String
+
+    from ato_common.identity import identity_mismatch
+
+    def on_identity(msg) -> None:
+        try:
+            mismatch = identity_mismatch(own_identity, msg.data)
+        except ValueError as error:
+            mismatch = str(error)
+        if mismatch:
+            node.get_logger().error(f'{refusal}: {mismatch}')
+            node.exit_code = 2
+            node.finished = True
+    return node.create_subscription(String, topic('identity').name, on_identity,
+                                    qos_profile(topic('identity').qos))
+
+
 def wait_until_delivered(publishers, timeout_s: float) -> bool:
     """Wait until every reliable subscriber matched to ``publishers`` has acknowledged all they
     sent (a node about to exit: its last messages must not be lost with it); False if some were

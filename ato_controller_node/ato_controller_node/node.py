@@ -28,10 +28,10 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Header, String
+from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
-from ato_common.identity import identity_mismatch, scenario_identity
+from ato_common.identity import scenario_identity
 from ato_common.knowledge import knowledge_of
 from ato_common.params import Param, ParameterTable
 from ato_common.ros import (
@@ -49,6 +49,7 @@ from ato_common.ros import (
     status_name,
     to_time,
     topic,
+    watch_plant_identity,
 )
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import Command, Reference, ReferencePoint, seconds
@@ -155,8 +156,7 @@ class AtoControllerNode(RunNodeHooks, Node):
                                  qos_profile(topic('state_measured').qos))
         self.create_subscription(JointTrajectory, topic('reference').name, self.on_reference,
                                  qos_profile(topic('reference').qos))
-        self.create_subscription(String, topic('identity').name, self.on_identity,
-                                 qos_profile(topic('identity').qos))
+        watch_plant_identity(self, self.identity, 'refusing to drive')
         if not self.lockstep:
             self.create_timer(self.dt, self.on_timer)
         self.get_logger().info(f"law {self.host.law.name} at {self.rate_hz:g} Hz "
@@ -169,16 +169,6 @@ class AtoControllerNode(RunNodeHooks, Node):
             settings = {name: dataclasses.asdict(self.host.settings(name)) for name in LAWS}
         return ControllerHost(self.knowledge, self.dt, law, settings,
                               self.params['bumpless_time_constant_s'])
-
-    def on_identity(self, msg: String) -> None:
-        try:
-            mismatch = identity_mismatch(self.identity, msg.data)
-        except ValueError as error:
-            mismatch = str(error)
-        if mismatch:
-            self.get_logger().error(f'refusing to drive: {mismatch}')
-            self.exit_code = 2
-            self.finished = True
 
     # --- parameters: validate, then apply ---------------------------------------------------
     def _gain_changes(self, changes: dict) -> dict[str, dict]:

@@ -43,11 +43,11 @@ import math
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Float64, Header, String
+from std_msgs.msg import Float64, Header
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_common.braking_curves import RunSupervision
-from ato_common.identity import identity_mismatch, scenario_identity
+from ato_common.identity import scenario_identity
 from ato_common.params import Param, ParameterTable
 from ato_common.ros import (
     MessageError,
@@ -66,6 +66,7 @@ from ato_common.ros import (
     status_name,
     to_time,
     topic,
+    watch_plant_identity,
 )
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import Reference, nanoseconds, seconds
@@ -147,8 +148,7 @@ class ProfileNode(RunNodeHooks, Node):
                                           qos_profile(topic('curve').qos))
         self.publishing(curve_pub, self.curve_msg())
         self._curve_pub = curve_pub  # keep the latched publisher alive
-        self.create_subscription(String, topic('identity').name, self.on_identity,
-                                 qos_profile(topic('identity').qos))
+        watch_plant_identity(self, self.identity, 'refusing to stream the target curve')
         if self.lockstep:
             self.create_subscription(Clock, topic('clock').name, self.on_clock,
                                      qos_profile(topic('clock').qos))
@@ -173,16 +173,6 @@ class ProfileNode(RunNodeHooks, Node):
     def check_preview(self, changes) -> str | None:
         return preview_problem(changes.get('preview_horizon_s', self.params['preview_horizon_s']),
                                changes.get('preview_step_s', self.params['preview_step_s']))
-
-    def on_identity(self, msg: String) -> None:
-        try:
-            mismatch = identity_mismatch(self.identity, msg.data)
-        except ValueError as error:
-            mismatch = str(error)
-        if mismatch:
-            self.get_logger().error(f'refusing to stream the target curve: {mismatch}')
-            self.exit_code = 2
-            self.finished = True
 
     def curve_msg(self) -> JointTrajectory:
         step = self.params['curve_sample_period_s']
