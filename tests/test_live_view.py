@@ -112,9 +112,9 @@ def test_a_client_watches_a_lockstep_run(tmp_path, domain_id, rate):
             return channel['id']
 
         outcome = run_lockstep(StackConfig(scenario='short_line', domain_id=domain_id,
-                                           end_time_s=60.0, log_dir=tmp_path / 'logs'),
+                                           end_time_s=150.0, log_dir=tmp_path / 'logs'),
                                actions={5.0: watch})
-        assert outcome.metrics.simulated_time_s >= 59.0
+        assert outcome.metrics.simulated_time_s >= 149.0
         stamps = []
         while True:
             try:
@@ -131,7 +131,7 @@ def test_a_client_watches_a_lockstep_run(tmp_path, domain_id, rate):
         assert stamps == sorted(stamps) and len(set(stamps)) == len(stamps)
         steps = outcome.metrics.samples
         if rate == '0':  # every 0.1 s step from the subscription on to the end
-            assert len(stamps) >= 100 and stamps[-1] >= 59_900_000_000, len(stamps)
+            assert len(stamps) >= 50 and stamps[-1] >= 149_900_000_000, len(stamps)
             assert set(np.diff(stamps)) == {100_000_000}
         else:  # the latest at 20 Hz of the run's wall time, far fewer than the steps
             assert 1 <= len(stamps) <= 20 * outcome.wall_time_s + 5 < steps, len(stamps)
