@@ -73,6 +73,20 @@ def test_a_watched_topic_arrives_as_published_and_costs_nothing_unwatched(tmp_pa
         assert 'Traceback' not in log.read_text(errors='replace')
 
 
+def test_a_port_already_taken_is_an_error_naming_it(domain_id):
+    import socket
+    with socket.socket() as taken:
+        taken.bind(('127.0.0.1', 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        result = subprocess.run([executable_path('recorder', 'live'), '--port', str(port)],
+                                capture_output=True, text=True, timeout=60,
+                                env=dict(os.environ, ROS_DOMAIN_ID=str(domain_id)))
+    assert result.returncode == 2
+    assert f'cannot serve Foxglove on 127.0.0.1:{port}' in result.stderr
+    assert 'Traceback' not in result.stderr
+
+
 def test_a_port_that_is_not_a_port_is_refused(tmp_path):
     result = subprocess.run([executable_path('recorder', 'live'), '--port', '70000'],
                             capture_output=True, text=True, timeout=60)
