@@ -53,6 +53,18 @@ def test_recording_holds_every_message_the_run_published(recorded):
     assert info.end_ns >= 200_000_000_000  # log time is simulated time
 
 
+def test_unstamped_topics_are_logged_at_simulated_time(recorded):
+    """The stack's recorder takes its time from the /clock it records (``--sim-time``): an
+    unstamped message is logged at the simulated time of a step, never at the wall clock."""
+    _, bag = recorded
+    ticks = {m.log_time_ns for m in read_messages(bag, ['/clock'])} | {0}
+    for topic in ('/ato/distance_to_go', '/ato/permitted_speed'):
+        times = [m.log_time_ns for m in read_messages(bag, [topic])]
+        assert len(times) > 2000, topic
+        assert set(times) <= ticks, topic
+        assert times == sorted(times), topic
+
+
 def test_the_mcap_library_with_mcap_ros2_decodes_every_message(recorded):
     _, bag = recorded
     with open(bag_file(bag), 'rb') as stream:
@@ -170,3 +182,13 @@ def test_replay_of_a_broken_file_says_what_is_wrong(tmp_path, domain_id):
                             env=dict(os.environ, ROS_DOMAIN_ID=str(domain_id)))
     assert result.returncode == 2
     assert 'is not an MCAP file' in result.stderr and 'Traceback' not in result.stderr
+
+
+def test_two_sources_of_simulated_time_are_refused_naming_both(tmp_path, domain_id):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id))
+    done = subprocess.run([executable_path('recorder', 'recorder'), '-o', str(tmp_path / 'bag'),
+                           '--sim-time', '--ros-args', '-p', 'use_sim_time:=true'],
+                          env=env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2
+    assert '--sim-time and use_sim_time' in done.stderr + done.stdout
+    assert 'Traceback' not in done.stderr

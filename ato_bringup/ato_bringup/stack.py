@@ -33,8 +33,18 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
+from ato_common import wire
 from ato_common.conventions import normalised_namespace, stack_remaps
-from ato_common.ros import from_time, make_executor, qos_profile, status_in_namespace, topic
+from ato_common.ros import (
+    decoded,
+    from_time,
+    make_executor,
+    qos_profile,
+    reference_from_msg,
+    state_from_msg,
+    status_in_namespace,
+    topic,
+)
 
 EXECUTABLES = {
     'plant': ('train_plant_node', 'train_plant_node'),
@@ -111,43 +121,49 @@ class Monitor:
                              f'{FULL}')
         self.counts = dict.fromkeys(self.watch, 0)
         n = self.node
-        callbacks = {'state': (JointTrajectory, self.on_state),
-                     'reference': (JointTrajectory, self.on_reference),
-                     'command': (JointState, self.on_command),
-                     'diagnostics': (DiagnosticArray, self.on_diagnostics)}
+        # The per-step topics are taken as bytes and read by ato_common.wire (the monitor must
+        # cost the loop little: no rclpy message objects); the diagnostics as messages.
+        callbacks = {'state': (JointTrajectory, self.on_state, True),
+                     'reference': (JointTrajectory, self.on_reference, True),
+                     'command': (JointState, self.on_command, True),
+                     'diagnostics': (DiagnosticArray, self.on_diagnostics, False)}
         for key in self.watch:
-            msg_type, callback = callbacks[key]
+            msg_type, callback, raw = callbacks[key]
             n.create_subscription(msg_type, topic(key).name, callback,
-                                  qos_profile(topic(key).qos))
+                                  qos_profile(topic(key).qos), raw=raw)
 
-    def _sample(self, stamp) -> Sample:
-        key = from_time(stamp)
-        sample = self.samples.get(key)
+    def _sample(self, stamp_ns: int) -> Sample:
+        sample = self.samples.get(stamp_ns)
         if sample is None:
-            sample = self.samples[key] = Sample()
+            sample = self.samples[stamp_ns] = Sample()
         return sample
 
-    def on_state(self, msg: JointTrajectory) -> None:
+    def on_state(self, data: bytes) -> None:
         self.counts['state'] += 1
-        p = msg.points[0]
-        stamp_ns = from_time(msg.header.stamp)
-        s = self._sample(msg.header.stamp)
+        state = decoded(data, wire.decode_state, JointTrajectory, state_from_msg)
+        stamp_ns = state.stamp_ns
+        s = self._sample(stamp_ns)
         self.last_stamp_ns = max(self.last_stamp_ns, stamp_ns)
         self.arrivals.append((time.monotonic(), self.last_stamp_ns))
-        s.positions, s.speeds = tuple(p.positions), tuple(p.velocities)
-        s.accelerations, s.forces = tuple(p.accelerations), tuple(p.effort)
+        s.positions, s.speeds = state.positions, state.speeds
+        s.accelerations, s.forces = state.accelerations, state.forces
         if self.reference is not None:
             s.ref_position, s.ref_speed = self.reference(stamp_ns)
 
-    def on_reference(self, msg: JointTrajectory) -> None:
+    def on_reference(self, data: bytes) -> None:
         self.counts['reference'] += 1
-        s = self._sample(msg.header.stamp)
-        s.ref_position, s.ref_speed = msg.points[0].positions[0], msg.points[0].velocities[0]
+        reference = decoded(data, wire.decode_reference, JointTrajectory, reference_from_msg)
+        s = self._sample(reference.stamp_ns)
+        s.ref_position, s.ref_speed = reference.now.position, reference.now.speed
 
-    def on_command(self, msg: JointState) -> None:
+    def on_command(self, data: bytes) -> None:
         self.counts['command'] += 1
-        s = self._sample(msg.header.stamp)
-        s.command, s.law = tuple(msg.effort), msg.header.frame_id
+        stamp_ns, law, _, _, _, effort = decoded(
+            data, wire.decode_joint_state, JointState,
+            lambda m: (from_time(m.header.stamp), m.header.frame_id, m.name, m.position,
+                       m.velocity, m.effort))
+        s = self._sample(stamp_ns)
+        s.command, s.law = tuple(effort), law
 
     def on_diagnostics(self, msg: DiagnosticArray) -> None:
         self.counts['diagnostics'] += 1
@@ -226,16 +242,18 @@ class Stack:
             'controller': {**common, 'controller': c.controller,
                            'wait_for_subscribers': 1 + recorder + ('command' in watch),
                            **c.controller_params},
-            # unstamped topics are logged at the recorder's ROS time: simulated in lockstep
-            'recorder': {'use_sim_time': True} if c.lockstep else {},
+            'recorder': {},
         }
 
     def start(self, order=('controller', 'profile', 'plant')) -> None:
         self.config.log_dir.mkdir(parents=True, exist_ok=True)
         params = self.node_params()
         if self.config.record_to is not None:
+            # unstamped topics are logged at simulated time in lockstep: that of the /clock the
+            # recorder records (--sim-time: no second subscription to /clock)
             self.start_process('recorder', params['recorder'],
-                               ['-o', str(self.config.record_to)])
+                               ['-o', str(self.config.record_to),
+                                *(['--sim-time'] if self.config.lockstep else [])])
         if self.config.composed:
             self.start_composed(params)
             return

@@ -27,7 +27,16 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ato_common.conventions import REFERENCE_JOINT, TOPICS, QosSpec, Topic
-from ato_common.types import NS_PER_S, Command, Reference, ReferencePoint, TrainState
+from ato_common.types import NS_PER_S, Command, Reference, TrainState
+from ato_common.wire import (
+    MessageError,
+    UnknownEncoding,
+    command_from_fields,
+    reference_from_fields,
+    state_from_fields,
+)
+
+__all__ = ['MessageError']  # re-exported: the nodes catch it from here
 
 
 def qos_profile(spec: QosSpec) -> QoSProfile:
@@ -60,10 +69,6 @@ def from_duration(duration: Duration) -> float:
     return duration.sec + duration.nanosec * 1e-9
 
 
-class MessageError(ValueError):
-    """A received message does not have the layout of the suite's conventions."""
-
-
 def state_to_msg(state: TrainState) -> JointTrajectory:
     msg = JointTrajectory()
     msg.header.stamp = to_time(state.stamp_ns)
@@ -77,17 +82,13 @@ def state_to_msg(state: TrainState) -> JointTrajectory:
     return msg
 
 
+def _points(msg: JointTrajectory) -> list[tuple]:
+    return [(p.positions, p.velocities, p.accelerations, p.effort,
+             from_duration(p.time_from_start)) for p in msg.points]
+
+
 def state_from_msg(msg: JointTrajectory) -> TrainState:
-    n = len(msg.joint_names)
-    if len(msg.points) != 1:
-        raise MessageError(f'train state must have exactly one point, got {len(msg.points)}')
-    p = msg.points[0]
-    for field in ('positions', 'velocities', 'accelerations', 'effort'):
-        if len(getattr(p, field)) != n:
-            raise MessageError(f'train state {field} has {len(getattr(p, field))} values '
-                               f'for {n} cars')
-    return TrainState(from_time(msg.header.stamp), tuple(msg.joint_names), tuple(p.positions),
-                      tuple(p.velocities), tuple(p.accelerations), tuple(p.effort))
+    return state_from_fields(from_time(msg.header.stamp), msg.joint_names, _points(msg))
 
 
 def reference_to_msg(reference: Reference) -> JointTrajectory:
@@ -110,22 +111,8 @@ def reference_to_msg(reference: Reference) -> JointTrajectory:
 
 def reference_from_msg(msg: JointTrajectory, time_origin_s: float = 0.0) -> Reference:
     """``time_origin_s`` maps the stamp to the curve's own time (0 in lockstep)."""
-    if list(msg.joint_names) != [REFERENCE_JOINT] or not msg.points:
-        raise MessageError(f'reference must have joint_names [{REFERENCE_JOINT!r}] and at least '
-                           f'one point, got {list(msg.joint_names)} with {len(msg.points)} points')
-    stamp_ns = from_time(msg.header.stamp)
-    t0 = stamp_ns / NS_PER_S - time_origin_s
-    points = []
-    for p in msg.points:
-        if not (len(p.positions) == len(p.velocities) == len(p.accelerations) == 1):
-            raise MessageError('each reference point needs one position, velocity and acceleration')
-        if len(p.effort) > 1:
-            raise MessageError(f'a reference point carries at most one jerk (effort), got '
-                               f'{len(p.effort)}')
-        points.append(ReferencePoint(t0 + from_duration(p.time_from_start), p.positions[0],
-                                     p.velocities[0], p.accelerations[0],
-                                     p.effort[0] if p.effort else 0.0))
-    return Reference(stamp_ns, tuple(points))
+    return reference_from_fields(from_time(msg.header.stamp), msg.joint_names, _points(msg),
+                                 time_origin_s)
 
 
 def command_to_msg(command: Command) -> JointState:
@@ -149,17 +136,20 @@ def actuator_forces_to_msg(stamp_ns: int, names: Sequence[str],
 
 def command_from_msg(msg: JointState, expected_actuators: Sequence[str]) -> Command:
     """Validate a command against the plant's actuators; raise MessageError with the reason."""
-    names = tuple(msg.name)
-    if names != tuple(expected_actuators):
-        raise MessageError(f'command names {list(names)} do not match the actuators '
-                           f'{list(expected_actuators)}')
-    if len(msg.effort) != len(names):
-        raise MessageError(f'command has {len(msg.effort)} efforts for {len(names)} actuators')
-    forces = tuple(float(f) for f in msg.effort)
-    bad = [n for n, f in zip(names, forces) if not math.isfinite(f)]
-    if bad:
-        raise MessageError(f'command force of {", ".join(bad)} is not finite')
-    return Command(from_time(msg.header.stamp), names, forces, msg.header.frame_id)
+    return command_from_fields(from_time(msg.header.stamp), msg.header.frame_id, msg.name,
+                               msg.effort, expected_actuators)
+
+
+def decoded(data: bytes, decode: Callable, msg_type, from_msg: Callable, *args):
+    """A message taken raw (``create_subscription(..., raw=True)``), read by ``decode`` (an
+    :mod:`ato_common.wire` decoder); bytes in an encoding it does not read are deserialised by
+    the middleware's own type support (``msg_type``) and converted by ``from_msg``, so that a
+    publisher of any encoding is understood. Raises MessageError naming what is wrong."""
+    try:
+        return decode(data, *args)
+    except UnknownEncoding:
+        from rclpy.serialization import deserialize_message
+        return from_msg(deserialize_message(data, msg_type), *args)
 
 
 def diagnostic_status(name: str, hardware_id: str, level: bytes, message: str,

@@ -31,6 +31,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
+from ato_common import wire
 from ato_common.identity import scenario_identity
 from ato_common.knowledge import knowledge_of
 from ato_common.params import Param, ParameterTable
@@ -38,7 +39,7 @@ from ato_common.ros import (
     MessageError,
     Publishing,
     RunNodeHooks,
-    command_to_msg,
+    decoded,
     diagnostic_status,
     freeze_startup_objects,
     node_usage,
@@ -152,10 +153,12 @@ class AtoControllerNode(RunNodeHooks, Node):
                                                  qos_profile(topic('command').qos))
         self.diag_pub = self.create_publisher(DiagnosticArray, topic('diagnostics').name,
                                               qos_profile(topic('diagnostics').qos))
+        # The per-step inputs are taken as bytes and read by ato_common.wire (no rclpy message
+        # objects); the command goes out the same way.
         self.create_subscription(JointTrajectory, topic('state_measured').name, self.on_state,
-                                 qos_profile(topic('state_measured').qos))
+                                 qos_profile(topic('state_measured').qos), raw=True)
         self.create_subscription(JointTrajectory, topic('reference').name, self.on_reference,
-                                 qos_profile(topic('reference').qos))
+                                 qos_profile(topic('reference').qos), raw=True)
         watch_plant_identity(self, self.identity, 'refusing to drive')
         if not self.lockstep:
             self.create_timer(self.dt, self.on_timer)
@@ -205,9 +208,9 @@ class AtoControllerNode(RunNodeHooks, Node):
             self.next_diagnostic_ns = 0  # announce the new law at the next step
 
     # --- inputs -------------------------------------------------------------------------------
-    def on_state(self, msg: JointTrajectory) -> None:
+    def on_state(self, data: bytes) -> None:
         try:
-            state = state_from_msg(msg)
+            state = decoded(data, wire.decode_state, JointTrajectory, state_from_msg)
         except MessageError as error:
             self.input_fault = f'bad state message: {error}'
             return
@@ -218,9 +221,9 @@ class AtoControllerNode(RunNodeHooks, Node):
             self.states = {0: state}
             self.state_received_wall = time.monotonic()
 
-    def on_reference(self, msg: JointTrajectory) -> None:
+    def on_reference(self, data: bytes) -> None:
         try:
-            reference = reference_from_msg(msg)
+            reference = decoded(data, wire.decode_reference, JointTrajectory, reference_from_msg)
         except MessageError as error:
             self.input_fault = f'bad reference message: {error}'
             return
@@ -305,8 +308,8 @@ class AtoControllerNode(RunNodeHooks, Node):
             self.get_logger().error(result.fault)
         self.last_fault_logged = result.fault
         self.step_times_s.append(time.perf_counter() - started)
-        msg = command_to_msg(Command(stamp_ns, self.knowledge.actuator_names, result.forces_n,
-                                     result.law))
+        msg = wire.encode_command(Command(stamp_ns, self.knowledge.actuator_names,
+                                          result.forces_n, result.law))
         self.publishing(self.command_pub, msg)
         self.last_command_msg = msg
         self.last_stamp_ns = stamp_ns

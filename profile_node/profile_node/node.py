@@ -46,6 +46,7 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64, Header
 from trajectory_msgs.msg import JointTrajectory
 
+from ato_common import wire
 from ato_common.braking_curves import RunSupervision
 from ato_common.identity import scenario_identity
 from ato_common.params import Param, ParameterTable
@@ -54,6 +55,7 @@ from ato_common.ros import (
     Observation,
     Publishing,
     RunNodeHooks,
+    decoded,
     diagnostic_status,
     freeze_startup_objects,
     from_duration,
@@ -151,7 +153,7 @@ class ProfileNode(RunNodeHooks, Node):
         watch_plant_identity(self, self.identity, 'refusing to stream the target curve')
         if self.lockstep:
             self.create_subscription(Clock, topic('clock').name, self.on_clock,
-                                     qos_profile(topic('clock').qos))
+                                     qos_profile(topic('clock').qos), raw=True)
         else:
             self.create_subscription(JointTrajectory, topic('state').name, self.on_state,
                                      qos_profile(topic('state').qos))
@@ -193,7 +195,8 @@ class ProfileNode(RunNodeHooks, Node):
                                          for i in range(count + 1)))
 
     def publish(self, stamp_ns: int) -> None:
-        self.publishing(self.reference_pub, reference_to_msg(self.reference_at(stamp_ns)))
+        # as CDR bytes packed from a template (ato_common.wire): a standard JointTrajectory
+        self.publishing(self.reference_pub, wire.encode_reference(self.reference_at(stamp_ns)))
 
     def publish_supervision(self, stamp_ns: int) -> None:
         """Distance to go and permitted speed now (unstamped: only ever for the current tick),
@@ -204,10 +207,10 @@ class ProfileNode(RunNodeHooks, Node):
         now = self.trajectory.at(seconds(stamp_ns - self.time_origin_ns))
         if dtg:
             target = self.plan.next_target(now.position, now.time_s)
-            self.publishing(self.dtg_pub, Float64(data=target.location_m - now.position))
+            self.publishing(self.dtg_pub, wire.encode_float64(target.location_m - now.position))
         if permitted:
-            self.publishing(self.permitted_pub,
-                            Float64(data=self.plan.permitted_speed(now.position, now.time_s)))
+            self.publishing(self.permitted_pub, wire.encode_float64(
+                self.plan.permitted_speed(now.position, now.time_s)))
 
     def publish_plan(self, stamp_ns: int, why: str) -> None:
         """The plan on diagnostics: only when it changes (start, replan, resume)."""
@@ -219,12 +222,16 @@ class ProfileNode(RunNodeHooks, Node):
         self.publishing(self.diag_pub, DiagnosticArray(header=Header(stamp=to_time(stamp_ns)),
                                                        status=[status]))
 
-    def on_clock(self, msg: Clock) -> None:
+    def on_clock(self, data: bytes) -> None:
         if not self.subscribers_met:
             if self.reference_pub.get_subscription_count() < self.params['wait_for_subscribers']:
                 return  # the plant re-sends the tick until the reference comes
             self.subscribers_met = True
-        tick = from_time(msg.clock)
+        try:
+            tick = decoded(data, wire.decode_clock, Clock, lambda msg: from_time(msg.clock))
+        except MessageError as error:
+            self.get_logger().warning(f'bad /clock message: {error}', throttle_duration_sec=1.0)
+            return
         if not self.plan_reported:
             self.publish_plan(tick, f'{self.plan.strategy} plan')
         if tick != self.sent_ahead_ns or tick == self.last_tick_ns:

@@ -8,7 +8,11 @@ Messages are written as the raw CDR bytes received (no deserialise/serialise). L
 :data:`ato_common.conventions.TOPICS` whose message starts with a header stamp or a time, /clock
 included) are logged at their own stamp, so a recording is the same however late the recorder
 received them; every other topic at the recorder's ROS time on receipt (simulated time with
-``--ros-args -p use_sim_time:=true``). ``receipt`` logs every topic on receipt, as rosbag2 does.
+``--ros-args -p use_sim_time:=true``, or ``--sim-time``). ``receipt`` logs every topic on
+receipt, as rosbag2 does. ``--sim-time`` takes the recorder's time from the ``/clock`` messages
+it records (the simulated time of the last one, 0 before the first), as ``use_sim_time`` would
+but without rclpy's second, deserialising subscription to ``/clock`` (a lockstep run publishes
+one every step); ``/clock`` is then always subscribed, recorded only if asked for.
 The publish time (``--publish-time``): by default ``source``, the publisher's source timestamp
 (wall time) as rosbag2 records it; rclpy hands it only to a subscription served by its
 single-threaded executor, so the recorder spins that one (``ATO_EXECUTOR=single`` in its own
@@ -31,9 +35,11 @@ from pathlib import Path
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
+from rosgraph_msgs.msg import Clock as ClockMsg
 
 from ato_common.conventions import TOPICS
-from ato_common.ros import RunNodeHooks, freeze_startup_objects, run_node
+from ato_common.ros import RunNodeHooks, freeze_startup_objects, qos_profile, run_node
+from ato_common.validation import ConfigError
 from recorder.bag import (
     DEFAULT_FLUSH_PERIOD_LOG_S,
     DEFAULT_FLUSH_PERIOD_S,
@@ -44,6 +50,7 @@ from recorder.ros_io import message_class, offered_profiles, subscription_qos
 from recorder.rosbag2_format import cdr_stamp_ns, starts_with_stamp
 
 LOG_TIMES = ('stamp', 'receipt')
+CLOCK = TOPICS['clock'].name
 
 
 def is_suite_topic(topic: str, type_name: str) -> bool:
@@ -65,9 +72,15 @@ def logs_at_stamp(topic: str, type_name: str, log_time: str) -> bool:
 
 class RecorderNode(RunNodeHooks, Node):
     def __init__(self, writer: BagWriter, topics: list[str] | None, discovery_period_s: float,
-                 log_time: str = 'stamp', publish_time: str = 'source'):
+                 log_time: str = 'stamp', publish_time: str = 'source', sim_time: bool = False):
         super().__init__('recorder')
         self.writer = writer
+        self.sim_time = sim_time
+        self.sim_now_ns = 0  # --sim-time: the stamp of the last /clock
+        self.clock_topic = self.resolve_topic_name(CLOCK)  # /clock as remapped (a namespace)
+        if sim_time and self.get_parameter('use_sim_time').value:
+            raise ConfigError('--sim-time and use_sim_time both ask for simulated time: give '
+                              'one of them')
         self.log_time = log_time
         self.publish_time = publish_time
         self.wanted = set(topics) if topics else None
@@ -87,6 +100,11 @@ class RecorderNode(RunNodeHooks, Node):
         freeze_startup_objects()
 
     def discover(self) -> None:
+        if self.sim_time and self.clock_topic not in self.subscribed and \
+                self.wanted is not None and self.clock_topic not in self.wanted:
+            # the time only, not recorded
+            self.subscribed[self.clock_topic] = self.create_subscription(
+                ClockMsg, CLOCK, self._on_clock, qos_profile(TOPICS['clock'].qos), raw=True)
         for topic, types in self.get_topic_names_and_types():
             if topic in self.subscribed or (self.wanted is not None and topic not in self.wanted):
                 continue
@@ -117,16 +135,28 @@ class RecorderNode(RunNodeHooks, Node):
             self.get_logger().info(f'recording {topic} [{type_name}], logged at '
                                    f'{"its stamp" if stamped else "receipt"}')
 
+    def _on_clock(self, data: bytes) -> None:
+        stamp = cdr_stamp_ns(data)
+        if stamp is not None:
+            self.sim_now_ns = stamp
+
+    def now_ns(self) -> int:
+        """The recorder's time: of the last /clock with ``--sim-time``, else its ROS time."""
+        return self.sim_now_ns if self.sim_time else self.get_clock().now().nanoseconds
+
     def _callback(self, topic: str, stamped: bool):
-        write, clock = self.writer.write, self.get_clock()
+        write = self.writer.write
+        is_clock = topic == self.clock_topic
 
         # Two parameters, no default: rclpy passes the message info only to such a callback.
         def on_message(data: bytes, info) -> None:
             if self.finished:
                 return
+            if is_clock and self.sim_time:
+                self._on_clock(data)
             log_time_ns = cdr_stamp_ns(data) if stamped else None
             if log_time_ns is None:
-                log_time_ns = clock.now().nanoseconds
+                log_time_ns = self.now_ns()
             try:
                 write(topic, log_time_ns, data,
                       info.get('source_timestamp') or None if info else None)
@@ -188,6 +218,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('--publish-time', choices=('source', 'log'), default='source',
                         help="source: the publisher's source timestamp, as rosbag2 (default); "
                              'log: the log time')
+    parser.add_argument('--sim-time', action='store_true',
+                        help='the time of unstamped messages: the simulated time of the last '
+                             '/clock (as use_sim_time, without its second /clock subscription)')
     parser.add_argument('--custom-data', action='append', default=[], metavar='KEY=VALUE',
                         help="a string pair for metadata.yaml's custom_data (repeatable)")
     parser.add_argument('--discovery-period', type=float, default=0.1,
@@ -218,7 +251,8 @@ def main(args=None) -> int:
         return 2
     try:
         return run_node(lambda: RecorderNode(writer, options.topics, options.discovery_period,
-                                             options.log_time, options.publish_time), args)
+                                             options.log_time, options.publish_time,
+                                             options.sim_time), args)
     finally:
         if not writer.closed:  # the node never came up
             try:

@@ -28,7 +28,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header, String
 from trajectory_msgs.msg import JointTrajectory
 
-from ato_common import units
+from ato_common import units, wire
 from ato_common.identity import scenario_identity
 from ato_common.params import Param, ParameterTable
 from ato_common.plant_setup import parse_failure_injection
@@ -37,17 +37,14 @@ from ato_common.ros import (
     Observation,
     Publishing,
     RunNodeHooks,
-    actuator_forces_to_msg,
     command_from_msg,
+    decoded,
     diagnostic_status,
     freeze_startup_objects,
-    from_time,
     node_usage,
     qos_profile,
     run_node,
-    state_to_msg,
     status_name,
-    to_duration,
     to_time,
     topic,
     wait_until_delivered,
@@ -202,7 +199,7 @@ class TrainPlantNode(RunNodeHooks, Node):
                 raise ConfigError(reason)
             self.inject_failure(p['inject_failure'])
         self.create_subscription(JointState, topic('command').name, self.on_command,
-                                 qos_profile(topic('command').qos))
+                                 qos_profile(topic('command').qos), raw=True)
         # Wall-clock timer: start-up, re-sends in lockstep, integration in real time.
         self.timer = self.create_timer(
             0.02 if self.lockstep else 1.0 / p['real_time_rate_hz'], self.on_timer)
@@ -226,7 +223,9 @@ class TrainPlantNode(RunNodeHooks, Node):
             # Once per step: a re-sent step must repeat the same measurement (sensor noise is
             # drawn here), or lockstep runs would depend on how often a step was re-sent.
             truth = self.sim.truth()
-            self.step_messages = [stamp, Clock(clock=to_time(stamp)), truth,
+            # The per-step messages go out as CDR bytes packed from templates (ato_common.wire):
+            # standard messages on the wire, without rclpy's message objects.
+            self.step_messages = [stamp, wire.encode_clock(stamp), truth,
                                   self._msg(self.sim.measured(truth), stamp), None, None, None]
             self.step_since_wall = time.monotonic()
             if self.waiting:
@@ -243,8 +242,8 @@ class TrainPlantNode(RunNodeHooks, Node):
         truth, commanded, applied = self.observations
         for index, observation, build in (
                 (4, truth, lambda: self._msg(messages[2], stamp)),
-                (5, commanded, lambda: actuator_forces_to_msg(stamp, names, self.sim.commanded)),
-                (6, applied, lambda: actuator_forces_to_msg(stamp, names, self.sim.applied))):
+                (5, commanded, lambda: wire.encode_joint_forces(stamp, names, self.sim.commanded)),
+                (6, applied, lambda: wire.encode_joint_forces(stamp, names, self.sim.applied))):
             publisher = observation.publisher
             if observation.due():
                 if messages[index] is None:
@@ -261,12 +260,9 @@ class TrainPlantNode(RunNodeHooks, Node):
             self.publish_diagnostics()
             self.next_diagnostic_ns = self.sim.stamp_ns + nanoseconds(DIAGNOSTIC_PERIOD_S)
 
-    def _msg(self, state: TrainState, stamp_ns: int):
-        msg = state_to_msg(state)
-        msg.header.stamp = to_time(stamp_ns)
+    def _msg(self, state: TrainState, stamp_ns: int) -> bytes:
         # Run time since the start, so real-time subscribers can relate stamps to the curve.
-        msg.points[0].time_from_start = to_duration(seconds(state.stamp_ns))
-        return msg
+        return wire.encode_state(state, stamp_ns, seconds(state.stamp_ns))
 
     def safety_message(self) -> str:
         sim = self.sim
@@ -425,11 +421,12 @@ class TrainPlantNode(RunNodeHooks, Node):
             for _ in range(steps):
                 self.advance()
 
-    def on_command(self, msg: JointState) -> None:
+    def on_command(self, data: bytes) -> None:
         if not self.started or self.finished:
             return
         try:
-            command = command_from_msg(msg, self.sim.actuator_names)
+            command = decoded(data, wire.decode_command, JointState, command_from_msg,
+                              self.sim.actuator_names)
             if self.lockstep and command.stamp_ns == self.stamp_ns() - self.period_ns:
                 return  # the previous step's command again (it answered a re-sent step)
             wrong = self.wrong_stamp(command.stamp_ns)
@@ -453,7 +450,7 @@ class TrainPlantNode(RunNodeHooks, Node):
             self.last_rejection = f'rejected command: {error}; holding the previous one'
             self.get_logger().warning(self.last_rejection, throttle_duration_sec=1.0)
             self.publish_diagnostics()
-            if self.lockstep and from_time(msg.header.stamp) != self.stamp_ns():
+            if self.lockstep and wire.stamp_of(data) != self.stamp_ns():
                 return
             if self.lockstep:
                 self.sim.command_missed()  # this step's command was not valid
