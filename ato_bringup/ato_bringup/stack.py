@@ -36,6 +36,7 @@ from trajectory_msgs.msg import JointTrajectory
 from ato_common import wire
 from ato_common.conventions import normalised_namespace, stack_remaps
 from ato_common.ros import (
+    MessageError,
     decoded,
     from_time,
     make_executor,
@@ -97,6 +98,10 @@ class Sample:
     law: str = ''
 
 
+#: how many reasons for unread messages the monitor keeps
+MAX_REJECTED = 10
+
+
 @dataclass
 class Monitor:
     """Subscriptions of the runner, keyed by stamp: those of ``watch`` (``FULL`` or ``LEAN``).
@@ -113,6 +118,7 @@ class Monitor:
     last_stamp_ns: int = -1  # of the newest state
     arrivals: list[tuple[float, int]] = field(default_factory=list)  # (monotonic s, stamp ns)
     counts: dict[str, int] = field(default_factory=dict)  # messages received per watched topic
+    rejected: list[str] = field(default_factory=list)  # why a message was not read (the first)
 
     def __post_init__(self):
         unknown = set(self.watch) - set(FULL)
@@ -138,9 +144,24 @@ class Monitor:
             sample = self.samples[stamp_ns] = Sample()
         return sample
 
+    def _read(self, key: str, data: bytes, *read):
+        """A message of ``key`` read by ``read`` (``ros.decoded``'s arguments), or None for
+        one that breaks the suite's layout (some other publisher on the topic): the monitor
+        says so, keeps the reason and goes on."""
+        self.counts[key] += 1
+        try:
+            return decoded(data, *read)
+        except MessageError as error:
+            if len(self.rejected) < MAX_REJECTED:
+                self.rejected.append(f'{topic(key).name}: {error}')
+            self.node.get_logger().warning(f'{topic(key).name}: not read: {error}',
+                                           throttle_duration_sec=1.0)
+            return None
+
     def on_state(self, data: bytes) -> None:
-        self.counts['state'] += 1
-        state = decoded(data, wire.decode_state, JointTrajectory, state_from_msg)
+        state = self._read('state', data, wire.decode_state, JointTrajectory, state_from_msg)
+        if state is None:
+            return
         stamp_ns = state.stamp_ns
         s = self._sample(stamp_ns)
         self.last_stamp_ns = max(self.last_stamp_ns, stamp_ns)
@@ -151,17 +172,20 @@ class Monitor:
             s.ref_position, s.ref_speed = self.reference(stamp_ns)
 
     def on_reference(self, data: bytes) -> None:
-        self.counts['reference'] += 1
-        reference = decoded(data, wire.decode_reference, JointTrajectory, reference_from_msg)
+        reference = self._read('reference', data, wire.decode_reference, JointTrajectory,
+                               reference_from_msg)
+        if reference is None:
+            return
         s = self._sample(reference.stamp_ns)
         s.ref_position, s.ref_speed = reference.now.position, reference.now.speed
 
     def on_command(self, data: bytes) -> None:
-        self.counts['command'] += 1
-        stamp_ns, law, _, _, _, effort = decoded(
-            data, wire.decode_joint_state, JointState,
-            lambda m: (from_time(m.header.stamp), m.header.frame_id, m.name, m.position,
-                       m.velocity, m.effort))
+        read = self._read('command', data, wire.decode_joint_state, JointState,
+                          lambda m: (from_time(m.header.stamp), m.header.frame_id, m.name,
+                                     m.position, m.velocity, m.effort))
+        if read is None:
+            return
+        stamp_ns, law, _, _, _, effort = read
         s = self._sample(stamp_ns)
         s.command, s.law = tuple(effort), law
 

@@ -57,6 +57,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ato_common import units
+from ato_common.identity import Undescribable, content_key
 from ato_common.line import Line, PiecewiseConstant
 
 # ETCS default ceiling-supervision margins (SUBSET-026 A.3.1): dV at and below V_min, at and
@@ -408,6 +409,11 @@ class SampledLimit:
         return v0 + (v1 - v0) * (position_m - x0) / (x1 - x0)
 
 
+#: how many scenarios' supervisions a process keeps (RunSupervision.for_scenario)
+RUN_CACHE_SIZE = 8
+_RUNS: dict[str, 'RunSupervision'] = {}
+
+
 class RunSupervision:
     """One movement authority per leg of a run (station to station). The leg in force is the
     supervised train's state (``TrainSimulation`` keeps it): it moves on to the next leg only
@@ -434,13 +440,27 @@ class RunSupervision:
     @classmethod
     def for_scenario(cls, scenario) -> 'RunSupervision':
         """The run of a scenario (:class:`ato_common.scenario.Scenario`): from its initial
-        station through every later one, bounded by the train's design maximum speed."""
+        station through every later one, bounded by the train's design maximum speed.
+
+        Built once per content in a process (:data:`_RUNS`, the last few): the supervision is
+        read-only once built (its sampled tables are filled in on first use, from its own
+        content), and a campaign's or a comparison's runs of one scenario would otherwise build
+        the same braking curves again for every run."""
         stations = [s for s in scenario.line.stations
                     if s.position_m >= scenario.run.initial_position_m - 1e-9]
-        return cls(scenario.line, scenario.supervision, scenario.train.length_m,
-                   [s.position_m for s in stations], [s.name for s in stations],
-                   [s.dwell_s for s in stations],
-                   getattr(scenario.train, 'max_speed_mps', math.inf))
+        arguments = (scenario.line, scenario.supervision, scenario.train.length_m,
+                     [s.position_m for s in stations], [s.name for s in stations],
+                     [s.dwell_s for s in stations],
+                     getattr(scenario.train, 'max_speed_mps', math.inf))
+        try:
+            key = repr(content_key(arguments))
+        except Undescribable:
+            return cls(*arguments)
+        run = _RUNS.pop(key, None) or cls(*arguments)
+        _RUNS[key] = run  # the newest last
+        while len(_RUNS) > RUN_CACHE_SIZE:
+            _RUNS.pop(next(iter(_RUNS)))
+        return run
 
     def leg_at(self, position_m: float) -> int:
         passed = bisect_right(self.stations_m, position_m + self.STOP_WINDOW_M) - 1

@@ -168,3 +168,32 @@ def test_the_sampled_limits_match_the_exact_curves_and_never_exceed_them(name):
                 assert sampled(x) >= exact - 0.01  # within 0.036 km/h between samples
             for x in sampled.positions:  # exact at every sample
                 assert sampled(x) == pytest.approx(leg.curve(curve, x), abs=1e-9)
+
+
+def test_the_run_supervision_is_built_once_per_content():
+    """A campaign's runs of one scenario share one supervision; any change of what it is built
+    from (here a dwell, the train's length) builds another, equal to one built afresh."""
+    import dataclasses
+
+    import ato_common.braking_curves as braking_curves
+    scenario = load_scenario('short_line')
+    first = RunSupervision.for_scenario(scenario)
+    assert RunSupervision.for_scenario(load_scenario('short_line')) is first
+    stations = list(scenario.line.stations)
+    stations[1] = dataclasses.replace(stations[1], dwell_s=stations[1].dwell_s + 5.0)
+    other_dwell = dataclasses.replace(scenario, line=dataclasses.replace(
+        scenario.line, stations=type(scenario.line.stations)(stations)))
+    longer = dataclasses.replace(scenario, train=dataclasses.replace(
+        scenario.train, length_m=scenario.train.length_m + 50.0))
+    for changed in (other_dwell, longer):
+        again = RunSupervision.for_scenario(changed)
+        assert again is not first
+        braking_curves._RUNS.clear()
+        fresh = RunSupervision.for_scenario(changed)
+        assert fresh is not again
+        assert again.dwells_s == fresh.dwells_s
+        for leg, fresh_leg in zip(again.legs, fresh.legs):
+            assert leg.end_of_authority_m == fresh_leg.end_of_authority_m
+            xs = np.linspace(leg.start_m, leg.supervised_location_m, 200)
+            assert [leg.curve('ebi', x) for x in xs] == [fresh_leg.curve('ebi', x) for x in xs]
+    assert other_dwell.line.stations[1].dwell_s != scenario.line.stations[1].dwell_s
