@@ -86,14 +86,14 @@ def plan_statuses(outcome):
             if name == 'profile_node: plan']
 
 
-def run_traction_loss(tmp_path, domain_id, supplement: float, **config):
+def run_traction_loss(tmp_path, domain_id, supplement: float, logs: str = 'logs', **config):
     path = scenario_file(tmp_path, f'loss_{supplement:g}', TRACTION_LOSS.format(
         supplement=supplement))
     offline = run_offline(load_scenario(path), 'pid', replan_check_period_s=CHECK_PERIOD_S)
     # The lockstep run goes on to the replanned arrival (the runner ends at the first plan's).
     end = offline.times_s[-1]
     outcome = run_lockstep(StackConfig(scenario=path, domain_id=domain_id, end_time_s=end,
-                                       log_dir=tmp_path / f'logs_{supplement:g}', **config))
+                                       log_dir=tmp_path / logs, **config))
     return outcome, offline
 
 
@@ -145,13 +145,14 @@ def test_with_too_little_reserve_the_expected_delay_is_reported_before_the_arriv
 
 def test_two_lockstep_runs_with_a_replan_are_identical_and_composed_equals_separate(
         tmp_path, domain_id):
-    first, _ = run_traction_loss(tmp_path / 'first', domain_id, 10.0)
-    composed, _ = run_traction_loss(tmp_path / 'composed', domain_id, 10.0, composed=True)
+    first, _ = run_traction_loss(tmp_path, domain_id, 10.0, 'first')
+    composed, _ = run_traction_loss(tmp_path, domain_id, 10.0, 'composed', composed=True)
     assert [k for k, _ in composed.samples] == [k for k, _ in first.samples]
     for attribute in ('positions', 'speeds', 'ref_position', 'ref_speed', 'command'):
-        a = [getattr(s, attribute) for _, s in first.samples]
-        b = [getattr(s, attribute) for _, s in composed.samples]
-        assert a == b, attribute
+        # (the last step's command: the plant may end before the monitor hears it)
+        a = [getattr(s, attribute) for _, s in first.samples[:-1]]
+        b = [getattr(s, attribute) for _, s in composed.samples[:-1]]
+        assert a == b, attribute  # bit-identical floats
     assert [m for _, m, _ in plan_statuses(composed)] == \
         [m for _, m, _ in plan_statuses(first)]
 
@@ -170,17 +171,18 @@ def test_after_a_watchdog_brake_to_standstill_the_reference_resumes_and_the_trai
         stack.start_process('plant', params['plant'])
         monitor = stack.monitor
         controller = ControllerStandIn(stack)
-        # a faulty ATO: traction for 60 s, then every command stamped 1000 s ahead of its step,
-        # until the watchdog's emergency brake has stopped the train
+        # a faulty ATO: too little traction for 60 s (the train falls behind the reference),
+        # then every command stamped 1000 s ahead of its step, until the watchdog's emergency
+        # brake has stopped the train
         k = 0
         for k in range(600):
-            controller.answer(k * PERIOD_NS, [3e5], names)
+            controller.answer(k * PERIOD_NS, [1e5], names)
         moving_at = monitor.samples[600 * PERIOD_NS]
-        assert moving_at.speeds[0] > 10.0
+        assert moving_at.speeds[0] > 5.0
         for k in range(600, 3000):
             stamp = k * PERIOD_NS
             assert stack.spin_until(lambda s=stamp: monitor.last_stamp_ns == s, 60.0)
-            msg = JointState(name=list(names), effort=[3e5])
+            msg = JointState(name=list(names), effort=[1e5])
             msg.header.stamp = to_time(stamp + 1000 * 10**9)
             controller.publisher.publish(msg)
             assert stack.spin_until(lambda s=stamp: monitor.last_stamp_ns > s, 30.0)
