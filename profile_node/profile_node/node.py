@@ -16,12 +16,22 @@ first ones, a changed period, a re-sent tick) gets it at once. Real time: the sa
 clock timer, with the curve's time origin taken from the plant's first state message (its stamp
 minus its run time). The whole curve is latched once at start-up.
 
-Resume (real time): a plant that starts again (its run time goes back) gives the curve its time
-origin again, so the reference starts from the start of the run, not the dead plant's origin.
-A measured train standing still more than ``RESUME_GAP_M`` behind the reference (after an
-emergency or watchdog brake) gets the rest of its leg planned again from where it stands
-(``planner.resume_plan``), so the law does not chase a reference far ahead. The latched curve
-stays the original plan.
+Resume: a plant that starts again (its run time goes back; in lockstep its /clock) gives the
+curve its time origin again, so the reference starts from the start of the run, not the dead
+plant's origin. A measured train standing still more than ``RESUME_GAP_M`` behind the reference
+(after an emergency or watchdog brake) gets the rest of its leg planned again from where it
+stands (``planner.resume_plan``), so the law does not chase a reference far ahead. The latched
+curve stays the original plan.
+
+Checks in lockstep: the measured state is read only at check instants, the first tick at or
+after each multiple of ``replan_check_period_s`` of simulated time, taken from a subscription
+no executor spins (keep last ``MEASURED_DEPTH``: the states between checks are overwritten in
+the middleware, never taken). A decision from the state of check instant t_c (a replan, a
+resume) applies to the references from t_c + 2 control periods on
+(``profile_node.replan.LockstepPlans``); a reference such a check decides is not sent ahead
+before the check's state has come (if it has not, the tick is answered when the plant re-sends
+it). The run stays bit-reproducible, and decides as the offline loop given the same period. With
+no publisher of the measured state (a profile driven by /clock alone) no check is made.
 
 Graph: ``wait_for_subscribers`` holds back only the first reference (an observer that goes away
 later does not stop the loop); the plant's latched identity must be the profile's own scenario,
@@ -31,9 +41,10 @@ logged, never fatal. A preview of more than ``MAX_PREVIEW_POINTS`` points is ref
 The plan (strategy, forecast energy, expected delay, each stop's target and planned arrival and
 reserve, each journey timing point's planned time) is published on ``/diagnostics`` as the
 status ``<node>: plan``, only when the plan changes: at the first tick, then at each
-replan or resume (no per-step message). Real time, ``timetable`` strategy: a moving train late
-by more than ``timetable.replan_delay_s`` gets the rest of its run planned again from its
-measured state (``profile_node.replan``).
+replan or resume (no per-step message; the status message says ``replanned`` or ``resumed``).
+``timetable`` strategy: a moving train late by more than ``timetable.replan_delay_s`` gets the
+rest of its run planned again from its measured state (``profile_node.replan``): in real time
+at each measurement, in lockstep at the check instants.
 """
 
 from __future__ import annotations
