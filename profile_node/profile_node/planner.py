@@ -52,6 +52,7 @@ from profile_node.timetable import (
 )
 from profile_node.trajectory import (
     AccelerationSteps,
+    CoastSteps,
     StateBuilder,
     Trajectory,
     TrajectoryBuilder,
@@ -378,7 +379,13 @@ def _coast_then_brake(builder: TrajectoryBuilder, scenario: Scenario, section: S
 
     def brake_start(speed: float) -> float:
         return end - speed_change_distance(speed, exit_speed, deceleration, jerk)
-    if _coast_end(scenario, builder.x, peak, low, jerk, end) <= brake_start(low):
+    # The coasts from here (to the speeds the bisection below tries) share their steps.
+    here = CoastSteps(builder.x, peak, coasting_deceleration(scenario), jerk, COAST_STEP_S)
+
+    def coast_end_from_here(speed: float) -> float:
+        x = here.end_of(speed, end)
+        return math.inf if x is None else x
+    if coast_end_from_here(low) <= brake_start(low):
         # Room for the whole coast: cruise until the point from which it ends where the
         # braking starts (a later start ends later).
         first, last = builder.x, brake_start(low)
@@ -395,7 +402,7 @@ def _coast_then_brake(builder: TrajectoryBuilder, scenario: Scenario, section: S
         lo, hi = low, peak
         for _ in range(20):
             middle = 0.5 * (lo + hi)
-            if _coast_end(scenario, builder.x, peak, middle, jerk, end) <= brake_start(middle):
+            if coast_end_from_here(middle) <= brake_start(middle):
                 hi = middle
             else:
                 lo = middle

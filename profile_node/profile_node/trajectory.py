@@ -231,6 +231,68 @@ class AccelerationSteps:
         return self.states[-1][1]
 
 
+class CoastSteps:
+    """:meth:`TrajectoryBuilder.coast_to` from one start (``v_from`` at ``x0``, zero
+    acceleration, t = 0) towards many target speeds, its whole steps computed once and replayed
+    (as :class:`AccelerationSteps`). ``end_of(v, limit_x)`` is where the builder's coast to
+    ``v`` ends, bit for bit, or None where it passes ``limit_x`` first (coast_to's False)."""
+
+    def __init__(self, x0: float, v_from: float, deceleration, jerk: float,
+                 step_s: float = 2.0):
+        self.deceleration, self.jerk, self.step_s = deceleration, jerk, step_s
+        self.states: list[tuple[float, float, float, float]] = [(0.0, x0, v_from, 0.0)]
+        self.jerks: list[float] = []
+
+    def _jerk(self, k: int) -> float:
+        if k == len(self.jerks):
+            t, x, v, a = self.states[k]
+            step_s, jerk, deceleration = self.step_s, self.jerk, self.deceleration
+            predicted = v + a * step_s
+            ahead = x + v * step_s
+            wanted = -max(deceleration(predicted, ahead), deceleration(v, x), 0.0)
+            j = min(max((wanted - a) / step_s, -jerk), jerk)
+            builder = StateBuilder(x, t)
+            builder.v, builder.a = v, a
+            builder.add(step_s, j)
+            self.jerks.append(j)
+            self.states.append((builder.t, builder.x, builder.v, builder.a))
+        return self.jerks[k]
+
+    def end_of(self, target_speed: float, limit_x: float = math.inf) -> float | None:
+        jerk, step_s = self.jerk, self.step_s
+        if target_speed >= self.states[0][2]:
+            return self.states[0][1]
+        for k in range(1_000_000):
+            t, x, v, a = self.states[k]
+            if x > limit_x:
+                return None
+            remaining = v - target_speed
+            if remaining <= 1e-12:
+                return x
+            if a < 0.0 and remaining <= a * a / (2.0 * jerk) + 1e-12:
+                builder = StateBuilder(x, t)
+                builder.v, builder.a = v, a
+                ramp_jerk = a * a / (2.0 * remaining)
+                builder.add(-a / ramp_jerk, ramp_jerk)
+                return builder.x
+            j = self._jerk(k)
+            a_end = a + j * step_s
+            v_end = v + step_s * (a + 0.5 * j * step_s)
+            if v_end - target_speed <= a_end * a_end / (2.0 * jerk):
+                builder = StateBuilder(x, t)
+                builder.v, builder.a = v, a
+                if a >= 0.0:
+                    peak = math.sqrt(remaining * jerk)
+                    builder.add(peak / jerk, -jerk)
+                    builder.add(peak / jerk, jerk)
+                else:
+                    hold = (remaining - a * a / (2.0 * jerk)) / -a
+                    builder.add(max(hold, 0.0), 0.0)
+                    builder.add(-a / jerk, jerk)
+                return builder.x
+        return self.states[-1][1]
+
+
 def speed_change_durations(dv: float, max_accel: float, jerk: float) -> tuple[float, float]:
     """(jerk ramp duration, constant-acceleration duration) of a symmetric S-curve changing the
     speed by ``dv`` >= 0 with |a| <= max_accel and |j| = jerk."""
