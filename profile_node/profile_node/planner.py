@@ -345,10 +345,12 @@ def coasting_deceleration(scenario: Scenario):
     """deceleration(v, x) of the train coasting (no traction, no brake) with its front at x:
     nominal Davis resistance over the mass plus g sin(grade over the train's length) [m/s^2]."""
     train, line = scenario.train, scenario.line
+    # Looked up once (the same values as per call): per coasting step.
+    resistance, mass, length = train.davis_nominal.force, train.mass_kg, train.length_m
+    gravity, grade = units.STANDARD_GRAVITY, train_grade_sine
 
     def deceleration(v: float, x: float) -> float:
-        return (train.davis_nominal.force(v) / train.mass_kg
-                + units.STANDARD_GRAVITY * train_grade_sine(line, x, train.length_m))
+        return resistance(v) / mass + gravity * grade(line, x, length)
     return deceleration
 
 
