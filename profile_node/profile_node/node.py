@@ -92,10 +92,10 @@ DELAY_WARNING_S = 1.0
 # 15.6x to 0.03x real time. A hundred cover a 100 s horizon at the default 1 s spacing.
 MAX_PREVIEW_POINTS = 100
 
-# Lockstep: the measured states the profile's unspun subscription keeps (the newest first out
-# of it). Between two reads the plant can publish at most the states up to two periods after
-# the check instant being read (it waits for the reference sent ahead), so a few suffice; the
-# rest are overwritten in the middleware, never taken.
+# Lockstep: the measured states the profile's unspun subscription keeps (taken oldest first).
+# When a check instant's state is read, the plant has published at most the states up to two
+# periods after it (it waits for the reference the check decides), so a few suffice; the
+# states between checks are overwritten in the middleware, never taken.
 MEASURED_DEPTH = 8
 
 
