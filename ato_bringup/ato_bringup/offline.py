@@ -26,7 +26,7 @@ from ato_common.types import NS_PER_S, nanoseconds, seconds
 from ato_common.uncertainty import perturbed
 from ato_controller_node.host import ControllerHost
 from profile_node.planner import Plan, plan_reference
-from profile_node.replan import Replanner
+from profile_node.replan import LockstepPlans, Replanner
 from train_plant_node.simulation import NORMAL, SensorSettings, TrainSimulation
 
 
@@ -170,19 +170,26 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
                 switches: dict[float, str] | None = None,
                 sensors: SensorSettings = SensorSettings(), model: str = 'point_mass',
                 end_time_s: float | None = None, controller_rate_hz: float | None = None,
-                uncertainty=None, **model_options) -> OfflineRun:
+                uncertainty=None, replan_check_period_s: float | None = None,
+                **model_options) -> OfflineRun:
     """Run ``controller`` on ``scenario`` with the plant ``model``; ``switches`` maps times to
     law names selected then; ``end_time_s`` and ``controller_rate_hz`` override the scenario's
     (a law that must run faster than a node can, e.g. Mao et al.'s feedback linearisation);
     ``uncertainty``: the drawn values the plant's truth is perturbed by (None: nominal). The
     plan comes from this process's cache of plans (``cached_plan``); with the ``timetable``
     strategy it is replanned when the train falls behind it (``profile_node.replan``), and the
-    run then follows the new plan (to its end, if that is later)."""
+    run then follows the new plan (to its end, if that is later). ``replan_check_period_s``:
+    decide as the profile node does in lockstep (``profile_node.replan.LockstepPlans``: the
+    measured state read at check instants this far apart, a replan or a resume from a standing
+    train applied two periods later) instead of replanning from every step's state at once."""
     key = scenario_key(scenario)
     plan = cached_plan(scenario, key)
-    replanner = Replanner(scenario, plan)
-    replanning = replanner.active
     period_ns = nanoseconds(1.0 / (controller_rate_hz or scenario.run.controller_rate_hz))
+    lockstep = (None if replan_check_period_s is None else
+                LockstepPlans(scenario, plan, period_ns, replan_check_period_s))
+    replanner = Replanner(scenario, plan) if lockstep is None else lockstep.replanner
+    replanning = replanner.active or lockstep is not None
+    in_force = plan
     truth_scenario = perturbed(scenario, uncertainty) if uncertainty is not None else scenario
     sim = TrainSimulation(truth_scenario, model, sensors=sensors, **model_options)
     host = ControllerHost(knowledge_of(scenario), seconds(period_ns), controller, settings)
@@ -217,9 +224,17 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
             host.select(pending.pop(0)[1])
         truth = truth_of()
         measured = measured_of(truth)
-        if replanning and replanner.update(t, measured.positions[0], measured.speeds[0]):
+        if lockstep is not None:
+            if lockstep.schedule(sim.stamp_ns):
+                lockstep.check(sim.stamp_ns, measured.positions[0], measured.speeds[0])
+            changed = lockstep.plan_at(sim.stamp_ns) is not in_force
+        else:
+            changed = replanning and replanner.update(t, measured.positions[0],
+                                                      measured.speeds[0])
+        if changed:
             # From now on the new plan's reference, sampled as the run goes.
-            at = replanner.plan.trajectory.at
+            in_force = replanner.plan if lockstep is None else lockstep.plan_at(sim.stamp_ns)
+            at = in_force.trajectory.at
             if sampled:
                 references, sampled = references[:k], False
                 add_reference = references.append

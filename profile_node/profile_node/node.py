@@ -16,12 +16,22 @@ first ones, a changed period, a re-sent tick) gets it at once. Real time: the sa
 clock timer, with the curve's time origin taken from the plant's first state message (its stamp
 minus its run time). The whole curve is latched once at start-up.
 
-Resume (real time): a plant that starts again (its run time goes back) gives the curve its time
-origin again, so the reference starts from the start of the run, not the dead plant's origin.
-A measured train standing still more than ``RESUME_GAP_M`` behind the reference (after an
-emergency or watchdog brake) gets the rest of its leg planned again from where it stands
-(``planner.resume_plan``), so the law does not chase a reference far ahead. The latched curve
-stays the original plan.
+Resume: a plant that starts again (its run time goes back; in lockstep its /clock) gives the
+curve its time origin again, so the reference starts from the start of the run, not the dead
+plant's origin. A measured train standing still more than ``RESUME_GAP_M`` behind the reference
+(after an emergency or watchdog brake) gets the rest of its leg planned again from where it
+stands (``planner.resume_plan``), so the law does not chase a reference far ahead. The latched
+curve stays the original plan.
+
+Checks in lockstep: the measured state is read only at check instants, the first tick at or
+after each multiple of ``replan_check_period_s`` of simulated time, taken from a subscription
+no executor spins (keep last ``MEASURED_DEPTH``: the states between checks are overwritten in
+the middleware, never taken). A decision from the state of check instant t_c (a replan, a
+resume) applies to the references from t_c + 2 control periods on
+(``profile_node.replan.LockstepPlans``); a reference such a check decides is not sent ahead
+before the check's state has come (if it has not, the tick is answered when the plant re-sends
+it). The run stays bit-reproducible, and decides as the offline loop given the same period. With
+no publisher of the measured state (a profile driven by /clock alone) no check is made.
 
 Graph: ``wait_for_subscribers`` holds back only the first reference (an observer that goes away
 later does not stop the loop); the plant's latched identity must be the profile's own scenario,
@@ -31,23 +41,22 @@ logged, never fatal. A preview of more than ``MAX_PREVIEW_POINTS`` points is ref
 The plan (strategy, forecast energy, expected delay, each stop's target and planned arrival and
 reserve, each journey timing point's planned time) is published on ``/diagnostics`` as the
 status ``<node>: plan``, only when the plan changes: at the first tick, then at each
-replan or resume (no per-step message). Real time, ``timetable`` strategy: a moving train late
-by more than ``timetable.replan_delay_s`` gets the rest of its run planned again from its
-measured state (``profile_node.replan``).
+replan or resume (no per-step message; the status message says ``replanned`` or ``resumed``).
+``timetable`` strategy: a moving train late by more than ``timetable.replan_delay_s`` gets the
+rest of its run planned again from its measured state (``profile_node.replan``): in real time
+at each measurement, in lockstep at the check instants.
 """
 
 from __future__ import annotations
 
-import math
-
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64, Header
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_common import wire
-from ato_common.braking_curves import RunSupervision
 from ato_common.identity import scenario_identity
 from ato_common.params import Param, ParameterTable
 from ato_common.ros import (
@@ -73,8 +82,8 @@ from ato_common.ros import (
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import Reference, nanoseconds, seconds
 from ato_common.validation import ConfigError
-from profile_node.planner import RESUME_GAP_M, plan_reference, resume_plan
-from profile_node.replan import Replanner
+from profile_node.planner import RESUME_GAP_M, Plan, plan_reference
+from profile_node.replan import CHECK_PERIOD_S, LockstepPlans, Replanner
 from profile_node.timetable import plan_summary
 
 # The plan's diagnostics warn from this expected delay on, s (below: the solver's accuracy).
@@ -84,6 +93,12 @@ DELAY_WARNING_S = 1.0
 # bytes, on every step: 60,001 of them (a 600 s horizon every 0.01 s) slowed a lockstep run from
 # 15.6x to 0.03x real time. A hundred cover a 100 s horizon at the default 1 s spacing.
 MAX_PREVIEW_POINTS = 100
+
+# Lockstep: the measured states the profile's unspun subscription keeps (taken oldest first).
+# When a check instant's state is read, the plant has published at most the states up to two
+# periods after it (it waits for the reference the check decides), so a few suffice; the
+# states between checks are overwritten in the middleware, never taken.
+MEASURED_DEPTH = 8
 
 
 def preview_problem(horizon_s: float, step_s: float) -> str | None:
@@ -110,6 +125,9 @@ PARAMS = (
           maximum=100),
     Param('curve_sample_period_s', 1.0, 'spacing of the latched whole-curve samples, s',
           minimum=0.01, maximum=60.0),
+    Param('replan_check_period_s', CHECK_PERIOD_S, 'lockstep: simulated time between two '
+          'checks of the measured state (replan a late train, resume a standing one), s',
+          minimum=0.01, maximum=3600.0),
 )
 
 
@@ -135,6 +153,10 @@ class ProfileNode(RunNodeHooks, Node):
         self.identity = scenario_identity(self.scenario)
         self.replanner = Replanner(self.scenario, self.plan)
         self.plan_reported = False
+        self.checks: list[int] = []  # lockstep: check instants whose state is still to read
+        self.plans: LockstepPlans | None = None
+        self.sampler: Node | None = None
+        self.unchecked_reported = False
         self.diag_pub = self.create_publisher(DiagnosticArray, topic('diagnostics').name,
                                               qos_profile(topic('diagnostics').qos))
 
@@ -152,6 +174,16 @@ class ProfileNode(RunNodeHooks, Node):
         self._curve_pub = curve_pub  # keep the latched publisher alive
         watch_plant_identity(self, self.identity, 'refusing to stream the target curve')
         if self.lockstep:
+            self.start_lockstep_plans()
+            # Not spun (a node of its own, on no executor): the measured state is taken from
+            # it only at check instants (module docstring), not paid for at every step.
+            self.sampler = Node(f'{self.get_name()}_measured_sampler', context=self.context,
+                                start_parameter_services=False)
+            self.measured_sub = self.sampler.create_subscription(
+                JointTrajectory, self.resolve_topic_name(topic('state_measured').name),
+                lambda msg: None, QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                                             history=HistoryPolicy.KEEP_LAST,
+                                             depth=MEASURED_DEPTH), raw=True)
             self.create_subscription(Clock, topic('clock').name, self.on_clock,
                                      qos_profile(topic('clock').qos), raw=True)
         else:
@@ -172,6 +204,22 @@ class ProfileNode(RunNodeHooks, Node):
                     f'{check.planned_s:.1f} s, outside [{point.earliest_s}, {point.latest_s}] s')
         freeze_startup_objects()
 
+    def start_lockstep_plans(self) -> None:
+        period_ns = nanoseconds(1.0 / self.scenario.run.controller_rate_hz)
+        self.plans = LockstepPlans(self.scenario, self.plan, period_ns,
+                                   self.params['replan_check_period_s'])
+        self.replanner = self.plans.replanner
+        self.checks = []
+
+    def close_outputs(self) -> None:
+        if self.sampler is not None:
+            self.sampler.destroy_node()
+            self.sampler = None
+
+    def plan_for(self, stamp_ns: int) -> Plan:
+        """The plan whose reference is streamed for ``stamp_ns``."""
+        return self.plan if self.plans is None else self.plans.plan_at(stamp_ns)
+
     def check_preview(self, changes) -> str | None:
         return preview_problem(changes.get('preview_horizon_s', self.params['preview_horizon_s']),
                                changes.get('preview_step_s', self.params['preview_step_s']))
@@ -191,8 +239,8 @@ class ProfileNode(RunNodeHooks, Node):
         t = seconds(stamp_ns - self.time_origin_ns)
         horizon, step = self.params['preview_horizon_s'], self.params['preview_step_s']
         count = int(horizon / step + 1e-9)
-        return Reference(stamp_ns, tuple(self.trajectory.at(t + i * step)
-                                         for i in range(count + 1)))
+        at = self.plan_for(stamp_ns).trajectory.at
+        return Reference(stamp_ns, tuple(at(t + i * step) for i in range(count + 1)))
 
     def publish(self, stamp_ns: int) -> None:
         # as CDR bytes packed from a template (ato_common.wire): a standard JointTrajectory
@@ -204,21 +252,23 @@ class ProfileNode(RunNodeHooks, Node):
         dtg, permitted = self.dtg_observation.due(), self.permitted_observation.due()
         if not (dtg or permitted):
             return
-        now = self.trajectory.at(seconds(stamp_ns - self.time_origin_ns))
+        plan = self.plan_for(stamp_ns)
+        now = plan.trajectory.at(seconds(stamp_ns - self.time_origin_ns))
         if dtg:
-            target = self.plan.next_target(now.position, now.time_s)
+            target = plan.next_target(now.position, now.time_s)
             self.publishing(self.dtg_pub, wire.encode_float64(target.location_m - now.position))
         if permitted:
             self.publishing(self.permitted_pub, wire.encode_float64(
-                self.plan.permitted_speed(now.position, now.time_s)))
+                plan.permitted_speed(now.position, now.time_s)))
 
-    def publish_plan(self, stamp_ns: int, why: str) -> None:
+    def publish_plan(self, stamp_ns: int, why: str, plan: Plan | None = None) -> None:
         """The plan on diagnostics: only when it changes (start, replan, resume)."""
         self.plan_reported = True
-        late = self.plan.expected_delay_s > DELAY_WARNING_S
+        plan = plan or self.plan
+        late = plan.expected_delay_s > DELAY_WARNING_S
         status = diagnostic_status(status_name(self, 'plan'), self.scenario.name,
                                    DiagnosticStatus.WARN if late else DiagnosticStatus.OK, why,
-                                   plan_summary(self.plan))
+                                   plan_summary(plan))
         self.publishing(self.diag_pub, DiagnosticArray(header=Header(stamp=to_time(stamp_ns)),
                                                        status=[status]))
 
@@ -232,15 +282,104 @@ class ProfileNode(RunNodeHooks, Node):
         except MessageError as error:
             self.get_logger().warning(f'bad /clock message: {error}', throttle_duration_sec=1.0)
             return
+        if self.last_tick_ns is not None and tick < self.last_tick_ns:
+            self.restart_lockstep()
+        if self.plans.schedule(tick):
+            self.checks.append(tick)
         if not self.plan_reported:
             self.publish_plan(tick, f'{self.plan.strategy} plan')
         if tick != self.sent_ahead_ns or tick == self.last_tick_ns:
-            self.publish(tick)  # not sent ahead, or the plant re-sent the tick
+            # not sent ahead, or the plant re-sent the tick
+            if not self.decided_until(tick):
+                return  # the state of a check instant has not come: the plant re-sends the tick
+            self.publish(tick)
         self.publish_supervision(tick)
         if self.last_tick_ns is not None and tick > self.last_tick_ns:
-            self.sent_ahead_ns = 2 * tick - self.last_tick_ns
-            self.publish(self.sent_ahead_ns)
+            ahead = 2 * tick - self.last_tick_ns
+            if self.decided_until(ahead):  # else it is sent at its own tick
+                self.sent_ahead_ns = ahead
+                self.publish(ahead)
         self.last_tick_ns = tick
+
+    def restart_lockstep(self) -> None:
+        """A new plant (its simulated time went back): the run and the curve start again."""
+        self.plan = plan_reference(self.scenario)
+        self.trajectory = self.plan.trajectory
+        self.start_lockstep_plans()
+        self.last_tick_ns = self.sent_ahead_ns = None
+        self.plan_reported = False
+        self.get_logger().warning('lockstep: the plant started again; the curve restarts from '
+                                  'its origin')
+
+    def decided_until(self, stamp_ns: int) -> bool:
+        """Whether every check instant whose decision applies to the reference of
+        ``stamp_ns`` has been decided (its measured state read now if it has come)."""
+        start_of = self.plans.start_of
+        if not self.checks or start_of(self.checks[0]) > stamp_ns:
+            return True
+        self.read_checks()
+        if self.checks and self.measured_sub.get_publisher_count() == 0:
+            # Nobody publishes the measured state (a profile driven by /clock alone, or before
+            # the plant's publisher is matched): no state can come, so no check can be made.
+            if not self.unchecked_reported:
+                self.unchecked_reported = True
+                self.get_logger().info('lockstep: no publisher of the measured state: the '
+                                       'reference goes on without checks of the train')
+            self.checks.clear()
+        return not self.checks or start_of(self.checks[0]) > stamp_ns
+
+    def read_checks(self) -> None:
+        """Take the measured states that have come, up to the oldest pending check instant's,
+        and decide from it (``LockstepPlans.check``); the older ones are dropped."""
+        sub = self.measured_sub
+        while self.checks:
+            with sub.handle:
+                taken = sub.handle.take_message(sub.msg_type, sub.raw)
+            if taken is None:
+                return
+            stamp = wire.stamp_of(taken[0])  # as bytes: only a check's state is read
+            if stamp is None:
+                continue
+            while self.checks and self.checks[0] < stamp:
+                self.get_logger().error(
+                    f'lockstep: the measured state of {seconds(self.checks.pop(0)):.3f} s was '
+                    f'overwritten before it was read (more than {MEASURED_DEPTH} states came '
+                    'after it): no check at that instant')
+            if self.checks and self.checks[0] == stamp:
+                self.checks.pop(0)
+                self.check_measured(stamp, taken[0])
+
+    def check_measured(self, stamp_ns: int, data: bytes) -> None:
+        try:
+            state = decoded(data, wire.decode_state, JointTrajectory, state_from_msg)
+        except MessageError as error:
+            self.get_logger().warning(f'lockstep: the measured state of '
+                                      f'{seconds(stamp_ns):.3f} s is not usable ({error})')
+            return
+        decision = self.plans.check(stamp_ns, state.positions[0], state.speeds[0])
+        if decision is None:
+            return
+        self.plan = decision.plan
+        self.trajectory = decision.plan.trajectory
+        self.report_decision(decision.kind, decision.checked_ns, decision.position_m,
+                             decision.plan, seconds(decision.start_ns))
+
+    def report_decision(self, kind: str, stamp_ns: int, position: float, plan: Plan,
+                        start_s: float) -> None:
+        if kind == 'replanned':
+            late = self.replanner.replans[-1][1]
+            self.get_logger().warning(
+                f'the train is late by {late:.1f} s at {position:.1f} m: the rest of the run is '
+                f'planned again from {start_s:.2f} s, expected delay '
+                f'{plan.expected_delay_s:.1f} s')
+            self.publish_plan(stamp_ns, 'replanned: the train was late', plan)
+        else:
+            self.resumes += 1
+            self.get_logger().warning(
+                f'the train stands at {position:.1f} m, behind the reference by more than '
+                f'{RESUME_GAP_M:g} m: the leg is planned again from there from {start_s:.2f} s '
+                f'({self.resumes} resumes)')
+            self.publish_plan(stamp_ns, 'resumed: the train stood behind the reference', plan)
 
     def on_state(self, msg: JointTrajectory) -> None:
         if not msg.points:
@@ -271,29 +410,12 @@ class ProfileNode(RunNodeHooks, Node):
         position, speed = state.positions[0], state.speeds[0]
         now_ns = self.get_clock().now().nanoseconds
         time_s = seconds(now_ns - self.time_origin_ns)
-        if self.replanner.update(time_s, position, speed) is not None:
-            self.plan = self.replanner.plan
-            self.trajectory = self.plan.trajectory
-            self.get_logger().warning(
-                f'the train is late by {self.replanner.replans[-1][1]:.1f} s: the rest of the '
-                f'run is planned again from {position:.1f} m, expected delay '
-                f'{self.plan.expected_delay_s:.1f} s')
-            self.publish_plan(now_ns, 'replanned: the train was late')
+        decided = self.replanner.decide(time_s, position, speed)
+        if decided is None:
             return
-        if not (math.isfinite(position) and math.isfinite(speed)) \
-                or abs(speed) > RunSupervision.STANDSTILL_MPS:
-            return
-        if self.trajectory.at(time_s).position - position <= RESUME_GAP_M:
-            return
-        plan = resume_plan(self.scenario, position, time_s)
-        if plan is None:
-            return
-        self.plan, self.trajectory = plan, plan.trajectory
-        self.replanner.plan = plan
-        self.resumes += 1
-        self.get_logger().warning(
-            f'the train stands at {position:.1f} m, behind the reference by more than '
-            f'{RESUME_GAP_M:g} m: the leg is planned again from there ({self.resumes} resumes)')
+        kind, self.plan = decided
+        self.trajectory = self.plan.trajectory
+        self.report_decision(kind, now_ns, position, self.plan, time_s)
 
     def on_timer(self) -> None:
         if self.time_origin_ns is not None:

@@ -26,7 +26,6 @@ supervision times), the braking into that target is planned further ahead and th
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass, replace
 from types import SimpleNamespace
@@ -51,7 +50,14 @@ from profile_node.timetable import (
     window_conflicts,
     window_target,
 )
-from profile_node.trajectory import Trajectory, TrajectoryBuilder, speed_change_distance
+from profile_node.trajectory import (
+    AccelerationSteps,
+    CoastSteps,
+    StateBuilder,
+    Trajectory,
+    TrajectoryBuilder,
+    speed_change_distance,
+)
 
 
 class PlanningError(ConfigError):
@@ -123,12 +129,13 @@ def traction_capability(scenario: Scenario, climb_sine: float):
     """capability(v): planning acceleration capped by the train's traction reserve [m/s^2]."""
     train, planning = scenario.train, scenario.planning
     mass = train.mass_kg
+    # Looked up once (the same operands, so the same values, as per call): per traction step.
+    traction_at, resistance = train.traction.max_traction_at, train.davis_nominal.force
+    highest, climb = planning.max_acceleration_mps2, units.STANDARD_GRAVITY * max(climb_sine, 0.0)
 
     def capability(v: float) -> float:
-        reserve = (train.traction.max_traction_at(v) - train.davis_nominal.force(v)) / mass
-        return min(planning.max_acceleration_mps2,
-                   TRACTION_RESERVE_SHARE * (reserve - units.STANDARD_GRAVITY
-                                             * max(climb_sine, 0.0)))
+        reserve = (traction_at(v) - resistance(v)) / mass
+        return min(highest, TRACTION_RESERVE_SHARE * (reserve - climb))
     return capability
 
 
@@ -145,15 +152,43 @@ def braking_deceleration(scenario: Scenario, descent_sine: float) -> float:
     return min(scenario.planning.service_deceleration_mps2, available)
 
 
-@functools.lru_cache(maxsize=100_000)
-def _traction_distance(traction, davis, mass_kg: float, planning, climb_sine: float,
-                       v_from: float, v_to: float) -> float:
+class _TractionDistances:
     """traction_phase_distance for a train and a climb, remembered: the timetable strategy
-    plans the same traction phases again for every cruise speed it tries."""
-    train = SimpleNamespace(traction=traction, davis_nominal=davis, mass_kg=mass_kg)
-    capability = traction_capability(SimpleNamespace(train=train, planning=planning),
-                                     climb_sine)
-    return traction_phase_distance(v_from, v_to, capability, planning.max_jerk_mps3)
+    plans the same traction phases again for every cruise speed it tries, and phases from the
+    same speed share their steps (``trajectory.AccelerationSteps``). ``cache_clear()`` forgets
+    both (a planning from scratch)."""
+
+    def __init__(self, size: int = 100_000):
+        self.size = size
+        self.distances: dict[tuple, float] = {}
+        self.steps: dict[tuple, AccelerationSteps] = {}
+
+    def cache_clear(self) -> None:
+        self.distances.clear()
+        self.steps.clear()
+
+    def __call__(self, traction, davis, mass_kg: float, planning, climb_sine: float,
+                 v_from: float, v_to: float) -> float:
+        key = (traction, davis, mass_kg, planning, climb_sine, v_from, v_to)
+        distance = self.distances.get(key)
+        if distance is None:
+            start = key[:-1]
+            steps = self.steps.get(start)
+            if steps is None:
+                if len(self.steps) >= self.size:
+                    self.steps.clear()
+                train = SimpleNamespace(traction=traction, davis_nominal=davis, mass_kg=mass_kg)
+                capability = traction_capability(
+                    SimpleNamespace(train=train, planning=planning), climb_sine)
+                steps = self.steps[start] = AccelerationSteps(
+                    v_from, capability, planning.max_jerk_mps3, MIN_PLANNED_ACCELERATION_MPS2)
+            if len(self.distances) >= self.size:
+                self.distances.clear()
+            distance = self.distances[key] = steps.distance_to(v_to)
+        return distance
+
+
+_traction_distance = _TractionDistances()
 
 
 def section_traction_distance(scenario: Scenario, climb_sine: float, v_from: float,
@@ -164,7 +199,7 @@ def section_traction_distance(scenario: Scenario, climb_sine: float, v_from: flo
 
 
 def traction_phase_distance(v_from: float, v_to: float, capability, jerk: float) -> float:
-    builder = TrajectoryBuilder()
+    builder = StateBuilder()
     builder.v = v_from
     builder.accelerate_to(v_to, capability, jerk, MIN_PLANNED_ACCELERATION_MPS2)
     return builder.x
@@ -310,10 +345,12 @@ def coasting_deceleration(scenario: Scenario):
     """deceleration(v, x) of the train coasting (no traction, no brake) with its front at x:
     nominal Davis resistance over the mass plus g sin(grade over the train's length) [m/s^2]."""
     train, line = scenario.train, scenario.line
+    # Looked up once (the same values as per call): per coasting step.
+    resistance, mass, length = train.davis_nominal.force, train.mass_kg, train.length_m
+    gravity, grade = units.STANDARD_GRAVITY, train_grade_sine
 
     def deceleration(v: float, x: float) -> float:
-        return (train.davis_nominal.force(v) / train.mass_kg
-                + units.STANDARD_GRAVITY * train_grade_sine(line, x, train.length_m))
+        return resistance(v) / mass + gravity * grade(line, x, length)
     return deceleration
 
 
@@ -326,7 +363,7 @@ def _coast_end(scenario: Scenario, start_m: float, v_from: float, v_to: float, j
                limit_m: float) -> float:
     """Where a coast from ``v_from`` at ``start_m`` reaches ``v_to`` (inf: not before
     ``limit_m``)."""
-    builder = TrajectoryBuilder(x0=start_m)
+    builder = StateBuilder(x0=start_m)
     builder.v = v_from
     if not builder.coast_to(v_to, coasting_deceleration(scenario), jerk, COAST_STEP_S, limit_m):
         return math.inf
@@ -344,7 +381,13 @@ def _coast_then_brake(builder: TrajectoryBuilder, scenario: Scenario, section: S
 
     def brake_start(speed: float) -> float:
         return end - speed_change_distance(speed, exit_speed, deceleration, jerk)
-    if _coast_end(scenario, builder.x, peak, low, jerk, end) <= brake_start(low):
+    # The coasts from here (to the speeds the bisection below tries) share their steps.
+    here = CoastSteps(builder.x, peak, coasting_deceleration(scenario), jerk, COAST_STEP_S)
+
+    def coast_end_from_here(speed: float) -> float:
+        x = here.end_of(speed, end)
+        return math.inf if x is None else x
+    if coast_end_from_here(low) <= brake_start(low):
         # Room for the whole coast: cruise until the point from which it ends where the
         # braking starts (a later start ends later).
         first, last = builder.x, brake_start(low)
@@ -361,7 +404,7 @@ def _coast_then_brake(builder: TrajectoryBuilder, scenario: Scenario, section: S
         lo, hi = low, peak
         for _ in range(20):
             middle = 0.5 * (lo + hi)
-            if _coast_end(scenario, builder.x, peak, middle, jerk, end) <= brake_start(middle):
+            if coast_end_from_here(middle) <= brake_start(middle):
                 hi = middle
             else:
                 lo = middle

@@ -42,6 +42,7 @@ compares the resulting energy with a dynamic programme over distance and speed.
 from __future__ import annotations
 
 import math
+from bisect import bisect_left, bisect_right
 from dataclasses import dataclass
 
 import numpy as np
@@ -93,13 +94,25 @@ def train_grade_sine(line, front_m: float, length_m: float) -> float:
         return line.grade_sine(front_m)
     rear = front_m - length_m
     starts, values = line.grade_sine.starts, line.grade_sine.values
+    # Only the grades from the one under the rear to the one under the front overlap the train
+    # (the others' overlap is <= 0 and was never added): the same sum, in the same order.
+    first = max(bisect_right(starts, rear) - 1, 0)
+    last = min(max(bisect_left(starts, front_m) - 1, 0), len(values) - 1)
+    count = len(starts)
     total = 0.0
-    for i, value in enumerate(values):
-        a = starts[i] if i > 0 else -math.inf
-        b = starts[i + 1] if i + 1 < len(starts) else math.inf
+    if first == last:  # the whole train on one grade (most calls): the loop's one term
+        a = starts[first] if first > 0 else -math.inf
+        b = starts[first + 1] if first + 1 < count else math.inf
         overlap = min(b, front_m) - max(a, rear)
         if overlap > 0.0:
-            total += value * overlap
+            total += values[first] * overlap
+        return total / length_m
+    for i in range(first, last + 1):
+        a = starts[i] if i > 0 else -math.inf
+        b = starts[i + 1] if i + 1 < count else math.inf
+        overlap = min(b, front_m) - max(a, rear)
+        if overlap > 0.0:
+            total += values[i] * overlap
     return total / length_m
 
 

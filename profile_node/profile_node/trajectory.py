@@ -150,6 +150,149 @@ class TrajectoryBuilder:
         return Trajectory(self.segments, (self.t, self.x, self.v, self.a))
 
 
+class StateBuilder(TrajectoryBuilder):
+    """A builder that only carries the end state forward (no segments kept): for the planner's
+    trial runs (where a coast ends), the end state of :class:`TrajectoryBuilder`'s, bit for
+    bit, at a fraction of its cost."""
+
+    def add(self, duration: float, jerk: float = 0.0) -> None:
+        if duration <= 0.0:
+            return
+        t0 = self.t
+        t = t0 + duration
+        tau = t - t0  # as Segment.at computes it
+        v0, a0 = self.v, self.a
+        self.x, self.v, self.a = (self.x + tau * (v0 + tau * (a0 / 2.0 + tau * jerk / 6.0)),
+                                  v0 + tau * (a0 + tau * jerk / 2.0),
+                                  a0 + tau * jerk)
+        self.t = t
+
+
+class AccelerationSteps:
+    """:meth:`TrajectoryBuilder.accelerate_to` from one start (standstill or a speed, zero
+    acceleration, at x = 0, t = 0) towards many target speeds: its whole steps do not depend on
+    the target (only where it stops stepping and ramps down does), so they are computed once
+    and replayed. ``distance_to(v)`` is the distance the builder's phase to ``v`` covers, bit
+    for bit (the same operations on the same values)."""
+
+    def __init__(self, v_from: float, capability, jerk: float, min_acceleration: float,
+                 step_s: float = 1.0):
+        self.capability, self.jerk, self.min_acceleration = capability, jerk, min_acceleration
+        self.step_s = step_s
+        self.states: list[tuple[float, float, float, float]] = [(0.0, 0.0, v_from, 0.0)]
+        self.jerks: list[float] = []  # the jerk of the whole step from each state
+
+    def _jerk(self, k: int) -> float:
+        """The jerk of the whole step from state ``k`` (state k + 1 then exists)."""
+        if k == len(self.jerks):
+            t, x, v, a = self.states[k]
+            step_s, jerk, capability = self.step_s, self.jerk, self.capability
+            predicted = v + a * step_s
+            wanted = max(min(capability(predicted), capability(v)), self.min_acceleration)
+            j = min(max((wanted - a) / step_s, -jerk), jerk)
+            builder = StateBuilder(x, t)
+            builder.v, builder.a = v, a
+            builder.add(step_s, j)
+            self.jerks.append(j)
+            self.states.append((builder.t, builder.x, builder.v, builder.a))
+        return self.jerks[k]
+
+    def distance_to(self, target_speed: float) -> float:
+        jerk, step_s = self.jerk, self.step_s
+        if target_speed <= self.states[0][2]:
+            return self.states[0][1]
+        for k in range(1_000_000):
+            t, x, v, a = self.states[k]
+            remaining = target_speed - v
+            if remaining <= 1e-12:
+                return x
+            builder = None
+            if a > 0.0 and remaining <= a * a / (2.0 * jerk) + 1e-12:
+                builder = StateBuilder(x, t)
+                builder.v, builder.a = v, a
+                ramp_jerk = a * a / (2.0 * remaining)
+                builder.add(a / ramp_jerk, -ramp_jerk)
+                return builder.x
+            j = self._jerk(k)
+            a_end = a + j * step_s
+            v_end = v + step_s * (a + 0.5 * j * step_s)
+            if target_speed - v_end <= a_end * a_end / (2.0 * jerk):
+                builder = StateBuilder(x, t)
+                builder.v, builder.a = v, a
+                if a <= 0.0:
+                    peak = math.sqrt(remaining * jerk)
+                    builder.add(peak / jerk, jerk)
+                    builder.add(peak / jerk, -jerk)
+                else:
+                    hold = (remaining - a * a / (2.0 * jerk)) / a
+                    builder.add(max(hold, 0.0), 0.0)
+                    builder.add(a / jerk, -jerk)
+                return builder.x
+        return self.states[-1][1]
+
+
+class CoastSteps:
+    """:meth:`TrajectoryBuilder.coast_to` from one start (``v_from`` at ``x0``, zero
+    acceleration, t = 0) towards many target speeds, its whole steps computed once and replayed
+    (as :class:`AccelerationSteps`). ``end_of(v, limit_x)`` is where the builder's coast to
+    ``v`` ends, bit for bit, or None where it passes ``limit_x`` first (coast_to's False)."""
+
+    def __init__(self, x0: float, v_from: float, deceleration, jerk: float,
+                 step_s: float = 2.0):
+        self.deceleration, self.jerk, self.step_s = deceleration, jerk, step_s
+        self.states: list[tuple[float, float, float, float]] = [(0.0, x0, v_from, 0.0)]
+        self.jerks: list[float] = []
+
+    def _jerk(self, k: int) -> float:
+        if k == len(self.jerks):
+            t, x, v, a = self.states[k]
+            step_s, jerk, deceleration = self.step_s, self.jerk, self.deceleration
+            predicted = v + a * step_s
+            ahead = x + v * step_s
+            wanted = -max(deceleration(predicted, ahead), deceleration(v, x), 0.0)
+            j = min(max((wanted - a) / step_s, -jerk), jerk)
+            builder = StateBuilder(x, t)
+            builder.v, builder.a = v, a
+            builder.add(step_s, j)
+            self.jerks.append(j)
+            self.states.append((builder.t, builder.x, builder.v, builder.a))
+        return self.jerks[k]
+
+    def end_of(self, target_speed: float, limit_x: float = math.inf) -> float | None:
+        jerk, step_s = self.jerk, self.step_s
+        if target_speed >= self.states[0][2]:
+            return self.states[0][1]
+        for k in range(1_000_000):
+            t, x, v, a = self.states[k]
+            if x > limit_x:
+                return None
+            remaining = v - target_speed
+            if remaining <= 1e-12:
+                return x
+            if a < 0.0 and remaining <= a * a / (2.0 * jerk) + 1e-12:
+                builder = StateBuilder(x, t)
+                builder.v, builder.a = v, a
+                ramp_jerk = a * a / (2.0 * remaining)
+                builder.add(-a / ramp_jerk, ramp_jerk)
+                return builder.x
+            j = self._jerk(k)
+            a_end = a + j * step_s
+            v_end = v + step_s * (a + 0.5 * j * step_s)
+            if v_end - target_speed <= a_end * a_end / (2.0 * jerk):
+                builder = StateBuilder(x, t)
+                builder.v, builder.a = v, a
+                if a >= 0.0:
+                    peak = math.sqrt(remaining * jerk)
+                    builder.add(peak / jerk, -jerk)
+                    builder.add(peak / jerk, jerk)
+                else:
+                    hold = (remaining - a * a / (2.0 * jerk)) / -a
+                    builder.add(max(hold, 0.0), 0.0)
+                    builder.add(-a / jerk, jerk)
+                return builder.x
+        return self.states[-1][1]
+
+
 def speed_change_durations(dv: float, max_accel: float, jerk: float) -> tuple[float, float]:
     """(jerk ramp duration, constant-acceleration duration) of a symmetric S-curve changing the
     speed by ``dv`` >= 0 with |a| <= max_accel and |j| = jerk."""
