@@ -14,12 +14,19 @@ it records (the simulated time of the last one, 0 before the first), as ``use_si
 but without rclpy's second, deserialising subscription to ``/clock`` (a lockstep run publishes
 one every step); ``/clock`` is then always subscribed, recorded only if asked for.
 The publish time (``--publish-time``): by default ``source``, the publisher's source timestamp
-(wall time) as rosbag2 records it; rclpy hands it only to a subscription served by its
-single-threaded executor, so the recorder spins that one (``ATO_EXECUTOR=single`` in its own
-process). ``log`` writes the log time instead and keeps the suite's default executor.
+(wall time) as rosbag2 records it; ``log`` writes the log time instead.
 
-SIGINT and SIGTERM close the file properly; a SIGKILL loses at most the last flush period:
-chunks are flushed every ``--flush-period`` of wall time (0.5 s) and every
+The recorder takes its messages itself: its subscriptions sit on a node of their own that no
+executor spins (``<name>_subscriptions``), and every ``--take-period`` of wall time (5 ms) it
+takes whatever each one holds (``take_message``, as bytes with the message info, which carries
+the source timestamp) and writes them in the order they were received. An executor would wake
+once per message and, for the message info, would have to be rclpy's single-threaded one; taking
+in batches costs a fraction of that, which matters because the recorder shares the machine with
+the loop it records. A message is on disk at most a take period plus a flush period after it was
+received; SIGINT and SIGTERM take what is left before closing.
+
+SIGINT and SIGTERM close the file properly; a SIGKILL loses at most the last take and flush
+periods: chunks are flushed every ``--flush-period`` of wall time (0.5 s) and every
 ``--flush-period-log`` of log time (0.25 s, simulated time in a lockstep run), whichever comes
 first; ``ros2 run recorder recover <bag>`` makes a valid bag of the rest.
 """
@@ -27,7 +34,6 @@ first; ``ros2 run recorder recover <bag>`` makes a valid bag of the rest.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from datetime import datetime
 from pathlib import Path
@@ -50,6 +56,10 @@ from recorder.ros_io import message_class, offered_profiles, subscription_qos
 from recorder.rosbag2_format import cdr_stamp_ns, starts_with_stamp
 
 LOG_TIMES = ('stamp', 'receipt')
+#: how often the recorder takes what its subscriptions hold, s of wall time
+DEFAULT_TAKE_PERIOD_S = 0.005
+#: at most this many messages of one topic per take (the rest at the next)
+MAX_TAKES = 10_000
 CLOCK = TOPICS['clock'].name
 
 
@@ -72,8 +82,13 @@ def logs_at_stamp(topic: str, type_name: str, log_time: str) -> bool:
 
 class RecorderNode(RunNodeHooks, Node):
     def __init__(self, writer: BagWriter, topics: list[str] | None, discovery_period_s: float,
-                 log_time: str = 'stamp', publish_time: str = 'source', sim_time: bool = False):
+                 log_time: str = 'stamp', publish_time: str = 'source', sim_time: bool = False,
+                 take_period_s: float = DEFAULT_TAKE_PERIOD_S):
         super().__init__('recorder')
+        # The subscriptions' node: never spun, its messages are taken every take period.
+        self.taker = Node(f'{self.get_name()}_subscriptions', context=self.context,
+                          start_parameter_services=False)
+        self.takes: dict[str, tuple[object, object]] = {}  # topic -> (subscription, handler)
         self.writer = writer
         self.sim_time = sim_time
         self.sim_now_ns = 0  # --sim-time: the stamp of the last /clock
@@ -95,6 +110,7 @@ class RecorderNode(RunNodeHooks, Node):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(discovery_period_s, self.discover, clock=steady)
         self.create_timer(writer.flush_period_s, self.flush, clock=steady)
+        self.create_timer(take_period_s, self.take, clock=steady)
         wanted = 'all topics' if self.wanted is None else sorted(self.wanted)
         self.get_logger().info(f'recording {wanted} to {writer.path}')
         freeze_startup_objects()
@@ -103,8 +119,8 @@ class RecorderNode(RunNodeHooks, Node):
         if self.sim_time and self.clock_topic not in self.subscribed and \
                 self.wanted is not None and self.clock_topic not in self.wanted:
             # the time only, not recorded
-            self.subscribed[self.clock_topic] = self.create_subscription(
-                ClockMsg, CLOCK, self._on_clock, qos_profile(TOPICS['clock'].qos), raw=True)
+            self._subscribe(self.clock_topic, ClockMsg, qos_profile(TOPICS['clock'].qos),
+                            lambda data, info: self._on_clock(data))
         for topic, types in self.get_topic_names_and_types():
             if topic in self.subscribed or (self.wanted is not None and topic not in self.wanted):
                 continue
@@ -129,9 +145,8 @@ class RecorderNode(RunNodeHooks, Node):
                 self.subscribed[topic] = None
                 continue
             stamped = logs_at_stamp(topic, type_name, self.log_time)
-            self.subscribed[topic] = self.create_subscription(
-                msg_type, topic, self._callback(topic, stamped), subscription_qos(offered),
-                raw=True)
+            self._subscribe(topic, msg_type, subscription_qos(offered),
+                            self._handler(topic, stamped))
             self.get_logger().info(f'recording {topic} [{type_name}], logged at '
                                    f'{"its stamp" if stamped else "receipt"}')
 
@@ -144,12 +159,36 @@ class RecorderNode(RunNodeHooks, Node):
         """The recorder's time: of the last /clock with ``--sim-time``, else its ROS time."""
         return self.sim_now_ns if self.sim_time else self.get_clock().now().nanoseconds
 
-    def _callback(self, topic: str, stamped: bool):
+    def _subscribe(self, topic: str, msg_type, qos, handler) -> None:
+        subscription = self.taker.create_subscription(msg_type, topic, lambda data: None, qos,
+                                                      raw=True)
+        self.subscribed[topic] = subscription
+        self.takes[topic] = (subscription, handler)
+
+    def take(self) -> None:
+        """Take what every subscription holds and hand it on in the order it was received
+        (so that ``--sim-time``'s /clock is read where it came among the others)."""
+        if self.finished:
+            return
+        taken = []
+        for subscription, handler in self.takes.values():
+            with subscription.handle:
+                for _ in range(MAX_TAKES):
+                    message = subscription.handle.take_message(subscription.msg_type, True)
+                    if message is None:
+                        break
+                    taken.append((message[1].get('received_timestamp') or 0, len(taken),
+                                  handler, message))
+        taken.sort(key=lambda item: item[:2])
+        for _, _, handler, (data, info) in taken:
+            handler(data, info)
+
+    def _handler(self, topic: str, stamped: bool):
         write = self.writer.write
         is_clock = topic == self.clock_topic
+        source = self.publish_time == 'source'
 
-        # Two parameters, no default: rclpy passes the message info only to such a callback.
-        def on_message(data: bytes, info) -> None:
+        def on_message(data: bytes, info: dict) -> None:
             if self.finished:
                 return
             if is_clock and self.sim_time:
@@ -159,14 +198,12 @@ class RecorderNode(RunNodeHooks, Node):
                 log_time_ns = self.now_ns()
             try:
                 write(topic, log_time_ns, data,
-                      info.get('source_timestamp') or None if info else None)
+                      (info.get('source_timestamp') or None) if source else None)
             except BagError as error:
                 self.stop_on_error(error)
                 return
             self.received += 1
-        if self.publish_time == 'source':
-            return on_message
-        return lambda data: on_message(data, None)
+        return on_message
 
     def flush(self) -> None:
         try:
@@ -186,6 +223,11 @@ class RecorderNode(RunNodeHooks, Node):
         if self.outputs_closed:
             return
         self.outputs_closed = True
+        if not self.finished:  # what came before the stop is recorded too
+            try:
+                self.take()
+            except Exception as error:  # noqa: BLE001 - the bag must be closed all the same
+                self.get_logger().error(f'the last messages could not be taken: {error}')
         self.finished = True  # a message still delivered is not written to a closed file
         try:
             info = self.writer.close()
@@ -197,6 +239,7 @@ class RecorderNode(RunNodeHooks, Node):
 
     def destroy_node(self) -> None:
         self.close_outputs()
+        self.taker.destroy_node()
         super().destroy_node()
 
 
@@ -218,6 +261,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('--publish-time', choices=('source', 'log'), default='source',
                         help="source: the publisher's source timestamp, as rosbag2 (default); "
                              'log: the log time')
+    parser.add_argument('--take-period', type=float, default=DEFAULT_TAKE_PERIOD_S,
+                        help='take what the subscriptions hold this often, s of wall time')
     parser.add_argument('--sim-time', action='store_true',
                         help='the time of unstamped messages: the simulated time of the last '
                              '/clock (as use_sim_time, without its second /clock subscription)')
@@ -239,9 +284,10 @@ def main(args=None) -> int:
             print(f'error: --custom-data {pair!r} is not KEY=VALUE', file=sys.stderr)
             return 2
         custom_data[key] = value
-    if options.publish_time == 'source':
-        # rclpy gives the message info (the source timestamp) only to the default executor.
-        os.environ['ATO_EXECUTOR'] = 'single'
+    if not (0.0 < options.take_period <= 1.0):
+        print(f'error: --take-period {options.take_period:g}: must be over 0 and at most 1 s',
+              file=sys.stderr)
+        return 2
     try:
         writer = BagWriter(output, options.compression, flush_period_s=options.flush_period,
                            flush_period_log_s=options.flush_period_log,
@@ -252,7 +298,7 @@ def main(args=None) -> int:
     try:
         return run_node(lambda: RecorderNode(writer, options.topics, options.discovery_period,
                                              options.log_time, options.publish_time,
-                                             options.sim_time), args)
+                                             options.sim_time, options.take_period), args)
     finally:
         if not writer.closed:  # the node never came up
             try:
