@@ -100,13 +100,6 @@ def train_grade_sine(line, front_m: float, length_m: float) -> float:
     last = min(max(bisect_left(starts, front_m) - 1, 0), len(values) - 1)
     count = len(starts)
     total = 0.0
-    if first == last:  # the whole train on one grade (most calls): the loop's one term
-        a = starts[first] if first > 0 else -math.inf
-        b = starts[first + 1] if first + 1 < count else math.inf
-        overlap = min(b, front_m) - max(a, rear)
-        if overlap > 0.0:
-            total += values[first] * overlap
-        return total / length_m
     for i in range(first, last + 1):
         a = starts[i] if i > 0 else -math.inf
         b = starts[i + 1] if i + 1 < count else math.inf

@@ -168,7 +168,35 @@ class StateBuilder(TrajectoryBuilder):
         self.t = t
 
 
-class AccelerationSteps:
+class _ReplayedSteps:
+    """The whole steps of one builder phase from one start, computed once and replayed: the
+    states after each step and the jerk of each (the phase's own wanted acceleration from
+    :meth:`_wanted`, limited by the jerk), the same operations on the same values as the
+    builder, so bit for bit its states."""
+
+    def __init__(self, start: tuple[float, float, float, float], jerk: float, step_s: float):
+        self.jerk, self.step_s = jerk, step_s
+        self.states: list[tuple[float, float, float, float]] = [start]  # (t, x, v, a)
+        self.jerks: list[float] = []  # the jerk of the whole step from each state
+
+    def _wanted(self, x: float, v: float, a: float) -> float:
+        raise NotImplementedError
+
+    def _jerk(self, k: int) -> float:
+        """The jerk of the whole step from state ``k`` (state k + 1 then exists)."""
+        if k == len(self.jerks):
+            t, x, v, a = self.states[k]
+            step_s, jerk = self.step_s, self.jerk
+            j = min(max((self._wanted(x, v, a) - a) / step_s, -jerk), jerk)
+            builder = StateBuilder(x, t)
+            builder.v, builder.a = v, a
+            builder.add(step_s, j)
+            self.jerks.append(j)
+            self.states.append((builder.t, builder.x, builder.v, builder.a))
+        return self.jerks[k]
+
+
+class AccelerationSteps(_ReplayedSteps):
     """:meth:`TrajectoryBuilder.accelerate_to` from one start (standstill or a speed, zero
     acceleration, at x = 0, t = 0) towards many target speeds: its whole steps do not depend on
     the target (only where it stops stepping and ramps down does), so they are computed once
@@ -177,25 +205,13 @@ class AccelerationSteps:
 
     def __init__(self, v_from: float, capability, jerk: float, min_acceleration: float,
                  step_s: float = 1.0):
-        self.capability, self.jerk, self.min_acceleration = capability, jerk, min_acceleration
-        self.step_s = step_s
-        self.states: list[tuple[float, float, float, float]] = [(0.0, 0.0, v_from, 0.0)]
-        self.jerks: list[float] = []  # the jerk of the whole step from each state
+        super().__init__((0.0, 0.0, v_from, 0.0), jerk, step_s)
+        self.capability, self.min_acceleration = capability, min_acceleration
 
-    def _jerk(self, k: int) -> float:
-        """The jerk of the whole step from state ``k`` (state k + 1 then exists)."""
-        if k == len(self.jerks):
-            t, x, v, a = self.states[k]
-            step_s, jerk, capability = self.step_s, self.jerk, self.capability
-            predicted = v + a * step_s
-            wanted = max(min(capability(predicted), capability(v)), self.min_acceleration)
-            j = min(max((wanted - a) / step_s, -jerk), jerk)
-            builder = StateBuilder(x, t)
-            builder.v, builder.a = v, a
-            builder.add(step_s, j)
-            self.jerks.append(j)
-            self.states.append((builder.t, builder.x, builder.v, builder.a))
-        return self.jerks[k]
+    def _wanted(self, x: float, v: float, a: float) -> float:
+        capability = self.capability
+        predicted = v + a * self.step_s
+        return max(min(capability(predicted), capability(v)), self.min_acceleration)
 
     def distance_to(self, target_speed: float) -> float:
         jerk, step_s = self.jerk, self.step_s
@@ -231,7 +247,7 @@ class AccelerationSteps:
         return self.states[-1][1]
 
 
-class CoastSteps:
+class CoastSteps(_ReplayedSteps):
     """:meth:`TrajectoryBuilder.coast_to` from one start (``v_from`` at ``x0``, zero
     acceleration, t = 0) towards many target speeds, its whole steps computed once and replayed
     (as :class:`AccelerationSteps`). ``end_of(v, limit_x)`` is where the builder's coast to
@@ -239,24 +255,14 @@ class CoastSteps:
 
     def __init__(self, x0: float, v_from: float, deceleration, jerk: float,
                  step_s: float = 2.0):
-        self.deceleration, self.jerk, self.step_s = deceleration, jerk, step_s
-        self.states: list[tuple[float, float, float, float]] = [(0.0, x0, v_from, 0.0)]
-        self.jerks: list[float] = []
+        super().__init__((0.0, x0, v_from, 0.0), jerk, step_s)
+        self.deceleration = deceleration
 
-    def _jerk(self, k: int) -> float:
-        if k == len(self.jerks):
-            t, x, v, a = self.states[k]
-            step_s, jerk, deceleration = self.step_s, self.jerk, self.deceleration
-            predicted = v + a * step_s
-            ahead = x + v * step_s
-            wanted = -max(deceleration(predicted, ahead), deceleration(v, x), 0.0)
-            j = min(max((wanted - a) / step_s, -jerk), jerk)
-            builder = StateBuilder(x, t)
-            builder.v, builder.a = v, a
-            builder.add(step_s, j)
-            self.jerks.append(j)
-            self.states.append((builder.t, builder.x, builder.v, builder.a))
-        return self.jerks[k]
+    def _wanted(self, x: float, v: float, a: float) -> float:
+        deceleration, step_s = self.deceleration, self.step_s
+        predicted = v + a * step_s
+        ahead = x + v * step_s
+        return -max(deceleration(predicted, ahead), deceleration(v, x), 0.0)
 
     def end_of(self, target_speed: float, limit_x: float = math.inf) -> float | None:
         jerk, step_s = self.jerk, self.step_s
