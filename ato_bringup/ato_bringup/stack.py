@@ -8,13 +8,14 @@ processes (plant, profile, controller) or, composed (``StackConfig.composed``), 
 
 The run monitor watches either everything the tests look at (``FULL``: the truth, the
 reference, the command and the diagnostics, each per step) or only what a run's summary needs
-(``LEAN``: the truth per step and the diagnostics; the reference of each step is the plan's,
-which is what the profile streams in lockstep, and the laws are read from the controller's
-diagnostics), so that watching costs the loop little.
+(``LEAN``: the truth per step and the diagnostics, and the reference the profile streamed
+taken in batches, not per message; the laws are read from the controller's diagnostics), so
+that watching costs the loop little.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import signal
 import subprocess
@@ -29,6 +30,8 @@ from ament_index_python.packages import get_package_prefix
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
+from rclpy.clock import Clock as RclpyClock
+from rclpy.clock import ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
@@ -100,6 +103,8 @@ class Sample:
 
 #: how many reasons for unread messages the monitor keeps
 MAX_REJECTED = 10
+#: how often the lean monitor takes the references it holds, s of wall time
+BATCH_PERIOD_S = 0.05
 
 
 @dataclass
@@ -126,6 +131,7 @@ class Monitor:
             raise ValueError(f'monitor watch {self.watch}: must hold state and only topics of '
                              f'{FULL}')
         self.counts = dict.fromkeys(self.watch, 0)
+        self.counts['batched_reference'] = 0
         n = self.node
         # The per-step topics are taken as bytes and read by ato_common.wire (the monitor must
         # cost the loop little: no rclpy message objects); the diagnostics as messages.
@@ -137,6 +143,37 @@ class Monitor:
             msg_type, callback, raw = callbacks[key]
             n.create_subscription(msg_type, topic(key).name, callback,
                                   qos_profile(topic(key).qos), raw=raw)
+        # Without the reference among the watched topics, the reference the profile streamed is
+        # still what each sample gets, taken in batches: its subscription sits on a node no
+        # executor spins, and every BATCH_PERIOD_S of wall time (and before the samples are
+        # read) the monitor takes what it holds, so that no message wakes the monitor. Until
+        # then a sample holds the plan's (``reference``), which is the stream's unless the
+        # profile replanned or resumed.
+        self.batched = None
+        if 'reference' not in self.watch:
+            self.batch_node = Node(f'{n.get_name()}_batched', namespace=n.get_namespace(),
+                                   context=n.context, start_parameter_services=False)
+            self.batched = self.batch_node.create_subscription(
+                JointTrajectory, topic('reference').name, lambda data: None,
+                qos_profile(topic('reference').qos), raw=True)
+            n.create_timer(BATCH_PERIOD_S, self.take_references,
+                           clock=RclpyClock(clock_type=ClockType.STEADY_TIME))
+
+    def take_references(self) -> None:
+        """Take the references the batched subscription holds into their samples."""
+        sub = self.batched
+        if sub is None:
+            return
+        with sub.handle:
+            while True:
+                taken = sub.handle.take_message(sub.msg_type, True)
+                if taken is None:
+                    return
+                reference = self._read('batched_reference', taken[0], wire.decode_reference,
+                                       JointTrajectory, reference_from_msg)
+                if reference is not None:
+                    s = self._sample(reference.stamp_ns)
+                    s.ref_position, s.ref_speed = reference.now.position, reference.now.speed
 
     def _sample(self, stamp_ns: int) -> Sample:
         sample = self.samples.get(stamp_ns)
@@ -168,7 +205,7 @@ class Monitor:
         self.arrivals.append((time.monotonic(), self.last_stamp_ns))
         s.positions, s.speeds = state.positions, state.speeds
         s.accelerations, s.forces = state.accelerations, state.forces
-        if self.reference is not None:
+        if self.reference is not None and math.isnan(s.ref_position):  # none streamed yet
             s.ref_position, s.ref_speed = self.reference(stamp_ns)
 
     def on_reference(self, data: bytes) -> None:
@@ -199,7 +236,8 @@ class Monitor:
                                      {kv.key: kv.value for kv in status.values}, status.message))
 
     def complete_samples(self) -> list[tuple[int, Sample]]:
-        """Samples that have a state, sorted by stamp."""
+        """Samples that have a state, sorted by stamp (the batched references taken first)."""
+        self.take_references()
         return sorted((k, s) for k, s in self.samples.items() if s.positions)
 
 
@@ -261,7 +299,8 @@ class Stack:
             'plant': {**common, 'end_time_s': float(c.end_time_s),
                       'wait_for_subscribers': 1 + recorder, 'start_delay_s': 1.0,
                       **c.plant_params},
-            'profile': {**common, 'wait_for_subscribers': 1 + recorder + ('reference' in watch),
+            # the monitor's reference, watched or batched, counts: it must miss none
+            'profile': {**common, 'wait_for_subscribers': 2 + recorder,
                         **c.profile_params},
             'controller': {**common, 'controller': c.controller,
                            'wait_for_subscribers': 1 + recorder + ('command' in watch),
@@ -417,6 +456,8 @@ class Stack:
                     process.kill()
                     process.wait()
         self.executor.shutdown()
+        if self.monitor.batched is not None:
+            self.monitor.batch_node.destroy_node()
         self.node.destroy_node()
         if self.context.ok():
             rclpy.shutdown(context=self.context)
