@@ -6,9 +6,9 @@ simulated time; then every process is stopped and the run's summary printed.
 
 ``--composed`` runs the plant, the profile and the controller in one process on one executor
 (``ato_stack``, ato_bringup.composed) instead of three: the same nodes, topics and results (bit
-for bit in lockstep), faster. The run's monitor watches only the true state per step and the
-diagnostics (ato_bringup.stack.LEAN); the summary's reference is the plan's, which the profile
-streams in lockstep.
+for bit in lockstep), faster. The run's monitor takes the true state and the reference the
+profile streamed in batches, not per message, and the diagnostics (ato_bringup.stack.LEAN), so
+the summary measures the tracking against the curve the train was given, replanned or not.
 
 Without --controller the law is the one that ``make compare`` ranked best on jinan_xuzhou
 (runs/compare/compare.json, see ato_bringup.compare), else pid; a ranked law that cannot drive

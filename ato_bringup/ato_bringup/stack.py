@@ -8,14 +8,13 @@ processes (plant, profile, controller) or, composed (``StackConfig.composed``), 
 
 The run monitor watches either everything the tests look at (``FULL``: the truth, the
 reference, the command and the diagnostics, each per step) or only what a run's summary needs
-(``LEAN``: the truth per step and the diagnostics, and the reference the profile streamed
-taken in batches, not per message; the laws are read from the controller's diagnostics), so
-that watching costs the loop little.
+(``LEAN``: the truth and the reference per step, taken in batches rather than per message, and
+the diagnostics; the laws are read from the controller's diagnostics), so that watching costs
+the loop little.
 """
 
 from __future__ import annotations
 
-import math
 import os
 import signal
 import subprocess
@@ -62,9 +61,10 @@ NODE_NAMES = {'plant': 'train_plant_node', 'profile': 'profile_node',
 
 FULL = ('state', 'reference', 'command', 'diagnostics')
 """What the monitor watches for the tests: every per-step topic of the loop it reports."""
-LEAN = ('state', 'diagnostics')
-"""What a run's summary needs: the truth per step and the diagnostics."""
-MONITORS = {'full': FULL, 'lean': LEAN}
+LEAN = ('state', 'reference', 'diagnostics')
+"""What a run's summary needs: the truth and the reference per step, and the diagnostics."""
+MONITORS = {'full': (FULL, ()), 'lean': (LEAN, ('state', 'reference'))}
+"""Each monitor: what it watches, and which of those it takes in batches (``Monitor.batch``)."""
 
 
 def executable_path(package: str, executable: str) -> str:
@@ -103,7 +103,7 @@ class Sample:
 
 #: how many reasons for unread messages the monitor keeps
 MAX_REJECTED = 10
-#: how often the lean monitor takes the references it holds, s of wall time
+#: how often the lean monitor takes what its batched subscriptions hold, s of wall time
 BATCH_PERIOD_S = 0.05
 
 
@@ -111,13 +111,16 @@ BATCH_PERIOD_S = 0.05
 class Monitor:
     """Subscriptions of the runner, keyed by stamp: those of ``watch`` (``FULL`` or ``LEAN``).
 
-    ``reference``: with a watch that leaves the reference topic out, the reference of a stamp
-    (ns -> (position m, speed m/s)), filled into each sample as its state arrives."""
+    ``batch``: the watched per-step topics taken in batches rather than per message: their
+    subscriptions sit on a node no executor spins, and every ``BATCH_PERIOD_S`` of wall time
+    (and before the samples are read, ``complete_samples``) the monitor takes what they hold, so
+    that no message wakes the monitor; a state's arrival time is its reception time from the
+    message info. ``last_stamp_ns`` then lags the loop by at most a batch period."""
 
     node: Node
     namespace: str = '/'  # of the stack: statuses of other stacks' nodes are left out
     watch: tuple[str, ...] = FULL
-    reference: Callable[[int], tuple[float, float]] | None = None
+    batch: tuple[str, ...] = ()
     samples: dict[int, Sample] = field(default_factory=dict)
     diagnostics: list[tuple[int, str, dict[str, str], str]] = field(default_factory=list)
     last_stamp_ns: int = -1  # of the newest state
@@ -127,11 +130,11 @@ class Monitor:
 
     def __post_init__(self):
         unknown = set(self.watch) - set(FULL)
-        if unknown or 'state' not in self.watch:
-            raise ValueError(f'monitor watch {self.watch}: must hold state and only topics of '
-                             f'{FULL}')
+        if unknown or 'state' not in self.watch or not set(self.batch) <= set(self.watch) - {
+                'diagnostics'}:
+            raise ValueError(f'monitor watch {self.watch}, batch {self.batch}: must hold state '
+                             f'and only topics of {FULL}, the per-step ones of them in batches')
         self.counts = dict.fromkeys(self.watch, 0)
-        self.counts['batched_reference'] = 0
         n = self.node
         # The per-step topics are taken as bytes and read by ato_common.wire (the monitor must
         # cost the loop little: no rclpy message objects); the diagnostics as messages.
@@ -139,41 +142,35 @@ class Monitor:
                      'reference': (JointTrajectory, self.on_reference, True),
                      'command': (JointState, self.on_command, True),
                      'diagnostics': (DiagnosticArray, self.on_diagnostics, False)}
+        self.batched: dict[str, tuple[object, Callable]] = {}
+        self.batch_node = Node(f'{n.get_name()}_batched', namespace=n.get_namespace(),
+                               context=n.context, start_parameter_services=False) \
+            if self.batch else None
         for key in self.watch:
             msg_type, callback, raw = callbacks[key]
-            n.create_subscription(msg_type, topic(key).name, callback,
-                                  qos_profile(topic(key).qos), raw=raw)
-        # Without the reference among the watched topics, the reference the profile streamed is
-        # still what each sample gets, taken in batches: its subscription sits on a node no
-        # executor spins, and every BATCH_PERIOD_S of wall time (and before the samples are
-        # read) the monitor takes what it holds, so that no message wakes the monitor. Until
-        # then a sample holds the plan's (``reference``), which is the stream's unless the
-        # profile replanned or resumed.
-        self.batched = None
-        if 'reference' not in self.watch:
-            self.batch_node = Node(f'{n.get_name()}_batched', namespace=n.get_namespace(),
-                                   context=n.context, start_parameter_services=False)
-            self.batched = self.batch_node.create_subscription(
-                JointTrajectory, topic('reference').name, lambda data: None,
-                qos_profile(topic('reference').qos), raw=True)
-            n.create_timer(BATCH_PERIOD_S, self.take_references,
+            if key in self.batch:
+                sub = self.batch_node.create_subscription(
+                    msg_type, topic(key).name, lambda data: None, qos_profile(topic(key).qos),
+                    raw=True)
+                self.batched[key] = (sub, callback)
+            else:
+                n.create_subscription(msg_type, topic(key).name, callback,
+                                      qos_profile(topic(key).qos), raw=raw)
+        if self.batch:
+            n.create_timer(BATCH_PERIOD_S, self.take_batched,
                            clock=RclpyClock(clock_type=ClockType.STEADY_TIME))
 
-    def take_references(self) -> None:
-        """Take the references the batched subscription holds into their samples."""
-        sub = self.batched
-        if sub is None:
-            return
-        with sub.handle:
-            while True:
-                taken = sub.handle.take_message(sub.msg_type, True)
-                if taken is None:
-                    return
-                reference = self._read('batched_reference', taken[0], wire.decode_reference,
-                                       JointTrajectory, reference_from_msg)
-                if reference is not None:
-                    s = self._sample(reference.stamp_ns)
-                    s.ref_position, s.ref_speed = reference.now.position, reference.now.speed
+    def take_batched(self) -> None:
+        """Take what the batched subscriptions hold, in their order of reception per topic."""
+        now_s, now_ns = time.monotonic(), time.time_ns()
+        for sub, callback in self.batched.values():
+            with sub.handle:
+                while True:
+                    taken = sub.handle.take_message(sub.msg_type, True)
+                    if taken is None:
+                        break
+                    received = taken[1].get('received_timestamp')
+                    callback(taken[0], now_s - (now_ns - received) * 1e-9 if received else now_s)
 
     def _sample(self, stamp_ns: int) -> Sample:
         sample = self.samples.get(stamp_ns)
@@ -195,20 +192,19 @@ class Monitor:
                                            throttle_duration_sec=1.0)
             return None
 
-    def on_state(self, data: bytes) -> None:
+    def on_state(self, data: bytes, arrived_s: float | None = None) -> None:
         state = self._read('state', data, wire.decode_state, JointTrajectory, state_from_msg)
         if state is None:
             return
         stamp_ns = state.stamp_ns
         s = self._sample(stamp_ns)
         self.last_stamp_ns = max(self.last_stamp_ns, stamp_ns)
-        self.arrivals.append((time.monotonic(), self.last_stamp_ns))
+        self.arrivals.append((time.monotonic() if arrived_s is None else arrived_s,
+                              self.last_stamp_ns))
         s.positions, s.speeds = state.positions, state.speeds
         s.accelerations, s.forces = state.accelerations, state.forces
-        if self.reference is not None and math.isnan(s.ref_position):  # none streamed yet
-            s.ref_position, s.ref_speed = self.reference(stamp_ns)
 
-    def on_reference(self, data: bytes) -> None:
+    def on_reference(self, data: bytes, arrived_s: float | None = None) -> None:
         reference = self._read('reference', data, wire.decode_reference, JointTrajectory,
                                reference_from_msg)
         if reference is None:
@@ -216,7 +212,7 @@ class Monitor:
         s = self._sample(reference.stamp_ns)
         s.ref_position, s.ref_speed = reference.now.position, reference.now.speed
 
-    def on_command(self, data: bytes) -> None:
+    def on_command(self, data: bytes, arrived_s: float | None = None) -> None:
         read = self._read('command', data, wire.decode_joint_state, JointState,
                           lambda m: (from_time(m.header.stamp), m.header.frame_id, m.name,
                                      m.position, m.velocity, m.effort))
@@ -236,8 +232,8 @@ class Monitor:
                                      {kv.key: kv.value for kv in status.values}, status.message))
 
     def complete_samples(self) -> list[tuple[int, Sample]]:
-        """Samples that have a state, sorted by stamp (the batched references taken first)."""
-        self.take_references()
+        """Samples that have a state, sorted by stamp (what the batches hold taken first)."""
+        self.take_batched()
         return sorted((k, s) for k, s in self.samples.items() if s.positions)
 
 
@@ -277,9 +273,8 @@ class Stack:
         self.node = Node('ato_run_monitor', namespace=self.namespace, context=self.context)
         if config.monitor not in MONITORS:
             raise ValueError(f'monitor {config.monitor!r}: one of {", ".join(MONITORS)}')
-        watch = MONITORS[config.monitor]
-        self.monitor = Monitor(self.node, self.namespace, watch,
-                               None if 'reference' in watch else planned_reference(config))
+        watch, batch = MONITORS[config.monitor]
+        self.monitor = Monitor(self.node, self.namespace, watch, batch)
         # The process that runs the plant (and so ends the run at end_time_s).
         self.plant_process = 'loop' if config.composed else 'plant'
         self.parameter_clients: dict[str, object] = {}
@@ -456,7 +451,7 @@ class Stack:
                     process.kill()
                     process.wait()
         self.executor.shutdown()
-        if self.monitor.batched is not None:
+        if self.monitor.batch_node is not None:
             self.monitor.batch_node.destroy_node()
         self.node.destroy_node()
         if self.context.ok():
@@ -473,21 +468,6 @@ class Stack:
             return '\n'.join(self.logs[name].read_text(errors='replace').splitlines()[-lines:])
         except OSError:
             return ''
-
-
-def planned_reference(config: StackConfig) -> Callable[[int], tuple[float, float]]:
-    """The reference of each stamp as the profile streams it in lockstep: the plan's target
-    curve at that time (``profile_node.planner.plan_reference``, planned once per scenario in
-    this process; the profile's time origin is 0 in lockstep), (position m, speed m/s)."""
-    from ato_bringup.offline import cached_plan
-    from ato_common.scenario import load_scenario
-    from ato_common.types import seconds
-    trajectory = cached_plan(load_scenario(config.scenario)).trajectory
-
-    def reference(stamp_ns: int) -> tuple[float, float]:
-        point = trajectory.at(seconds(stamp_ns))
-        return point.position, point.speed
-    return reference
 
 
 def parameter_value(value: object) -> ParameterValue:
