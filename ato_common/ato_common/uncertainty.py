@@ -156,12 +156,22 @@ PARAMETERS: dict[str, Parameter] = {p.name: p for p in (
               'force builds up is a few tenths of a second on an electro-pneumatic EMU brake); '
               'traction converters and the train bus add about 0.1 s (suite assumption within '
               'those figures)'),
-    Parameter('effectiveness', '1', 1.0, 0.05, 1.0,
+    Parameter('traction_effectiveness', '1', 1.0, 0.05, 1.0,
               Distribution('choice', values=(1.0, 0.875), weights=(0.9, 0.1)),
-              'traction and brake effectiveness: every actuator delivers this share of its '
-              'healthy force for the whole run (a partial loss, plant.failures kind partial)',
+              'traction effectiveness: every actuator delivers this share of its healthy '
+              'traction force for the whole run (a partial loss, plant.failures kind partial '
+              'traction_effectiveness); braking is not affected',
               'suite assumption: the loss of one traction converter of 8 on an EMU removes '
-              '12.5 % of the effort; the default has it in one draw of 10'),
+              '12.5 % of the traction effort (its electric brake is made up for by the '
+              'friction brake); the default has it in one draw of 10'),
+    Parameter('brake_effectiveness', '1', 1.0, 0.05, 1.0,
+              Distribution('choice', values=(1.0, 0.9375), weights=(0.95, 0.05)),
+              'brake effectiveness: every actuator delivers this share of its healthy braking '
+              'force for the whole run (a partial loss, plant.failures kind partial '
+              'brake_effectiveness); traction is not affected',
+              'suite assumption: the friction brake of one bogie of 16 isolated (cut out) on '
+              'an 8-car EMU removes 1/16 of the braking effort; the default has it in one '
+              'draw of 20'),
     Parameter('adhesion', '1', 0.3, 0.02, 0.5,
               Distribution('choice', values=(0.30, 0.15), weights=(0.8, 0.2)),
               'wheel-rail adhesion coefficient mu: caps the true traction and brake force at '
@@ -201,6 +211,12 @@ PARAMETERS: dict[str, Parameter] = {p.name: p for p in (
               'per mille of the weight'),
 )}
 
+#: parameters that no longer exist, with what replaced them (an old file is refused with it)
+RENAMED = {
+    'effectiveness': 'replaced by traction_effectiveness and brake_effectiveness (a lost '
+                     'traction converter does not lose the friction brake); give either or '
+                     'both, e.g. traction_effectiveness: {dist: choice, values: [1.0, 0.875]}',
+}
 #: the nominal draw: every parameter at the controller's value (the plant is its model)
 NOMINAL = {name: _fixed(p.nominal) for name, p in PARAMETERS.items()}
 #: the default uncertainty of a campaign
@@ -298,6 +314,8 @@ def parse_uncertainty(data: Any, where: str = 'uncertainty') -> dict[str, Distri
     for key, value in data.items():
         if key == 'defaults':
             continue
+        if key in RENAMED:
+            raise ConfigError(f'{where}.{key}: {RENAMED[key]}')
         if key not in PARAMETERS:
             raise ConfigError(f"{where}.{key}: unknown parameter; valid: "
                               f"{', '.join(PARAMETERS)}")
@@ -353,12 +371,13 @@ def perturbed(scenario, values: Mapping[str, float]):
         plant.actuators.time_constant_s, v['actuator_time_constant_s']),
         dead_time_s=max(plant.actuators.dead_time_s, v['actuator_dead_time_s']))
     failures = plant.failures
-    if v['effectiveness'] < 1.0:
+    traction_share, brake_share = v['traction_effectiveness'], v['brake_effectiveness']
+    if traction_share < 1.0 or brake_share < 1.0:
         failed = {f.actuator for f in failures if f.start_s <= 0.0}
         failures = failures + tuple(
             ActuatorFailure(name, 'partial', 0.0, min((f.start_s for f in failures
                                                        if f.actuator == name), default=math.inf),
-                            effectiveness=v['effectiveness'])
+                            effectiveness=traction_share, brake_effectiveness=brake_share)
             for name in train.actuator_names if name not in failed)
     disturbance = plant.disturbance
     if v['disturbance_per_weight'] > 0.0 and disturbance.kind == 'none':
