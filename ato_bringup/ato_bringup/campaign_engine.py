@@ -8,7 +8,8 @@ uncertainty (ato_common.uncertainty), the number of draws and the seed::
     seed: 1
     draws: 40
     scenarios: [short_line]          # built-in names or paths (relative to the campaign file)
-    laws: [pid, {law: luo_xu_adaptive, settings: {gamma_a: 1.0e-4}}]
+    laws: [pid, {law: luo_xu_adaptive, settings: {gamma_a: 1.0e-4}},
+           {law: pid, label: pid_flat, gradient: hidden}]  # its knowledge: a flat line
     baseline: pid                    # paired differences are taken against it
     uncertainty: default             # or nominal, or a mapping of parameters; if absent, each
                                      # scenario's uncertainty: section, else default
@@ -76,11 +77,18 @@ METRICS = ('rms_speed_error_kmh', 'max_speed_error_kmh', 'rms_position_error_m',
            'watchdog_events')
 
 
+#: what a law entry may say the controller is told of the gradient profile
+GRADIENT_KNOWLEDGE = ('drawn', 'known', 'hidden')
+
+
 @dataclass(frozen=True)
 class LawEntry:
     label: str                      # the law's name in the rows (name, or name#k with settings)
     law: str
     settings: Mapping[str, Any] = field(default_factory=dict)
+    #: the gradient profile in the controller's knowledge: as drawn (the uncertainty's
+    #: gradient_known), or known or hidden in every draw of this entry
+    gradient: str = 'drawn'
 
 
 @dataclass(frozen=True)
@@ -106,7 +114,8 @@ class Campaign:
     def fingerprint(self) -> str:
         """What the rows depend on: a row with another fingerprint is from another campaign."""
         text = json.dumps({'seed': self.seed, 'scenarios': self.scenarios,
-                           'laws': [(e.label, e.law, dict(e.settings)) for e in self.laws],
+                           'laws': [(e.label, e.law, dict(e.settings), e.gradient)
+                                    for e in self.laws],
                            'spec': {scenario: {k: repr(v) for k, v in sorted(spec.items())}
                                     for scenario, spec in sorted(self.specs.items())},
                            'end_time_s': self.end_time_s}, sort_keys=True, default=str)
@@ -120,6 +129,8 @@ class Campaign:
 
 def task_of(campaign: Campaign, scenario: str, entry: LawEntry, index: int) -> dict:
     values = uncertainty.draw(campaign.specs[scenario], campaign.seed, index)
+    if entry.gradient != 'drawn':  # a knowledge parameter: the plant of the draw is the same
+        values['gradient_known'] = 1.0 if entry.gradient == 'known' else 0.0
     return {'campaign': campaign.name, 'fingerprint': campaign.fingerprint,
             'scenario': scenario, 'law': entry.label, 'law_name': entry.law,
             'settings': dict(entry.settings), 'draw': index, 'values': values,
@@ -239,7 +250,7 @@ def _parse(data: Any, origin: str, base: Path) -> Campaign:
 
 
 def _law_entry(item: Any, i: int) -> LawEntry:
-    """``name`` or ``{law: name, settings: {gain: value}, label: text}``."""
+    """``name`` or ``{law: name, settings: {gain: value}, label: text, gradient: hidden}``."""
     if isinstance(item, str):
         item = {'law': item}
     law_fields = Fields(item, f'laws[{i}]')
@@ -258,9 +269,14 @@ def _law_entry(item: Any, i: int) -> LawEntry:
         validated_settings(LAWS[law].Settings, settings)
     except (ValueError, TypeError) as error:
         raise ConfigError(f'laws[{i}].settings: {error}') from None
-    label = law_fields.text('label', law if not settings else f'{law}#{i}')
+    gradient = law_fields.text('gradient', 'drawn')
+    if gradient not in GRADIENT_KNOWLEDGE:
+        raise ConfigError(f"laws[{i}].gradient: '{gradient}' is not valid; valid: "
+                          f"{', '.join(GRADIENT_KNOWLEDGE)}")
+    default_label = law if not settings and gradient == 'drawn' else f'{law}#{i}'
+    label = law_fields.text('label', default_label)
     law_fields.reject_unknown()
-    return LawEntry(label, law, dict(settings))
+    return LawEntry(label, law, dict(settings), gradient)
 
 
 def load_campaign(path: str | Path) -> Campaign:

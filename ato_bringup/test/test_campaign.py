@@ -432,3 +432,43 @@ def test_the_rows_of_two_versions_of_a_campaign_live_side_by_side(serial_rows, t
     assert len(read_rows(folder)) == 16
     pd.testing.assert_frame_equal(comparable(read_rows(folder, campaign.fingerprint)),
                                   comparable(rows))
+
+
+def test_a_hidden_gradient_changes_the_controller_only_and_the_closed_loop_shows_it():
+    from train_plant_node.simulation import TrainSimulation
+    scenario = load_scenario('short_line')
+    values = {name: p.nominal for name, p in uncertainty.PARAMETERS.items()}
+    hidden = dict(values, gradient_known=0.0)
+    # the plant's truth, and its grade force, are the nominal ones
+    assert uncertainty.perturbed(scenario, hidden) is scenario
+    sims = [TrainSimulation(uncertainty.perturbed(scenario, v)) for v in (hidden, values)]
+    for sim in sims:
+        sim.state[:2] = (20000.0, 30.0)  # on the 12 per mille grade, coasting at 30 m/s
+    hidden_accel, nominal_accel = (sim.truth().accelerations[0] for sim in sims)
+    assert hidden_accel == nominal_accel < -9.80665 * 0.012   # the grade decelerates it
+    # the closed loop: the PID feeds no grade forward, and tracks the grades worse
+    known_run = run_offline(scenario, 'pid', end_time_s=400.0, uncertainty=values)
+    hidden_run = run_offline(scenario, 'pid', end_time_s=400.0, uncertainty=hidden)
+    assert np.array_equal(known_run.ref_speeds, hidden_run.ref_speeds)
+    assert not np.array_equal(known_run.forces, hidden_run.forces)
+    assert hidden_run.metrics().rms_speed_error_kmh > known_run.metrics().rms_speed_error_kmh
+
+
+def test_a_law_entry_can_hide_the_gradient_on_the_same_draws(tmp_path):
+    example = resources.files('ato_bringup') / 'campaigns' / 'hidden_gradient.yaml'
+    assert [(e.label, e.gradient) for e in load_campaign(Path(str(example))).laws] == [
+        ('pid', 'drawn'), ('pid_gradient_hidden', 'hidden')]
+    data = dict(TINY, draws=2, end_time_s=300,
+                laws=['pid', {'law': 'pid', 'label': 'flat', 'gradient': 'hidden'}])
+    rows = run_campaign(load_campaign(write(tmp_path, data)), tmp_path / 'out', serial=True,
+                        progress=False)
+    pid, flat = (rows[rows['law'] == law].reset_index(drop=True) for law in ('pid', 'flat'))
+    assert list(pid['p_gradient_known']) == [1.0, 1.0]
+    assert list(flat['p_gradient_known']) == [0.0, 0.0]
+    plant = [c for c in rows.columns if c.startswith('p_') and c != 'p_gradient_known']
+    assert pid[plant].equals(flat[plant])   # the same plants: the difference is paired
+    assert (pid['rms_speed_error_kmh'] != flat['rms_speed_error_kmh']).all()
+    with pytest.raises(ConfigError, match=r"laws\[0\].gradient: 'flat' is not valid; valid: "
+                                          'drawn, known, hidden'):
+        load_campaign(write(tmp_path, dict(TINY, laws=[{'law': 'pid', 'gradient': 'flat'}]),
+                            'bad.yaml'))

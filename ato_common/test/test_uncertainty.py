@@ -77,6 +77,9 @@ def test_each_distribution_samples_inside_its_bounds_with_its_moments():
     ({'effectiveness': 0.9}, 'uncertainty.effectiveness',
      'replaced by traction_effectiveness and brake_effectiveness'),
     ({'defaults': 'yes'}, 'uncertainty.defaults', 'true or false'),
+    ({'gradient_known': 0.5}, 'uncertainty.gradient_known', '0.5 is not one of its values'),
+    ({'gradient_known': {'dist': 'uniform', 'low': 0, 'high': 1}},
+     'uncertainty.gradient_known', 'takes only the values 0, 1'),
 ])
 def test_a_bad_specification_names_its_field(spec, field, words):
     with pytest.raises(ConfigError) as error:
@@ -153,3 +156,20 @@ def test_the_new_parameters_have_cited_defaults_inside_their_valid_ranges():
         assert min(values) >= p.minimum and max(values) <= p.maximum
         assert np.std(values) > 0.0
 
+
+
+def test_hiding_the_gradient_acts_on_the_knowledge_only():
+    scenario = load_scenario('short_line')
+    for value in (False, 0, {'dist': 'choice', 'values': [False]}):
+        spec = u.parse_uncertainty({'defaults': False, 'gradient_known': value})
+        values = u.draw(spec, 1, 0)
+        assert values['gradient_known'] == 0.0
+        assert u.knowledge_options(values) == {'hide_gradient': True}
+        assert u.perturbed(scenario, values) is scenario   # the plant: the nominal truth
+    assert u.knowledge_options(None) == {'hide_gradient': False}
+    assert u.draw(u.DEFAULTS, 1, 0)['gradient_known'] == 1.0   # known by default
+    # the truth of a draw is the same whatever the controller is told (seeds included)
+    drawn = u.draw(u.DEFAULTS, 5, 2)
+    assert u.perturbed(scenario, dict(drawn, gradient_known=0.0)) == \
+        u.perturbed(scenario, drawn)
+    assert u.KNOWLEDGE_PARAMETERS == ('gradient_known',)
