@@ -378,13 +378,52 @@ def run_task(task: Mapping, runner: Callable[[Mapping], dict] | None = None) -> 
         row.update(status='error', reason=f'{type(error).__name__}: {error} '
                    f'[{traceback.format_exc(limit=-1).splitlines()[-3].strip()}]')
     row['wall_s'] = time.perf_counter() - started
+    freeze_worker_heap()
     return row
+
+
+#: the scenarios this process has parsed, by name or path and file version (see
+#: ``task_scenario``)
+_SCENARIOS: dict[tuple, Scenario] = {}
+
+
+def task_scenario(name_or_path: str) -> Scenario:
+    """``load_scenario(name_or_path)``, parsed once per process and file version: a worker runs
+    many draws and laws of the same few scenarios, and parsing one (YAML, validation, the line
+    and the train) costs about 1 % of a run. A file is parsed again when its modification time
+    or size changes (a long-lived cluster's workers see an edited scenario)."""
+    path = Path(name_or_path)
+    stat = path.stat() if name_or_path.endswith(('.yaml', '.yml')) and path.is_file() else None
+    key = (name_or_path, stat and (stat.st_mtime_ns, stat.st_size))
+    scenario = _SCENARIOS.get(key)
+    if scenario is None:
+        scenario = _SCENARIOS[key] = load_scenario(name_or_path)
+    return scenario
+
+
+_frozen = False
+
+
+def freeze_worker_heap() -> None:
+    """Once per Dask worker process, after its first run (the imports, the plant's kernels and
+    the first plan are in memory): collect, then move what is alive out of the cyclic garbage
+    collector's sight, as the nodes do (``ato_common.ros.freeze_startup_objects``). A worker's
+    heap (numba, scipy, distributed) is some 170 000 objects; a full collection visits each,
+    about 0.1 s, every few runs, and the objects each task leaves (Dask's task records) make
+    them more frequent. Outside a worker (a serial campaign, a test) nothing is frozen."""
+    global _frozen
+    if _frozen or not worker_address():
+        return
+    import gc
+    gc.collect()
+    gc.freeze()
+    _frozen = True
 
 
 def offline_metrics(task: Mapping) -> dict:
     """The offline closed loop of one task and its metrics (ato_bringup.offline)."""
     from ato_bringup.offline import run_offline
-    scenario = load_scenario(task['scenario'])
+    scenario = task_scenario(task['scenario'])
     settings = {task['law_name']: task['settings']} if task['settings'] else None
     run = run_offline(scenario, task['law_name'], settings, model=task['model'],
                       controller_rate_hz=task['rate_hz'], end_time_s=task['end_time_s'],
@@ -529,6 +568,13 @@ def run_serial(items: Iterable, function: Callable[[Any], dict],
         finished(row)
 
 
+#: the Dask configuration of a LocalCluster's workers: no statistical profiler (by default a
+#: worker samples the stack of its task thread every 10 ms, each sample taking the interpreter
+#: lock from the run); a cluster started with the dask command line is given the same with
+#: DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED=False (docs/guide/campaigns.md)
+WORKER_SETTINGS = {'distributed.worker.profile.enabled': False}
+
+
 def open_client(scheduler: str | None = None, workers: int | None = None,
                 allowed_failures: int | None = None):
     """(client, cluster): a Dask client to ``scheduler`` (or Dask's ``scheduler-address``
@@ -540,8 +586,9 @@ def open_client(scheduler: str | None = None, workers: int | None = None,
     address = scheduler or dask.config.get('scheduler-address', None)
     if address:
         return Client(address, timeout='30s'), None
-    settings = {} if allowed_failures is None else {
-        'distributed.scheduler.allowed-failures': allowed_failures}
+    settings = dict(WORKER_SETTINGS)
+    if allowed_failures is not None:
+        settings['distributed.scheduler.allowed-failures'] = allowed_failures
     # The scheduler serves HTTP even without a dashboard; ':0' takes a free port rather than
     # 8787, which another cluster on the machine may hold.
     with dask.config.set(settings):

@@ -86,6 +86,24 @@ class KnownGradient:
             return 0.0
         return self.sines[max(bisect_right(self.starts_m, position_m) - 1, 0)]
 
+    def mean_sine(self, front_m: float, length_m: float) -> float:
+        """The mean known sine of the grade under a train of ``length_m`` whose front is at
+        ``front_m`` (over [front - length, front], exactly: the profile is piecewise
+        constant); the sine at the front for a length of 0."""
+        if not self.starts_m or length_m <= 0.0:
+            return self.sine_at(front_m)
+        starts, sines = self.starts_m, self.sines
+        rear = front_m - length_m
+        first = max(bisect_right(starts, rear) - 1, 0)
+        last = max(bisect_right(starts, front_m) - 1, 0)
+        if first == last:
+            return sines[first]
+        total, lower = 0.0, rear
+        for i in range(first, last):
+            total += sines[i] * (starts[i + 1] - lower)
+            lower = starts[i + 1]
+        return (total + sines[last] * (front_m - lower)) / length_m
+
 
 #: the knowledge of a line whose gradient profile the controller is not given
 HIDDEN_GRADIENT = KnownGradient(hidden=True)
@@ -116,6 +134,7 @@ class TrainKnowledge:
     mode_switch: str = 'time'
     #: the line's gradient profile as on-board track data (empty: not known, a flat line)
     gradient: KnownGradient = KnownGradient()
+    length_m: float = 200.0     # the train's length (the grade force acts along it)
 
     def __post_init__(self) -> None:
         if self.mode_switch not in MODE_SWITCHES:
@@ -132,13 +151,15 @@ class TrainKnowledge:
         return cls(train.mass_kg, train.davis_nominal, train.traction, train.actuator_names,
                    train.cars, train.couplers, train.car_length_m,
                    tuple(KnownMode.of(m, i) for i, m in enumerate(modes)), mode_switch,
-                   gradient)
+                   gradient, train.length_m)
 
     def grade_force_n(self, positions_m: tuple[float, ...] | float) -> float:
         """The known grade force on the nominal train, N (positive uphill: it opposes the
-        motion): M g sin(grade) at the train's position, or, given one position per car of a
-        multi-car train, the sum of each car's nominal mass times g sin(grade) at its position.
-        0 everywhere when the gradient profile is not known."""
+        motion): M g times the mean sine of the grade under the train (its front at the
+        measured position, its mass spread over its length, so the force changes smoothly as
+        the train runs over a change of grade), or, given one position per car of a multi-car
+        train, the sum of each car's nominal mass times g sin(grade) at its position. 0
+        everywhere when the gradient profile is not known."""
         gradient = self.gradient
         if not gradient.starts_m:
             return 0.0
@@ -148,7 +169,7 @@ class TrainKnowledge:
                 return g * sum(car.mass_kg * gradient.sine_at(x)
                                for car, x in zip(self.cars, positions_m))
             positions_m = positions_m[0]
-        return g * self.nominal_mass_kg * gradient.sine_at(positions_m)
+        return g * self.nominal_mass_kg * gradient.mean_sine(positions_m, self.length_m)
 
     @cached_property
     def mode_schedule(self) -> ModeSchedule:

@@ -146,7 +146,7 @@ def test_the_knowledge_copies_the_gradient_profile_or_hides_it_and_the_truth_kee
     assert hidden.gradient == HIDDEN_GRADIENT and hidden.gradient.hidden
     assert all(hidden.gradient.sine_at(x) == 0.0 for x in positions)
     assert all(hidden.grade_force_n(x) == 0.0 for x in positions)
-    assert known.grade_force_n(20000.0) == pytest.approx(
+    assert known.grade_force_n(20000.0) == pytest.approx(   # the whole train on the grade
         known.nominal_mass_kg * 9.80665 * grades(20000.0))
     # everything else is the same knowledge; the scenario (the plant's truth) is untouched
     assert replace(hidden, gradient=known.gradient) == known
@@ -160,4 +160,17 @@ def test_a_multi_car_train_knows_the_grade_force_car_by_car():
     # the lead car on the grade, the others before it
     positions = (150.0, 50.0, 25.0, 0.0)
     assert known.grade_force_n(positions) == pytest.approx(9.80665 * 0.01 * cars[0].mass_kg)
-    assert known.grade_force_n(150.0) == pytest.approx(9.80665 * 0.01 * known.nominal_mass_kg)
+    # one position: the whole train's mass spread over its length, half of it on the grade
+    assert known.length_m == scenario.train.length_m == 100.0
+    assert known.grade_force_n(150.0) == pytest.approx(
+        9.80665 * 0.005 * known.nominal_mass_kg)
+
+
+def test_the_mean_grade_under_a_train_is_the_exact_mean_of_the_profile():
+    gradient = KnownGradient((0.0, 100.0, 130.0), (0.001, 0.01, -0.002))
+    assert gradient.mean_sine(90.0, 50.0) == 0.001          # all on the first segment
+    assert gradient.mean_sine(150.0, 100.0) == pytest.approx(
+        (50 * 0.001 + 30 * 0.01 + 20 * -0.002) / 100)      # over three segments
+    assert gradient.mean_sine(120.0, 0.0) == 0.01           # a point: the sine there
+    assert gradient.mean_sine(10.0, 200.0) == pytest.approx(0.001)  # before the start: level 1
+    assert KnownGradient().mean_sine(120.0, 100.0) == 0.0
