@@ -20,6 +20,7 @@ import pandas as pd
 import pytest
 import yaml
 
+from ato_bringup import campaign_engine as engine
 from ato_bringup import campaign_stats as cs
 from ato_bringup.campaign import main
 from ato_bringup.campaign_engine import (
@@ -472,3 +473,41 @@ def test_a_law_entry_can_hide_the_gradient_on_the_same_draws(tmp_path):
                                           'drawn, known, hidden'):
         load_campaign(write(tmp_path, dict(TINY, laws=[{'law': 'pid', 'gradient': 'flat'}]),
                             'bad.yaml'))
+
+
+def test_a_worker_parses_a_scenario_once_per_file_version(tmp_path):
+    from ato_bringup.campaign_engine import task_scenario
+    assert task_scenario('short_line') is task_scenario('short_line')
+    source = resources.files('ato_common') / 'scenarios' / 'short_line.yaml'
+    path = tmp_path / 'mine.yaml'
+    path.write_text(source.read_text())
+    first = task_scenario(str(path))
+    assert task_scenario(str(path)) is first and first.name == 'short_line'
+    data = yaml.safe_load(path.read_text())
+    data['name'] = 'edited'
+    path.write_text(yaml.safe_dump(data))
+    stat = path.stat()
+    os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns + 1_000_000_000))
+    assert task_scenario(str(path)).name == 'edited'   # an edited file is parsed again
+
+
+def _worker_view():
+    import gc
+
+    import dask
+    return ({key: dask.config.get(key) for key in engine.WORKER_SETTINGS}, gc.get_freeze_count())
+
+
+def test_the_local_cluster_s_workers_run_without_the_profiler_and_freeze_after_a_run():
+    client, cluster = engine.open_client(workers=1)
+    try:
+        (settings, frozen), = client.run(_worker_view).values()
+        assert settings == engine.WORKER_SETTINGS and frozen == 0
+        assert settings['distributed.worker.profile.enabled'] is False
+        task = dict(engine.parse_campaign(TINY, 'tiny', Path.cwd()).tasks()[0], end_time_s=5.0)
+        assert client.submit(run_task, task, pure=False).result()['status'] == 'ok'
+        (_, frozen), = client.run(_worker_view).values()
+        assert frozen > 0   # the heap after the first run is out of the collector's sight
+    finally:
+        client.close()
+        cluster.close()

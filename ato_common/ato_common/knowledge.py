@@ -114,11 +114,13 @@ class TrainKnowledge:
     """What the on-board software knows of its train: nominal values, not the truth.
 
     The nominal train: mass, Davis resistance (the on-board prior ``davis_nominal``, not the
-    simulated ``davis``), traction characteristic, actuator names, and for a multi-car train the
-    nominal per-car data, couplers and car length. For the laws that assume them known (Mao et
-    al. 2017's mode indicators chi_i): the operating modes and the schedule that says which one
-    applies, by time or by region (:meth:`known_mode`). No failure, disturbance, resistance
-    variation, sensor fault or noise, actuator lag: those are the plant's truth.
+    simulated ``davis``), traction characteristic, actuator names, length, and for a multi-car
+    train the nominal per-car data, couplers and car length. The line's gradient profile as
+    track data (``gradient``, :meth:`grade_force_n`; empty when hidden). For the laws that
+    assume them known (Mao et al. 2017's mode indicators chi_i): the operating modes and the
+    schedule that says which one applies, by time or by region (:meth:`known_mode`). No
+    failure, disturbance, resistance variation, sensor fault or noise, actuator lag: those are
+    the plant's truth.
     """
 
     nominal_mass_kg: float
