@@ -32,7 +32,8 @@ the speed error, which keeps growing while the train cannot follow). Both are ha
   reference x* - delta running at max(v* + ``catch_up_speed_mps``, sqrt(2 b |delta|)) with b
   ``catch_up_deceleration_mps2``: the train makes up the lost distance a little faster than the
   reference while it runs, and along a braking curve to where it stands (so it still reaches
-  every stop), instead of catching up at overspeed;
+  every stop), instead of catching up at overspeed; delta never exceeds the position error
+  itself (a replanned reference that starts where the train is takes it back to 0);
 - conditional integration: while the command is saturated the integrator only moves in the
   direction that leaves saturation.
 
@@ -127,6 +128,14 @@ class PidLaw(ControlLaw):
             self.delta = 0.0
 
     def step(self, measurement, reference):
+        # delta forgives part of the position error, never more than there is: when the
+        # reference comes back to the train (a replanned reference starts where it is), so does
+        # the law's
+        error = reference.position - measurement.position
+        if self.delta > 0.0:
+            self.delta = min(self.delta, max(error, 0.0))
+        elif self.delta < 0.0:
+            self.delta = max(self.delta, min(error, 0.0))
         base, per_action = self._unbounded_parts(measurement, reference)
         force = base + per_action * self.settings.ki_position * self.integral
         self._pending_error = reference.position - measurement.position - self.delta
