@@ -441,9 +441,12 @@ def campaign_throughput(scenario: str) -> list[str]:
     wall time and in CPU time (this process, with the scheduler, plus every worker's): on a
     machine shared with other work the wall times move with the load, the CPU times much
     less."""
-    from distributed import Client, LocalCluster
-
-    from ato_bringup.campaign_engine import offline_metrics, parse_campaign, run_campaign
+    from ato_bringup.campaign_engine import (
+        offline_metrics,
+        open_client,
+        parse_campaign,
+        run_campaign,
+    )
     data = {'name': 'bench', 'seed': 1, 'draws': BENCH_CAMPAIGN_DRAWS, 'scenarios': [scenario],
             'laws': list(BENCH_CAMPAIGN_LAWS), 'uncertainty': 'default'}
     campaign = parse_campaign(data, 'bench', Path.cwd())
@@ -458,10 +461,8 @@ def campaign_throughput(scenario: str) -> list[str]:
             f'{60 * n / bare_s:.1f} | - | - |']
     rates = {}
     for workers in (1, 2):
-        with tempfile.TemporaryDirectory() as out, \
-                LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                             dashboard_address=':0', silence_logs=40) as cluster, \
-                Client(cluster) as client:
+        client, cluster = open_client(workers=workers)  # the engine's LocalCluster
+        with tempfile.TemporaryDirectory() as out, cluster, client:
             client.run(_warm_up)
             before, cpu = client.run(_cpu_s), _cpu_s()
             started = time.perf_counter()

@@ -8,7 +8,8 @@ uncertainty (ato_common.uncertainty), the number of draws and the seed::
     seed: 1
     draws: 40
     scenarios: [short_line]          # built-in names or paths (relative to the campaign file)
-    laws: [pid, {law: luo_xu_adaptive, settings: {gamma_a: 1.0e-4}}]
+    laws: [pid, {law: luo_xu_adaptive, settings: {gamma_a: 1.0e-4}},
+           {law: pid, label: pid_flat, gradient: hidden}]  # its knowledge: a flat line
     baseline: pid                    # paired differences are taken against it
     uncertainty: default             # or nominal, or a mapping of parameters; if absent, each
                                      # scenario's uncertainty: section, else default
@@ -76,11 +77,18 @@ METRICS = ('rms_speed_error_kmh', 'max_speed_error_kmh', 'rms_position_error_m',
            'watchdog_events')
 
 
+#: what a law entry may say the controller is told of the gradient profile
+GRADIENT_KNOWLEDGE = ('drawn', 'known', 'hidden')
+
+
 @dataclass(frozen=True)
 class LawEntry:
     label: str                      # the law's name in the rows (name, or name#k with settings)
     law: str
     settings: Mapping[str, Any] = field(default_factory=dict)
+    #: the gradient profile in the controller's knowledge: as drawn (the uncertainty's
+    #: gradient_known), or known or hidden in every draw of this entry
+    gradient: str = 'drawn'
 
 
 @dataclass(frozen=True)
@@ -106,7 +114,8 @@ class Campaign:
     def fingerprint(self) -> str:
         """What the rows depend on: a row with another fingerprint is from another campaign."""
         text = json.dumps({'seed': self.seed, 'scenarios': self.scenarios,
-                           'laws': [(e.label, e.law, dict(e.settings)) for e in self.laws],
+                           'laws': [(e.label, e.law, dict(e.settings), e.gradient)
+                                    for e in self.laws],
                            'spec': {scenario: {k: repr(v) for k, v in sorted(spec.items())}
                                     for scenario, spec in sorted(self.specs.items())},
                            'end_time_s': self.end_time_s}, sort_keys=True, default=str)
@@ -120,6 +129,8 @@ class Campaign:
 
 def task_of(campaign: Campaign, scenario: str, entry: LawEntry, index: int) -> dict:
     values = uncertainty.draw(campaign.specs[scenario], campaign.seed, index)
+    if entry.gradient != 'drawn':  # a knowledge parameter: the plant of the draw is the same
+        values['gradient_known'] = 1.0 if entry.gradient == 'known' else 0.0
     return {'campaign': campaign.name, 'fingerprint': campaign.fingerprint,
             'scenario': scenario, 'law': entry.label, 'law_name': entry.law,
             'settings': dict(entry.settings), 'draw': index, 'values': values,
@@ -239,7 +250,7 @@ def _parse(data: Any, origin: str, base: Path) -> Campaign:
 
 
 def _law_entry(item: Any, i: int) -> LawEntry:
-    """``name`` or ``{law: name, settings: {gain: value}, label: text}``."""
+    """``name`` or ``{law: name, settings: {gain: value}, label: text, gradient: hidden}``."""
     if isinstance(item, str):
         item = {'law': item}
     law_fields = Fields(item, f'laws[{i}]')
@@ -258,9 +269,14 @@ def _law_entry(item: Any, i: int) -> LawEntry:
         validated_settings(LAWS[law].Settings, settings)
     except (ValueError, TypeError) as error:
         raise ConfigError(f'laws[{i}].settings: {error}') from None
-    label = law_fields.text('label', law if not settings else f'{law}#{i}')
+    gradient = law_fields.text('gradient', 'drawn')
+    if gradient not in GRADIENT_KNOWLEDGE:
+        raise ConfigError(f"laws[{i}].gradient: '{gradient}' is not valid; valid: "
+                          f"{', '.join(GRADIENT_KNOWLEDGE)}")
+    default_label = law if not settings and gradient == 'drawn' else f'{law}#{i}'
+    label = law_fields.text('label', default_label)
     law_fields.reject_unknown()
-    return LawEntry(label, law, dict(settings))
+    return LawEntry(label, law, dict(settings), gradient)
 
 
 def load_campaign(path: str | Path) -> Campaign:
@@ -362,13 +378,52 @@ def run_task(task: Mapping, runner: Callable[[Mapping], dict] | None = None) -> 
         row.update(status='error', reason=f'{type(error).__name__}: {error} '
                    f'[{traceback.format_exc(limit=-1).splitlines()[-3].strip()}]')
     row['wall_s'] = time.perf_counter() - started
+    freeze_worker_heap()
     return row
+
+
+#: the scenarios this process has parsed, by name or path and file version (see
+#: ``task_scenario``)
+_SCENARIOS: dict[tuple, Scenario] = {}
+
+
+def task_scenario(name_or_path: str) -> Scenario:
+    """``load_scenario(name_or_path)``, parsed once per process and file version: a worker runs
+    many draws and laws of the same few scenarios, and parsing one (YAML, validation, the line
+    and the train) costs about 1 % of a run. A file is parsed again when its modification time
+    or size changes (a long-lived cluster's workers see an edited scenario)."""
+    path = Path(name_or_path)
+    stat = path.stat() if name_or_path.endswith(('.yaml', '.yml')) and path.is_file() else None
+    key = (name_or_path, stat and (stat.st_mtime_ns, stat.st_size))
+    scenario = _SCENARIOS.get(key)
+    if scenario is None:
+        scenario = _SCENARIOS[key] = load_scenario(name_or_path)
+    return scenario
+
+
+_frozen = False
+
+
+def freeze_worker_heap() -> None:
+    """Once per Dask worker process, after its first run (the imports, the plant's kernels and
+    the first plan are in memory): collect, then move what is alive out of the cyclic garbage
+    collector's sight, as the nodes do (``ato_common.ros.freeze_startup_objects``). A worker's
+    heap (numba, scipy, distributed) is some 170 000 objects; a full collection visits each,
+    about 0.1 s, every few runs, and the objects each task leaves (Dask's task records) make
+    them more frequent. Outside a worker (a serial campaign, a test) nothing is frozen."""
+    global _frozen
+    if _frozen or not worker_address():
+        return
+    import gc
+    gc.collect()
+    gc.freeze()
+    _frozen = True
 
 
 def offline_metrics(task: Mapping) -> dict:
     """The offline closed loop of one task and its metrics (ato_bringup.offline)."""
     from ato_bringup.offline import run_offline
-    scenario = load_scenario(task['scenario'])
+    scenario = task_scenario(task['scenario'])
     settings = {task['law_name']: task['settings']} if task['settings'] else None
     run = run_offline(scenario, task['law_name'], settings, model=task['model'],
                       controller_rate_hz=task['rate_hz'], end_time_s=task['end_time_s'],
@@ -513,6 +568,18 @@ def run_serial(items: Iterable, function: Callable[[Any], dict],
         finished(row)
 
 
+#: the Dask configuration of a LocalCluster (its scheduler, in this process, and its workers):
+#: no statistical profiler (by default a worker samples the stack of its task thread every
+#: 10 ms, each sample taking the interpreter lock from the run), the event loops' tick every
+#: 1 s rather than 20 ms and the system monitor every 5 s rather than 0.5 s (each wake-up takes
+#: the lock too; together they cost an idle worker about 4 % of a core, 1 % after). A cluster
+#: started with the dask command line is given the same with the DASK_DISTRIBUTED__...
+#: variables of docs/guide/campaigns.md
+WORKER_SETTINGS = {'distributed.worker.profile.enabled': False,
+                   'distributed.admin.tick.interval': '1s',
+                   'distributed.admin.system-monitor.interval': '5s'}
+
+
 def open_client(scheduler: str | None = None, workers: int | None = None,
                 allowed_failures: int | None = None):
     """(client, cluster): a Dask client to ``scheduler`` (or Dask's ``scheduler-address``
@@ -524,8 +591,9 @@ def open_client(scheduler: str | None = None, workers: int | None = None,
     address = scheduler or dask.config.get('scheduler-address', None)
     if address:
         return Client(address, timeout='30s'), None
-    settings = {} if allowed_failures is None else {
-        'distributed.scheduler.allowed-failures': allowed_failures}
+    settings = dict(WORKER_SETTINGS)
+    if allowed_failures is not None:
+        settings['distributed.scheduler.allowed-failures'] = allowed_failures
     # The scheduler serves HTTP even without a dashboard; ':0' takes a free port rather than
     # 8787, which another cluster on the machine may hold.
     with dask.config.set(settings):

@@ -7,7 +7,8 @@ The plant simulates the whole scenario (the truth); the controller knows only
 ``knowledge_of(scenario)`` (ato_common.knowledge): the nominal train and the known modes. With
 ``uncertainty`` (the values of one draw, ato_common.uncertainty) the plant runs the perturbed
 truth ``perturbed(scenario, uncertainty)`` while the controller keeps the knowledge of the
-nominal ``scenario``: no drawn value reaches it."""
+nominal ``scenario``: no drawn value of the truth reaches it (a draw's ``gradient_known`` 0
+hides the gradient profile from its knowledge)."""
 
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ from ato_common.knowledge import knowledge_of
 from ato_common.metrics import RunMetrics, StopSample, compute_metrics
 from ato_common.scenario import Scenario
 from ato_common.types import NS_PER_S, nanoseconds, seconds
-from ato_common.uncertainty import perturbed
+from ato_common.uncertainty import knowledge_options, perturbed
 from ato_controller_node.host import ControllerHost
 from profile_node.planner import Plan, plan_reference
 from profile_node.replan import LockstepPlans, Replanner
@@ -175,7 +176,8 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
     """Run ``controller`` on ``scenario`` with the plant ``model``; ``switches`` maps times to
     law names selected then; ``end_time_s`` and ``controller_rate_hz`` override the scenario's
     (a law that must run faster than a node can, e.g. Mao et al.'s feedback linearisation);
-    ``uncertainty``: the drawn values the plant's truth is perturbed by (None: nominal). The
+    ``uncertainty``: the drawn values the plant's truth is perturbed by (None: nominal), and
+    what the controller is told (``gradient_known``: ``knowledge_options``). The
     plan comes from this process's cache of plans (``cached_plan``); with the ``timetable``
     strategy it is replanned when the train falls behind it (``profile_node.replan``), and the
     run then follows the new plan (to its end, if that is later). ``replan_check_period_s``:
@@ -192,7 +194,8 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
     in_force = plan
     truth_scenario = perturbed(scenario, uncertainty) if uncertainty is not None else scenario
     sim = TrainSimulation(truth_scenario, model, sensors=sensors, **model_options)
-    host = ControllerHost(knowledge_of(scenario), seconds(period_ns), controller, settings)
+    host = ControllerHost(knowledge_of(scenario, **knowledge_options(uncertainty)),
+                          seconds(period_ns), controller, settings)
     end = end_time_s if end_time_s is not None else run_end_time_s(scenario, plan)
     steps = int(end * 1e9 // period_ns)
     references = _sampled_references(plan, key, period_ns, steps)

@@ -20,6 +20,7 @@ import pandas as pd
 import pytest
 import yaml
 
+from ato_bringup import campaign_engine as engine
 from ato_bringup import campaign_stats as cs
 from ato_bringup.campaign import main
 from ato_bringup.campaign_engine import (
@@ -432,3 +433,81 @@ def test_the_rows_of_two_versions_of_a_campaign_live_side_by_side(serial_rows, t
     assert len(read_rows(folder)) == 16
     pd.testing.assert_frame_equal(comparable(read_rows(folder, campaign.fingerprint)),
                                   comparable(rows))
+
+
+def test_a_hidden_gradient_changes_the_controller_only_and_the_closed_loop_shows_it():
+    from train_plant_node.simulation import TrainSimulation
+    scenario = load_scenario('short_line')
+    values = {name: p.nominal for name, p in uncertainty.PARAMETERS.items()}
+    hidden = dict(values, gradient_known=0.0)
+    # the plant's truth, and its grade force, are the nominal ones
+    assert uncertainty.perturbed(scenario, hidden) is scenario
+    sims = [TrainSimulation(uncertainty.perturbed(scenario, v)) for v in (hidden, values)]
+    for sim in sims:
+        sim.state[:2] = (20000.0, 30.0)  # on the 12 per mille grade, coasting at 30 m/s
+    hidden_accel, nominal_accel = (sim.truth().accelerations[0] for sim in sims)
+    assert hidden_accel == nominal_accel < -9.80665 * 0.012   # the grade decelerates it
+    # the closed loop: the PID feeds no grade forward, and tracks the grades worse
+    known_run = run_offline(scenario, 'pid', end_time_s=400.0, uncertainty=values)
+    hidden_run = run_offline(scenario, 'pid', end_time_s=400.0, uncertainty=hidden)
+    assert np.array_equal(known_run.ref_speeds, hidden_run.ref_speeds)
+    assert not np.array_equal(known_run.forces, hidden_run.forces)
+    assert hidden_run.metrics().rms_speed_error_kmh > known_run.metrics().rms_speed_error_kmh
+
+
+def test_a_law_entry_can_hide_the_gradient_on_the_same_draws(tmp_path):
+    example = resources.files('ato_bringup') / 'campaigns' / 'hidden_gradient.yaml'
+    assert [(e.label, e.gradient) for e in load_campaign(Path(str(example))).laws] == [
+        ('pid', 'drawn'), ('pid_gradient_hidden', 'hidden')]
+    data = dict(TINY, draws=2, end_time_s=300,
+                laws=['pid', {'law': 'pid', 'label': 'flat', 'gradient': 'hidden'}])
+    rows = run_campaign(load_campaign(write(tmp_path, data)), tmp_path / 'out', serial=True,
+                        progress=False)
+    pid, flat = (rows[rows['law'] == law].reset_index(drop=True) for law in ('pid', 'flat'))
+    assert list(pid['p_gradient_known']) == [1.0, 1.0]
+    assert list(flat['p_gradient_known']) == [0.0, 0.0]
+    plant = [c for c in rows.columns if c.startswith('p_') and c != 'p_gradient_known']
+    assert pid[plant].equals(flat[plant])   # the same plants: the difference is paired
+    assert (pid['rms_speed_error_kmh'] != flat['rms_speed_error_kmh']).all()
+    with pytest.raises(ConfigError, match=r"laws\[0\].gradient: 'flat' is not valid; valid: "
+                                          'drawn, known, hidden'):
+        load_campaign(write(tmp_path, dict(TINY, laws=[{'law': 'pid', 'gradient': 'flat'}]),
+                            'bad.yaml'))
+
+
+def test_a_worker_parses_a_scenario_once_per_file_version(tmp_path):
+    from ato_bringup.campaign_engine import task_scenario
+    assert task_scenario('short_line') is task_scenario('short_line')
+    source = resources.files('ato_common') / 'scenarios' / 'short_line.yaml'
+    path = tmp_path / 'mine.yaml'
+    path.write_text(source.read_text())
+    first = task_scenario(str(path))
+    assert task_scenario(str(path)) is first and first.name == 'short_line'
+    data = yaml.safe_load(path.read_text())
+    data['name'] = 'edited'
+    path.write_text(yaml.safe_dump(data))
+    stat = path.stat()
+    os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns + 1_000_000_000))
+    assert task_scenario(str(path)).name == 'edited'   # an edited file is parsed again
+
+
+def _worker_view():
+    import gc
+
+    import dask
+    return ({key: dask.config.get(key) for key in engine.WORKER_SETTINGS}, gc.get_freeze_count())
+
+
+def test_the_local_cluster_s_workers_run_without_the_profiler_and_freeze_after_a_run():
+    client, cluster = engine.open_client(workers=1)
+    try:
+        (settings, frozen), = client.run(_worker_view).values()
+        assert settings == engine.WORKER_SETTINGS and frozen == 0
+        assert settings['distributed.worker.profile.enabled'] is False
+        task = dict(engine.parse_campaign(TINY, 'tiny', Path.cwd()).tasks()[0], end_time_s=5.0)
+        assert client.submit(run_task, task, pure=False).result()['status'] == 'ok'
+        (_, frozen), = client.run(_worker_view).values()
+        assert frozen > 0   # the heap after the first run is out of the collector's sight
+    finally:
+        client.close()
+        cluster.close()

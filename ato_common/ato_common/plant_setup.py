@@ -168,8 +168,15 @@ class ActuatorFailure:
     stuck:        force_n (F_j = Fbar_j0)
     stuck_signal: force_n + amplitude_n sin(omega t + phase) (F_j = Fbar_j0 + Fbar_j1 f_j1(t))
     loss:         0 (total loss of effectiveness)
-    partial:      effectiveness * the healthy force, 0 < effectiveness < 1
+    partial:      effectiveness * the healthy traction force (> 0), brake_effectiveness *
+                  the healthy braking force (< 0); each share in (0, 1]
     whatever it is commanded; a stuck force is not limited by the traction characteristic.
+
+    A partial loss scales traction and braking separately: a lost traction converter takes its
+    share of the traction away while the friction brake still brakes (the brake control makes up
+    for the lost electric brake), an isolated friction brake the other way round.
+    ``brake_effectiveness`` None: the braking share equals ``effectiveness`` (one share for
+    both, as a scenario with ``effectiveness`` alone gives).
     """
 
     actuator: str
@@ -180,7 +187,14 @@ class ActuatorFailure:
     amplitude_n: float = 0.0
     omega_rad_per_s: float = 0.0
     phase_rad: float = 0.0
-    effectiveness: float = 1.0
+    effectiveness: float = 1.0          # partial: the share of the healthy traction force
+    brake_effectiveness: float | None = None  # partial: of the braking force (None: as above)
+
+    @property
+    def braking_share(self) -> float:
+        """The share of the healthy braking force a partial loss delivers."""
+        return self.effectiveness if self.brake_effectiveness is None \
+            else self.brake_effectiveness
 
     def active(self, time_s: float) -> bool:
         return self.start_s <= time_s < self.end_s
@@ -193,13 +207,19 @@ class ActuatorFailure:
                 self.omega_rad_per_s * time_s + self.phase_rad)
         if self.kind == 'loss':
             return 0.0
+        if healthy_force_n < 0.0:
+            return self.braking_share * healthy_force_n
         return self.effectiveness * healthy_force_n
 
     def describe(self) -> str:
         details = {'stuck': f'{self.force_n:g} N',
                    'stuck_signal': f'{self.force_n:g} + {self.amplitude_n:g} sin('
                                    f'{self.omega_rad_per_s:g} t + {self.phase_rad:g}) N',
-                   'loss': '0 N', 'partial': f'{self.effectiveness:g} of the healthy force'}
+                   'loss': '0 N', 'partial': (
+                       f'{self.effectiveness:g} of the healthy force'
+                       if self.braking_share == self.effectiveness else
+                       f'{self.effectiveness:g} of the healthy traction, '
+                       f'{self.braking_share:g} of the braking force')}
         end = '' if math.isinf(self.end_s) else f' until {self.end_s:g} s'
         return f'{self.actuator} {self.kind} ({details[self.kind]}) from {self.start_s:g} s{end}'
 
@@ -401,6 +421,29 @@ def _disturbance(f: Fields) -> Disturbance:
     return d
 
 
+#: the keys of a partial loss: one share for both, or a share of traction and one of braking
+PARTIAL_KEYS = ('effectiveness', 'traction_effectiveness', 'brake_effectiveness')
+
+
+def _partial(item: Fields, actuator: str, start: float, end: float) -> ActuatorFailure:
+    """A partial loss: ``effectiveness`` (both shares), or ``traction_effectiveness`` and/or
+    ``brake_effectiveness`` (each defaults to ``effectiveness`` if given, else 1); at least one
+    of the keys."""
+    given = [key for key in PARTIAL_KEYS if item.has(key)]
+    if not given:
+        raise ConfigError(f"{item.where}: a partial loss needs 'effectiveness' (one share for "
+                          "traction and braking) or 'traction_effectiveness' and/or "
+                          "'brake_effectiveness'")
+
+    def share(key: str, default: float) -> float:
+        return item.number(key, default, minimum=0.0, maximum=1.0, exclusive_minimum=True)
+
+    both = share('effectiveness', 1.0)
+    traction, brake = share('traction_effectiveness', both), share('brake_effectiveness', both)
+    return ActuatorFailure(actuator, 'partial', start, end, effectiveness=traction,
+                           brake_effectiveness=None if brake == traction else brake)
+
+
 def parse_failures(items: Sequence[Fields], actuator_names: Sequence[str],
                    default_start_s: float | None = None) -> tuple[ActuatorFailure, ...]:
     """Failure records (also what the node accepts at run time, where start_s defaults to now)."""
@@ -425,8 +468,7 @@ def parse_failures(items: Sequence[Fields], actuator_names: Sequence[str],
                                       item.number('omega_rad_per_s', minimum=0.0),
                                       item.number('phase_rad', 0.0))
         if kind == 'partial':
-            failure = ActuatorFailure(actuator, kind, start, end, effectiveness=item.number(
-                'effectiveness', minimum=0.0, maximum=1.0, exclusive_minimum=True))
+            failure = _partial(item, actuator, start, end)
         item.reject_unknown()
         for other in failures:
             if other.actuator == actuator and other.start_s < end and start < other.end_s:

@@ -3,7 +3,10 @@
 The controller keeps the nominal train (``knowledge_of(scenario)``, :mod:`ato_common.knowledge`);
 the plant runs :func:`perturbed` ``(scenario, draw)``: the nominal scenario with a draw of the
 uncertain parameters applied to its train and its ``plant:`` section. The knowledge is never
-built from the perturbed scenario, so no drawn value reaches the controller.
+built from the perturbed scenario, so no drawn value of the truth reaches the controller. One
+parameter acts on the knowledge instead (``acts_on='knowledge'``): ``gradient_known`` 0 hides
+the line's gradient profile from the controller (``knowledge_options`` gives the arguments of
+``knowledge_of``) while the plant keeps its grades; it never changes the plant.
 
 An ``uncertainty:`` specification maps parameter names (:data:`PARAMETERS`) to distributions::
 
@@ -13,6 +16,7 @@ An ``uncertainty:`` specification maps parameter names (:data:`PARAMETERS`) to d
       wind_mps: {dist: normal, mean: 0.0, std: 3.0}
       adhesion: {dist: choice, values: [0.3, 0.15], weights: [0.8, 0.2]}
       davis_c_factor: 1.1       # a number: that value in every draw
+      gradient_known: false     # the controller's knowledge has a flat line (default: true)
 
 Distributions: ``uniform`` (low, high), ``normal`` (mean, std), ``truncated_normal`` (mean,
 std, low, high), ``lognormal`` (median, sigma: the standard deviation of the logarithm),
@@ -99,6 +103,11 @@ class Parameter:
     default: Distribution
     description: str
     source: str
+    #: 'plant': the draw changes the truth (perturbed); 'knowledge': it changes what the
+    #: controller is told (knowledge_options), never the plant
+    acts_on: str = 'plant'
+    #: the only values the parameter takes (empty: any in [minimum, maximum])
+    allowed: tuple[float, ...] = ()
 
 
 def _fixed(value: float) -> Distribution:
@@ -156,12 +165,22 @@ PARAMETERS: dict[str, Parameter] = {p.name: p for p in (
               'force builds up is a few tenths of a second on an electro-pneumatic EMU brake); '
               'traction converters and the train bus add about 0.1 s (suite assumption within '
               'those figures)'),
-    Parameter('effectiveness', '1', 1.0, 0.05, 1.0,
+    Parameter('traction_effectiveness', '1', 1.0, 0.05, 1.0,
               Distribution('choice', values=(1.0, 0.875), weights=(0.9, 0.1)),
-              'traction and brake effectiveness: every actuator delivers this share of its '
-              'healthy force for the whole run (a partial loss, plant.failures kind partial)',
+              'traction effectiveness: every actuator delivers this share of its healthy '
+              'traction force for the whole run (a partial loss, plant.failures kind partial '
+              'traction_effectiveness); braking is not affected',
               'suite assumption: the loss of one traction converter of 8 on an EMU removes '
-              '12.5 % of the effort; the default has it in one draw of 10'),
+              '12.5 % of the traction effort (its electric brake is made up for by the '
+              'friction brake); the default has it in one draw of 10'),
+    Parameter('brake_effectiveness', '1', 1.0, 0.05, 1.0,
+              Distribution('choice', values=(1.0, 0.9375), weights=(0.95, 0.05)),
+              'brake effectiveness: every actuator delivers this share of its healthy braking '
+              'force for the whole run (a partial loss, plant.failures kind partial '
+              'brake_effectiveness); traction is not affected',
+              'suite assumption: the friction brake of one bogie of 16 isolated (cut out) on '
+              'an 8-car EMU removes 1/16 of the braking effort; the default has it in one '
+              'draw of 20'),
     Parameter('adhesion', '1', 0.3, 0.02, 0.5,
               Distribution('choice', values=(0.30, 0.15), weights=(0.8, 0.2)),
               'wheel-rail adhesion coefficient mu: caps the true traction and brake force at '
@@ -199,8 +218,23 @@ PARAMETERS: dict[str, Parameter] = {p.name: p for p in (
               'value every 5 s) over the train weight M g: 0.002 is a 2 per mille grade',
               'suite assumption: unmodelled grades, gusts and coupler forces of the order of a '
               'per mille of the weight'),
+    Parameter('gradient_known', '1', 1.0, 0.0, 1.0, _fixed(1.0),
+              'the controller knows the line\'s gradient profile (1, or true) or not (0, or '
+              'false: its knowledge is a flat line, so a law that feeds the grade force '
+              'forward gets zero grade); the plant runs the true grades either way. Acts on '
+              'the knowledge (knowledge_of(scenario, hide_gradient=True)), not the plant',
+              'UNISIG SUBSET-026 packet 21: ETCS gives the train the gradient profile ahead; '
+              'hiding it stands for track data that is missing or not used (the default: '
+              'known in every draw)',
+              acts_on='knowledge', allowed=(0.0, 1.0)),
 )}
 
+#: parameters that no longer exist, with what replaced them (an old file is refused with it)
+RENAMED = {
+    'effectiveness': 'replaced by traction_effectiveness and brake_effectiveness (a lost '
+                     'traction converter does not lose the friction brake); give either or '
+                     'both, e.g. traction_effectiveness: {dist: choice, values: [1.0, 0.875]}',
+}
 #: the nominal draw: every parameter at the controller's value (the plant is its model)
 NOMINAL = {name: _fixed(p.nominal) for name, p in PARAMETERS.items()}
 #: the default uncertainty of a campaign
@@ -216,6 +250,23 @@ ODOMETER_RESET_SPACING_M = 1500.0
 
 
 def _distribution(value: Any, where: str, param: Parameter) -> Distribution:
+    distribution = _any_distribution(value, where, param)
+    if param.allowed:
+        values = (distribution.a,) if distribution.dist == 'fixed' else \
+            distribution.values if distribution.dist == 'choice' else None
+        valid = ', '.join(f'{v:g}' for v in param.allowed)
+        if values is None:
+            raise ConfigError(f'{where}: takes only the values {valid}: a number or '
+                              f'{{dist: choice, values: [...]}}, not {distribution.dist}')
+        for v in values:
+            if v not in param.allowed:
+                raise ConfigError(f'{where}: {v:g} is not one of its values ({valid})')
+    return distribution
+
+
+def _any_distribution(value: Any, where: str, param: Parameter) -> Distribution:
+    if isinstance(value, bool) and param.allowed == (0.0, 1.0):
+        value = float(value)  # a yes/no parameter: true is 1, false 0
     number = as_number(value)
     if number is not None:
         if not (math.isfinite(number) and param.minimum <= number <= param.maximum):
@@ -261,7 +312,8 @@ def _distribution(value: Any, where: str, param: Parameter) -> Distribution:
             raise ConfigError(f'{where}.values: must be a non-empty list of numbers')
         checked = []
         for i, v in enumerate(values):
-            n = as_number(v)
+            n = as_number(float(v) if isinstance(v, bool) and param.allowed == (0.0, 1.0)
+                          else v)
             if n is None or not (math.isfinite(n) and lo <= n <= hi):
                 raise ConfigError(f'{where}.values[{i}]: must be a number in [{lo:g}, {hi:g}] '
                                   f'{param.unit}, got {v!r}')
@@ -298,6 +350,8 @@ def parse_uncertainty(data: Any, where: str = 'uncertainty') -> dict[str, Distri
     for key, value in data.items():
         if key == 'defaults':
             continue
+        if key in RENAMED:
+            raise ConfigError(f'{where}.{key}: {RENAMED[key]}')
         if key not in PARAMETERS:
             raise ConfigError(f"{where}.{key}: unknown parameter; valid: "
                               f"{', '.join(PARAMETERS)}")
@@ -319,13 +373,28 @@ def _davis(davis: DavisResistance, load: float, values: Mapping[str, float]) -> 
     return DavisResistance(a + c * w * w, b + 2.0 * c * w, c)
 
 
+#: the parameters that act on the plant's truth, and those that act on the knowledge
+PLANT_PARAMETERS = tuple(n for n, p in PARAMETERS.items() if p.acts_on == 'plant')
+KNOWLEDGE_PARAMETERS = tuple(n for n, p in PARAMETERS.items() if p.acts_on == 'knowledge')
+
+
+def knowledge_options(values: Mapping[str, float] | None) -> dict[str, Any]:
+    """What a draw changes in what the controller is told: the keyword arguments of
+    ``ato_common.knowledge.knowledge_of`` (``hide_gradient``). Only the knowledge parameters
+    (KNOWLEDGE_PARAMETERS) are read; no value of the plant's truth reaches the controller."""
+    known = 1.0 if values is None else values.get('gradient_known', 1.0)
+    return {'hide_gradient': known == 0.0}
+
+
 def perturbed(scenario, values: Mapping[str, float]):
     """The plant's truth for one draw: ``scenario`` (the nominal, which the controller keeps)
-    with the drawn ``values`` applied to its train and its ``plant:`` section."""
-    nominal = {name: p.nominal for name, p in PARAMETERS.items()}
-    if dict(values) == nominal:
+    with the drawn ``values`` of the plant parameters (PLANT_PARAMETERS) applied to its train
+    and its ``plant:`` section. The knowledge parameters are not read: the plant of a draw is
+    the same whatever the controller is told (its noise and disturbance seeds too), so two
+    runs that differ only in what the controller knows are paired."""
+    v = {name: values[name] for name in PLANT_PARAMETERS}
+    if all(v[name] == PARAMETERS[name].nominal for name in PLANT_PARAMETERS):
         return scenario
-    v = values
     train, plant = scenario.train, scenario.plant
     load = v['mass_factor']
     inertia = load * (1.0 + v['rotating_mass_factor']) / (1.0 + PARAMETERS[
@@ -353,12 +422,13 @@ def perturbed(scenario, values: Mapping[str, float]):
         plant.actuators.time_constant_s, v['actuator_time_constant_s']),
         dead_time_s=max(plant.actuators.dead_time_s, v['actuator_dead_time_s']))
     failures = plant.failures
-    if v['effectiveness'] < 1.0:
+    traction_share, brake_share = v['traction_effectiveness'], v['brake_effectiveness']
+    if traction_share < 1.0 or brake_share < 1.0:
         failed = {f.actuator for f in failures if f.start_s <= 0.0}
         failures = failures + tuple(
             ActuatorFailure(name, 'partial', 0.0, min((f.start_s for f in failures
                                                        if f.actuator == name), default=math.inf),
-                            effectiveness=v['effectiveness'])
+                            effectiveness=traction_share, brake_effectiveness=brake_share)
             for name in train.actuator_names if name not in failed)
     disturbance = plant.disturbance
     if v['disturbance_per_weight'] > 0.0 and disturbance.kind == 'none':

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from ato_common.knowledge import KnownMode, TrainKnowledge, knowledge_of
+from ato_common.knowledge import KnownGradient, KnownMode, TrainKnowledge, knowledge_of
 from ato_common.plant_setup import (
     AbruptChange,
     ActuatorFailure,
@@ -71,7 +71,8 @@ def test_the_knowledge_copies_the_nominal_train_and_the_modes():
     scenario = load_scenario('mao_2017_modes')
     knowledge = knowledge_of(scenario)
     train = scenario.train
-    assert knowledge == TrainKnowledge.of(train, scenario.plant.modes, 'time')
+    assert knowledge == TrainKnowledge.of(train, scenario.plant.modes, 'time',
+                                          KnownGradient.of(scenario.line.grade_sine))
     assert knowledge.nominal_mass_kg == train.mass_kg
     assert knowledge.nominal_davis == train.davis_nominal
     assert knowledge.actuator_names == train.actuator_names
@@ -130,3 +131,46 @@ def test_modes_given_without_a_start_have_no_schedule():
     assert [m.davis for m in knowledge.modes] == [m.davis for m in scenario.plant.modes]
     with pytest.raises(ValueError, match='no start'):
         knowledge.known_mode(0.0, 0.0, 0)
+
+
+def test_the_knowledge_copies_the_gradient_profile_or_hides_it_and_the_truth_keeps_it():
+    from ato_common.knowledge import HIDDEN_GRADIENT
+    scenario = load_scenario('short_line')
+    grades = scenario.line.grade_sine
+    known = knowledge_of(scenario)
+    hidden = knowledge_of(scenario, hide_gradient=True)
+    positions = np.linspace(0.0, scenario.line.length_m, 2001)
+    assert [known.gradient.sine_at(x) for x in positions] == [grades(x) for x in positions]
+    assert any(grades(x) != 0.0 for x in positions)
+    # hidden: a flat line, zero grade (and grade force) everywhere
+    assert hidden.gradient == HIDDEN_GRADIENT and hidden.gradient.hidden
+    assert all(hidden.gradient.sine_at(x) == 0.0 for x in positions)
+    assert all(hidden.grade_force_n(x) == 0.0 for x in positions)
+    assert known.grade_force_n(20000.0) == pytest.approx(   # the whole train on the grade
+        known.nominal_mass_kg * 9.80665 * grades(20000.0))
+    # everything else is the same knowledge; the scenario (the plant's truth) is untouched
+    assert replace(hidden, gradient=known.gradient) == known
+    assert scenario.line.grade_sine is grades and grades(20000.0) > 0.0
+
+
+def test_a_multi_car_train_knows_the_grade_force_car_by_car():
+    scenario = load_scenario('mao_4car')
+    known = replace(knowledge_of(scenario), gradient=KnownGradient((0.0, 100.0), (0.0, 0.01)))
+    cars = known.cars
+    # the lead car on the grade, the others before it
+    positions = (150.0, 50.0, 25.0, 0.0)
+    assert known.grade_force_n(positions) == pytest.approx(9.80665 * 0.01 * cars[0].mass_kg)
+    # one position: the whole train's mass spread over its length, half of it on the grade
+    assert known.length_m == scenario.train.length_m == 100.0
+    assert known.grade_force_n(150.0) == pytest.approx(
+        9.80665 * 0.005 * known.nominal_mass_kg)
+
+
+def test_the_mean_grade_under_a_train_is_the_exact_mean_of_the_profile():
+    gradient = KnownGradient((0.0, 100.0, 130.0), (0.001, 0.01, -0.002))
+    assert gradient.mean_sine(90.0, 50.0) == 0.001          # all on the first segment
+    assert gradient.mean_sine(150.0, 100.0) == pytest.approx(
+        (50 * 0.001 + 30 * 0.01 + 20 * -0.002) / 100)      # over three segments
+    assert gradient.mean_sine(120.0, 0.0) == 0.01           # a point: the sine there
+    assert gradient.mean_sine(10.0, 200.0) == pytest.approx(0.001)  # before the start: level 1
+    assert KnownGradient().mean_sine(120.0, 100.0) == 0.0

@@ -69,8 +69,17 @@ def test_each_distribution_samples_inside_its_bounds_with_its_moments():
     ({'adhesion': {'dist': 'beta'}}, 'uncertainty.adhesion.dist', "'beta' is not valid"),
     ({'adhesion': {'dist': 'uniform', 'low': 0.1, 'high': 0.2, 'mode': 1}},
      'uncertainty.adhesion', 'unknown field(s) mode'),
-    ({'effectiveness': 1.5}, 'uncertainty.effectiveness', 'must be a finite number in'),
+    ({'traction_effectiveness': 1.5}, 'uncertainty.traction_effectiveness',
+     'must be a finite number in'),
+    ({'brake_effectiveness': {'dist': 'uniform', 'low': 0.0, 'high': 1.0}},
+     'uncertainty.brake_effectiveness.low', 'must be >= 0.05'),
+    # the one share of both of older files is refused, naming the two that replaced it
+    ({'effectiveness': 0.9}, 'uncertainty.effectiveness',
+     'replaced by traction_effectiveness and brake_effectiveness'),
     ({'defaults': 'yes'}, 'uncertainty.defaults', 'true or false'),
+    ({'gradient_known': 0.5}, 'uncertainty.gradient_known', '0.5 is not one of its values'),
+    ({'gradient_known': {'dist': 'uniform', 'low': 0, 'high': 1}},
+     'uncertainty.gradient_known', 'takes only the values 0, 1'),
 ])
 def test_a_bad_specification_names_its_field(spec, field, words):
     with pytest.raises(ConfigError) as error:
@@ -91,7 +100,7 @@ def test_the_truth_is_perturbed_and_the_nominal_scenario_and_its_knowledge_are_n
     values.update(mass_factor=1.1, rotating_mass_factor=0.09, davis_a_factor=1.2,
                   davis_b_factor=0.8, davis_c_factor=1.05, wind_mps=5.0,
                   actuator_time_constant_s=0.5, actuator_dead_time_s=0.3,
-                  effectiveness=0.875, adhesion=0.02,
+                  traction_effectiveness=0.875, brake_effectiveness=0.9375, adhesion=0.02,
                   speed_noise_mps=0.03, speed_bias_mps=0.1, position_bias_m=-1.0,
                   odometry_scale_error=0.002, disturbance_per_weight=0.001)
     truth = u.perturbed(scenario, values)
@@ -107,8 +116,8 @@ def test_the_truth_is_perturbed_and_the_nominal_scenario_and_its_knowledge_are_n
     assert truth.train.traction.max_emergency_brake_force_n == pytest.approx(limit)
     assert truth.plant.actuators.time_constant_s == 0.5
     assert truth.plant.actuators.dead_time_s == 0.3
-    assert [(f.actuator, f.kind, f.effectiveness, f.start_s) for f in truth.plant.failures] == \
-        [('traction', 'partial', 0.875, 0.0)]
+    assert [(f.actuator, f.kind, f.effectiveness, f.braking_share, f.start_s)
+            for f in truth.plant.failures] == [('traction', 'partial', 0.875, 0.9375, 0.0)]
     assert truth.plant.disturbance.kind == 'random'
     assert truth.plant.disturbance.amplitude_n == pytest.approx(
         0.001 * train.mass_kg * inertia * 9.80665)
@@ -146,3 +155,21 @@ def test_the_new_parameters_have_cited_defaults_inside_their_valid_ranges():
         values = [u.draw(u.DEFAULTS, 3, i)[name] for i in range(200)]
         assert min(values) >= p.minimum and max(values) <= p.maximum
         assert np.std(values) > 0.0
+
+
+
+def test_hiding_the_gradient_acts_on_the_knowledge_only():
+    scenario = load_scenario('short_line')
+    for value in (False, 0, {'dist': 'choice', 'values': [False]}):
+        spec = u.parse_uncertainty({'defaults': False, 'gradient_known': value})
+        values = u.draw(spec, 1, 0)
+        assert values['gradient_known'] == 0.0
+        assert u.knowledge_options(values) == {'hide_gradient': True}
+        assert u.perturbed(scenario, values) is scenario   # the plant: the nominal truth
+    assert u.knowledge_options(None) == {'hide_gradient': False}
+    assert u.draw(u.DEFAULTS, 1, 0)['gradient_known'] == 1.0   # known by default
+    # the truth of a draw is the same whatever the controller is told (seeds included)
+    drawn = u.draw(u.DEFAULTS, 5, 2)
+    assert u.perturbed(scenario, dict(drawn, gradient_known=0.0)) == \
+        u.perturbed(scenario, drawn)
+    assert u.KNOWLEDGE_PARAMETERS == ('gradient_known',)

@@ -70,6 +70,53 @@ def test_failures_act_at_their_scheduled_times_and_show_in_the_published_force()
     assert gain == pytest.approx((2e5 - 30e3) * 40.0 / 500e3, rel=0.02)
 
 
+def test_partial_loss_scales_traction_and_braking_by_their_own_shares():
+    # A lost converter (traction at 0.5) with the friction brake intact, an isolated brake
+    # (braking at 0.25) with the traction intact, and the one share of both of older files.
+    failures = [
+        {'actuator': 'motor_1', 'kind': 'partial', 'start_s': 0, 'traction_effectiveness': 0.5},
+        {'actuator': 'motor_2', 'kind': 'partial', 'start_s': 0, 'brake_effectiveness': 0.25},
+        {'actuator': 'motor_3', 'kind': 'partial', 'start_s': 0, 'effectiveness': 0.5}]
+    sim = TrainSimulation(scenario(plant={'failures': failures}))
+    run(sim, 1, (30e3,) * 4)
+    assert sim.applied == (15e3, 30e3, 15e3, 30e3)
+    run(sim, 1, (-30e3,) * 4)
+    assert sim.applied == (-30e3, -7.5e3, -15e3, -30e3)
+    assert sim.truth().forces[0] == pytest.approx(-82.5e3)  # the train feels the sum
+    described = {f.actuator: f.describe() for f in sim.failures}
+    assert '0.5 of the healthy traction, 1 of the braking force' in described['motor_1']
+    assert '0.5 of the healthy force' in described['motor_3']
+
+
+@pytest.mark.parametrize('record, message', [
+    ({}, "needs 'effectiveness'"),
+    ({'brake_effectiveness': 0.0}, 'brake_effectiveness'),
+    ({'traction_effectiveness': 1.5}, 'traction_effectiveness')])
+def test_a_partial_loss_without_a_valid_share_is_refused(record, message):
+    failure = {'actuator': 'motor_1', 'kind': 'partial', 'start_s': 0, **record}
+    with pytest.raises(ConfigError, match=message):
+        scenario(plant={'failures': [failure]})
+
+
+@pytest.mark.parametrize('traction, brake, pulled, braked', [
+    (0.875, 1.0, 0.875, 1.0),    # a lost converter: the friction brake still brakes
+    (1.0, 0.9375, 1.0, 0.9375),  # an isolated brake: the traction is whole
+])
+def test_drawn_traction_and_brake_effectiveness_act_separately_on_the_plant(traction, brake, pulled,
+                                                                      braked):
+    from ato_common import uncertainty as u
+    from ato_common.scenario import load_scenario
+    scenario = load_scenario('short_line')
+    values = {name: p.nominal for name, p in u.PARAMETERS.items()}
+    values.update(traction_effectiveness=traction, brake_effectiveness=brake)
+    sim = TrainSimulation(u.perturbed(scenario, values))
+    n = len(sim.actuator_names)
+    sim.apply_command((1e4,) * n)
+    assert sim.applied == pytest.approx((1e4 * pulled,) * n)
+    sim.apply_command((-1e4,) * n)
+    assert sim.applied == pytest.approx((-1e4 * braked,) * n)
+
+
 def test_run_time_injection_replaces_and_repairs():
     from ato_common.plant_setup import ActuatorFailure
     sim = TrainSimulation(scenario())
