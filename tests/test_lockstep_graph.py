@@ -72,8 +72,9 @@ def test_two_lockstep_runs_give_identical_state_sequences(pid_run, tmp_path, dom
 def test_composed_lean_run_gives_the_state_sequence_of_separate_processes(pid_run, tmp_path,
                                                                           domain_id):
     """The three nodes in one process (ato_stack) watched by the lean monitor of run_scenario
-    (the truth and the reference taken in batches, no command): the same steps, bit for bit, as three
-    processes watched by the full monitor, the same metrics, the laws from the diagnostics."""
+    (the truth and the reference taken in batches, no command): the same steps, bit for bit,
+    as three processes watched by the full monitor, the same metrics, the laws from the
+    diagnostics."""
     composed = run_lockstep(config(domain_id, tmp_path, 'composed', composed=True,
                                    monitor='lean', plant_params=dict(NOISY_PLANT)))
     assert composed.exit_codes == {'loop': 0}
