@@ -205,7 +205,9 @@ def test_after_a_watchdog_brake_to_standstill_the_reference_resumes_and_the_trai
                 and samples[-1][1].speeds[0] < 0.01
         assert stack.spin_until(lambda: stopped_at_b() or stack.exited('plant'), 300.0), \
             stack.log_tail('profile') + stack.log_tail('controller')
+        stack.spin_for(0.5)  # what the plant sent before it ended
         samples = monitor.complete_samples()
+        logs = '\n'.join(stack.log_tail(name) for name in ('plant', 'profile', 'controller'))
         resumes = [(stamp, values) for stamp, name, values, message in monitor.diagnostics
                    if name == 'profile_node: plan' and message.startswith('resumed')]
         assert len(resumes) == 1, stack.log_tail('profile')
@@ -219,5 +221,8 @@ def test_after_a_watchdog_brake_to_standstill_the_reference_resumes_and_the_trai
         assert after
         assert abs(after[0].ref_position - after[0].positions[0]) < 1.0
         assert max(abs(s.ref_position - s.positions[0]) for s in after) < 5.0
-        assert stopped_at_b()
+        last = samples[-1]
+        assert stopped_at_b(), (f'last sample at {last[0] / 1e9:.1f} s: '
+                                f'{last[1].positions[0]:.2f} m, {last[1].speeds[0]:.3f} m/s\n'
+                                + logs)
         assert max(s.positions[0] for _, s in samples) < leg.end_of_authority_m
