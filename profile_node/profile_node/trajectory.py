@@ -7,6 +7,7 @@ v is exactly the derivative of x and a of v.
 
 from __future__ import annotations
 
+import abc
 import math
 from bisect import bisect_right
 from dataclasses import dataclass
@@ -168,7 +169,7 @@ class StateBuilder(TrajectoryBuilder):
         self.t = t
 
 
-class _ReplayedSteps:
+class _ReplayedSteps(abc.ABC):
     """The whole steps of one builder phase from one start, computed once and replayed: the
     states after each step and the jerk of each (the phase's own wanted acceleration from
     :meth:`_wanted`, limited by the jerk), the same operations on the same values as the
@@ -179,8 +180,9 @@ class _ReplayedSteps:
         self.states: list[tuple[float, float, float, float]] = [start]  # (t, x, v, a)
         self.jerks: list[float] = []  # the jerk of the whole step from each state
 
+    @abc.abstractmethod
     def _wanted(self, x: float, v: float, a: float) -> float:
-        raise NotImplementedError
+        """The acceleration the phase wants from state (x, v, a), before the jerk limit."""
 
     def _jerk(self, k: int) -> float:
         """The jerk of the whole step from state ``k`` (state k + 1 then exists)."""
