@@ -6,7 +6,7 @@ setup(
     name=PACKAGE_NAME,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={'ato_common': ['scenarios/*.yaml']},
+    package_data={'ato_common': ['scenarios/*.yaml', 'fastdds_profile.xml']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
         ('share/' + PACKAGE_NAME, ['package.xml']),

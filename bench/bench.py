@@ -46,6 +46,7 @@ from ato_bringup.provenance import results_page_provenance, write_results_page
 from ato_bringup.runner import STEADY_WINDOW, prepare, process_cpu_s, run_lockstep
 from ato_bringup.stack import StackConfig, executable_path
 from ato_common.domains import free_domain
+from ato_common.middleware import with_middleware_defaults
 from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
 from ato_common.trains import train_preset
 from ato_common.types import NS_PER_S, nanoseconds
@@ -61,6 +62,7 @@ class GraphRun:
     steady: float         # real-time factor between 10 % and 90 % of the run
     steps: int
     startup_s: float      # starting the processes to the first step
+    teardown_s: float     # the last step to the plant's exit
     cpu_ms_per_step: dict[str, float]  # per process, in the steady window
     count: int            # messages recorded, or received by the live view's client
 
@@ -96,7 +98,7 @@ def graph_rtf(scenario: str, executor: str, domain_id: int, record: bool = False
         cpu['live view'] = 1e3 * (cpu1 - cpu0) / steps
     return GraphRun(outcome.metrics.simulated_time_s / outcome.wall_time_s,
                     outcome.steady_real_time_factor(), outcome.metrics.samples,
-                    outcome.startup_s, cpu, count)
+                    outcome.startup_s, outcome.teardown_s, cpu, count)
 
 
 PROCESS_ORDER = ('plant', 'profile', 'controller', 'loop', 'recorder', 'live view', 'monitor')
@@ -111,8 +113,8 @@ def cpu_cell(run: GraphRun) -> str:
 
 def graph_row(label: str, run: GraphRun, extra: str = '-') -> str:
     return (f'| {label} | {run.steps} | {run.overall:.1f}x | {run.steady:.1f}x | '
-            f'{1e3 / (10 * run.steady):.2f} ms | {run.startup_s:.2f} s | {cpu_cell(run)} | '
-            f'{extra} |')
+            f'{1e3 / (10 * run.steady):.2f} ms | {run.startup_s:.2f} s | '
+            f'{run.teardown_s:.2f} s | {cpu_cell(run)} | {extra} |')
 
 
 def lockstep_section(scenario: str, domain_id: int) -> list[str]:
@@ -120,12 +122,15 @@ def lockstep_section(scenario: str, domain_id: int) -> list[str]:
              'The run monitor of `run_scenario` (the truth per step and the diagnostics) beside '
              'the three node processes, or the three nodes composed in one (`--composed`, '
              '`ato_stack`); real-time factor = simulated time / wall time, overall (start-up '
-             'included) and steady (10 % to 90 % of the run); start-up = starting the processes '
-             'to the first step; CPU per step of each process (user + system, /proc/<pid>/stat) '
-             'in the steady window. Goals: separate at least 150x steady, composed at least '
-             '250x, the recorder at most 10 % slower.', '',
-             '| run | steps | overall | steady | per 0.1 s step | start-up | CPU ms per step | '
-             'recorded |', '|---|---|---|---|---|---|---|---|']
+             'and teardown included) and steady (10 % to 90 % of the run); start-up = starting '
+             'the processes to the first step; teardown = the last step to the plant\'s exit; '
+             'CPU per step of each process (user + system, /proc/<pid>/stat) in the steady '
+             f'window. The recorder and the live view are measured in turns with the runs '
+             f'without them ({PAIRS} of each), their cost as the median of the pairs\' ratios. '
+             'Goals: separate at least 150x steady, composed at least 250x, the recorder at '
+             'most 10 % slower.', '',
+             '| run | steps | overall | steady | per 0.1 s step | start-up | teardown | '
+             'CPU ms per step | recorded |', '|---|---|---|---|---|---|---|---|---|']
     print('\n'.join(lines), flush=True)
     rows = []
 
@@ -133,35 +138,42 @@ def lockstep_section(scenario: str, domain_id: int) -> list[str]:
         rows.append(row)
         print(row, flush=True)
 
-    # The live view's cost is a ratio of two noisy figures: runs without and with it, in
+    def slower(pairs) -> float:
+        return statistics.median(100 * (1 - b.steady / a.steady) for a, b in pairs)
+
+    # The cost of an observer is a ratio of two noisy figures: runs without and with it, in
     # turns, and the median of the pairs' ratios.
-    pairs = [(graph_rtf(scenario, 'events', domain_id),
-              graph_rtf(scenario, 'events', domain_id, live=True)) for _ in range(LIVE_PAIRS)]
-    separate = median_run([a for a, _ in pairs])
-    add(graph_row('separate processes, EventsExecutor', separate,
-                  f'- (median of {LIVE_PAIRS} runs)'))
-    composed = graph_rtf(scenario, 'events', domain_id, composed=True)
-    add(graph_row('composed (one process, one EventsExecutor)', composed))
-    for label, base, is_composed in (('separate, with the recorder', separate, False),
-                                     ('composed, with the recorder', composed, True)):
-        run = graph_rtf(scenario, 'events', domain_id, True, composed=is_composed)
+    plain, live, recorded = [], [], []
+    for _ in range(PAIRS):
+        plain.append(graph_rtf(scenario, 'events', domain_id))
+        live.append(graph_rtf(scenario, 'events', domain_id, live=True))
+        recorded.append(graph_rtf(scenario, 'events', domain_id, True))
+    composed, composed_recorded = [], []
+    for _ in range(PAIRS):
+        composed.append(graph_rtf(scenario, 'events', domain_id, composed=True))
+        composed_recorded.append(graph_rtf(scenario, 'events', domain_id, True, composed=True))
+    add(graph_row('separate processes, EventsExecutor', median_run(plain),
+                  f'- (median of {PAIRS} runs)'))
+    add(graph_row('composed (one process, one EventsExecutor)', median_run(composed),
+                  f'- (median of {PAIRS} runs)'))
+    for label, base, runs in (('separate, with the recorder', plain, recorded),
+                              ('composed, with the recorder', composed, composed_recorded)):
+        run = median_run(runs)
         add(graph_row(label, run, f'{run.count} messages, '
                       f'{run.count * run.steady / (run.steps / 10):.0f} per second; '
-                      f'{100 * (1 - run.steady / base.steady):+.0f} % slower steady'))
+                      f'{slower(zip(base, runs)):+.0f} % slower steady (median of the pairs)'))
     single = graph_rtf(scenario, 'single', domain_id)
     add(graph_row('separate processes, SingleThreadedExecutor', single))
-    watched = median_run([b for _, b in pairs])
-    slower = statistics.median(100 * (1 - b.steady / a.steady) for a, b in pairs)
+    watched = median_run(live)
     add(graph_row(f'separate, with the live view (`recorder live`) and one Foxglove client '
-                  f'watching the layout\'s {len(layout_topics())} topics (median of '
-                  f'{LIVE_PAIRS} runs, each after a run without it)', watched,
-                  f'{watched.count} messages to the client; {slower:+.0f} % slower steady '
-                  f'(median of the pairs; goal at most 10 %)'))
+                  f'watching the layout\'s {len(layout_topics())} topics', watched,
+                  f'{watched.count} messages to the client; {slower(zip(plain, live)):+.0f} % '
+                  f'slower steady (median of the pairs; goal at most 10 %)'))
     return lines + rows
 
 
-#: runs without and with the live view, in turns
-LIVE_PAIRS = 3
+#: runs without and with each observer (the recorder, the live view), in turns
+PAIRS = 3
 
 
 def median_run(runs: list[GraphRun]) -> GraphRun:
@@ -183,7 +195,7 @@ def watched_live_view(domain_id: int, logs: Path):
     counting the messages the client received)."""
     from recorder.foxglove_client import FoxgloveClient
     from recorder.live import served_url
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), FASTDDS_BUILTIN_TRANSPORTS='SHM')
+    env = with_middleware_defaults(dict(os.environ, ROS_DOMAIN_ID=str(domain_id)))
     log = logs / 'live.log'
     with open(log, 'wb') as out:
         live = subprocess.Popen([executable_path('recorder', 'live'), '--port', '0',

@@ -41,7 +41,9 @@ def launch_file(monkeypatch):
             'EmitEvent': recorder_class('EmitEvent', 'event'),
             'OpaqueFunction': recorder_class('OpaqueFunction', 'function', 'args', 'kwargs'),
             'RegisterEventHandler': recorder_class('RegisterEventHandler', 'event_handler',
-                                                   positional=('event_handler',))},
+                                                   positional=('event_handler',)),
+            'SetEnvironmentVariable': recorder_class('SetEnvironmentVariable',
+                                                     positional=('name', 'value'))},
         'launch.event_handlers': {'OnProcessExit': recorder_class(
             'OnProcessExit', 'target_action', 'on_exit', 'handle_once')},
         'launch.events': {'Shutdown': recorder_class('Shutdown', 'reason', 'due_to_sigint')},
@@ -138,3 +140,19 @@ def test_composed_starts_one_process_with_a_section_per_node(launch_file):
     assert controller['controller'] == 'luo_xu' and controller['lockstep'] is True
     plant = sections['/**/train_plant_node']['ros__parameters']
     assert plant['end_time_s'] == 12.5 and 'controller' not in plant
+
+
+def test_the_nodes_get_the_middleware_defaults_unless_the_user_set_them(launch_file,
+                                                                          monkeypatch):
+    from ato_common.middleware import DEFAULTS, FASTDDS_PROFILE
+
+    def environment():
+        return {e.kwargs['name']: e.kwargs['value']
+                for e in launch_file.generate_launch_description().kwargs['initial_entities']
+                if type(e).__name__ == 'SetEnvironmentVariable'}
+    for name in DEFAULTS:
+        monkeypatch.delenv(name, raising=False)
+    assert environment() == DEFAULTS
+    assert FASTDDS_PROFILE.is_file()
+    monkeypatch.setenv('FASTRTPS_DEFAULT_PROFILES_FILE', '/their/own.xml')
+    assert 'FASTRTPS_DEFAULT_PROFILES_FILE' not in environment()

@@ -15,6 +15,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from ato_bringup.runner import run_lockstep
 from ato_bringup.stack import Stack, StackConfig, executable_path
 from ato_common.conventions import TOPICS
+from ato_common.middleware import with_middleware_defaults
 from ato_common.ros import qos_profile
 from recorder.foxglove_client import FoxgloveClient, message_data
 from recorder.live import served_url
@@ -103,7 +104,7 @@ def test_a_client_watches_a_lockstep_run(tmp_path, domain_id, rate):
     topic = '/' + state.name
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED='1')
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    env.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'SHM')  # as the stack's own processes
+    env = with_middleware_defaults(env)  # as the stack's own processes
     log = tmp_path / 'live.log'
     with open(log, 'wb') as out:
         live = subprocess.Popen([executable_path('recorder', 'live'), '--port', '0',

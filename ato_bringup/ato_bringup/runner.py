@@ -37,6 +37,7 @@ class RunOutcome:
     counts: dict[str, int] = field(default_factory=dict)  # messages the monitor received
     events: RunEvents = field(default_factory=RunEvents)  # what went wrong (run_events)
     startup_s: float = float('nan')  # wall time from starting the processes to the first state
+    teardown_s: float = float('nan')  # wall time from the last state to the plant's exit
     # CPU seconds of each process (and 'monitor', this one) spent in the steady window
     # (STEADY_WINDOW of the run's simulated time), and the control steps in it
     window_cpu_s: dict[str, float] = field(default_factory=dict)
@@ -168,6 +169,7 @@ def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], obj
         arrivals = list(monitor.arrivals)
         counts = dict(monitor.counts)
         startup = monitor.arrivals[0][0] - started if monitor.arrivals else float('nan')
+        teardown = started + wall - monitor.arrivals[-1][0] if monitor.arrivals else float('nan')
     window_cpu, window_steps = {}, 0
     if len(cpu) == 2:
         (s0, c0), (s1, c1) = cpu
@@ -187,7 +189,7 @@ def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], obj
                         [s.positions[0] for _, s in samples], diagnostics=diagnostics,
                         tolerance_m=stop_tolerance_m)
     return RunOutcome(scenario, config, samples, diagnostics, wall, codes, metrics, laws, results,
-                      arrivals, counts, events, startup, window_cpu, window_steps)
+                      arrivals, counts, events, startup, teardown, window_cpu, window_steps)
 
 
 def laws_in(diagnostics) -> set[str]:

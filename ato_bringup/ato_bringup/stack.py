@@ -37,6 +37,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from ato_common import wire
 from ato_common.conventions import normalised_namespace, stack_remaps
+from ato_common.middleware import with_middleware_defaults
 from ato_common.ros import (
     MessageError,
     decoded,
@@ -265,9 +266,8 @@ class Stack:
         self.context = rclpy.Context()
         self.env = dict(os.environ, ROS_DOMAIN_ID=str(config.domain_id), PYTHONUNBUFFERED='1')
         self.env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-        # The stack runs on one host: Fast DDS over shared memory only is about 30 % faster per
-        # step than its default UDP + shared memory, and still talks to default participants.
-        self.env.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'SHM')
+        # The stack runs on one host: shared memory only, short heartbeats (ato_common.middleware)
+        self.env = with_middleware_defaults(self.env)
         self.namespace = normalised_namespace(config.namespace)
         rclpy.init(context=self.context, domain_id=config.domain_id)
         self.node = Node('ato_run_monitor', namespace=self.namespace, context=self.context)
@@ -292,13 +292,14 @@ class Stack:
         watch = self.monitor.watch
         return {
             'plant': {**common, 'end_time_s': float(c.end_time_s),
-                      'wait_for_subscribers': 1 + recorder, 'start_delay_s': 1.0,
+                      'wait_for_subscribers': 1 + recorder, 'wait_for_recorders': recorder,
                       **c.plant_params},
             # the monitor's reference, watched or batched, counts: it must miss none
             'profile': {**common, 'wait_for_subscribers': 2 + recorder,
-                        **c.profile_params},
+                        'wait_for_recorders': recorder, **c.profile_params},
             'controller': {**common, 'controller': c.controller,
                            'wait_for_subscribers': 1 + recorder + ('command' in watch),
+                           'wait_for_recorders': recorder,
                            **c.controller_params},
             'recorder': {},
         }

@@ -18,8 +18,12 @@ launch down with that reason; one that fails (any other code) is reported as an 
 the node and its exit code, and ``ros2 launch`` then exits with 1 (the handler raises
 :class:`NodeFailed`: launch logs an exception in a handler as an error, shuts everything down
 and returns 1, the only way a launch file sets its exit code).
+
+The nodes get the suite's middleware settings (``ato_common.middleware``: Fast DDS over shared
+memory only, a reliable writer's heartbeat every 0.1 s) unless the environment sets its own.
 """
 
+import os
 import tempfile
 
 import yaml
@@ -29,6 +33,7 @@ from launch.actions import (
     EmitEvent,
     OpaqueFunction,
     RegisterEventHandler,
+    SetEnvironmentVariable,
 )
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
@@ -37,6 +42,7 @@ from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
 from ato_common.conventions import normalised_namespace, stack_remaps
+from ato_common.middleware import middleware_defaults
 from ato_controller_node.laws import LAWS
 
 NODES = ('ato_controller_node', 'profile_node', 'train_plant_node')
@@ -120,7 +126,12 @@ def stack(context):
 
 
 def generate_launch_description():
+    # The suite's middleware settings for the nodes on one host, unless the user set their own
+    # (ato_common.middleware: shared memory only, heartbeats every 0.1 s).
+    environment = [SetEnvironmentVariable(name, value)
+                   for name, value in middleware_defaults(os.environ).items()]
     return LaunchDescription([
+        *environment,
         DeclareLaunchArgument('controller', default_value='pid', choices=sorted(LAWS),
                               description='control law, one of the registry: '
                               + ', '.join(sorted(LAWS))),

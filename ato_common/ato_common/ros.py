@@ -291,6 +291,16 @@ def watch_plant_identity(node, own_identity: str, refusal: str):
                                     qos_profile(topic('identity').qos))
 
 
+def first_unmatched(wanted) -> str:
+    """The topic of the first publisher of ``wanted`` ((publisher or None, subscribers it must
+    have)) that has fewer subscribers, '' if none: a node's first output waits for every
+    observer on each topic it publishes (DDS matches each topic separately)."""
+    for publisher, count in wanted:
+        if publisher is not None and publisher.get_subscription_count() < count:
+            return publisher.topic_name
+    return ''
+
+
 def wait_until_delivered(publishers, timeout_s: float) -> bool:
     """Wait until every reliable subscriber matched to ``publishers`` has acknowledged all they
     sent (a node about to exit: its last messages must not be lost with it); False if some were

@@ -41,6 +41,7 @@ from ato_common.ros import (
     RunNodeHooks,
     decoded,
     diagnostic_status,
+    first_unmatched,
     freeze_startup_objects,
     node_usage,
     qos_profile,
@@ -69,6 +70,9 @@ NODE_PARAMS = (
           '(false: on a wall-clock timer)'),
     Param('wait_for_subscribers', 0, 'lockstep: command nothing before ato/command has this '
           'many subscribers (so a monitor or recorder misses nothing)', minimum=0, maximum=100),
+    Param('wait_for_recorders', 0, 'lockstep: observers that record every topic (e.g. the '
+          'recorder): nothing is commanded before /diagnostics has this many subscribers too',
+          minimum=0, maximum=100),
     Param('stale_after_s', 0.5, 'real time: a measurement or a reference older than this is '
           'stale; the controller then commands nothing (and the plant watchdog brakes), s',
           minimum=0.01,
@@ -244,7 +248,8 @@ class AtoControllerNode(RunNodeHooks, Node):
         if stamp_ns not in self.states or stamp_ns not in self.references:
             return
         if not self.subscribers_met:
-            if self.command_pub.get_subscription_count() < self.params['wait_for_subscribers']:
+            if first_unmatched(((self.command_pub, self.params['wait_for_subscribers']),
+                                (self.diag_pub, self.params['wait_for_recorders']))):
                 return  # the plant re-sends the step until the command comes
             self.subscribers_met = True
         if stamp_ns < self.last_stamp_ns:

@@ -66,6 +66,7 @@ from ato_common.ros import (
     RunNodeHooks,
     decoded,
     diagnostic_status,
+    first_unmatched,
     freeze_startup_objects,
     from_duration,
     from_time,
@@ -123,6 +124,9 @@ PARAMS = (
     Param('wait_for_subscribers', 0, 'lockstep: publish no reference before ato/reference has '
           'this many subscribers (so a monitor or recorder misses nothing)', minimum=0,
           maximum=100),
+    Param('wait_for_recorders', 0, 'lockstep: observers that record every topic (e.g. the '
+          'recorder): nothing is published before the distance to go, the permitted speed and '
+          '/diagnostics each have this many subscribers too', minimum=0, maximum=100),
     Param('curve_sample_period_s', 1.0, 'spacing of the latched whole-curve samples, s',
           minimum=0.01, maximum=60.0),
     Param('replan_check_period_s', CHECK_PERIOD_S, 'lockstep: simulated time between two '
@@ -274,7 +278,10 @@ class ProfileNode(RunNodeHooks, Node):
 
     def on_clock(self, data: bytes) -> None:
         if not self.subscribers_met:
-            if self.reference_pub.get_subscription_count() < self.params['wait_for_subscribers']:
+            recorders = self.params['wait_for_recorders']
+            if first_unmatched(((self.reference_pub, self.params['wait_for_subscribers']),
+                                (self.dtg_pub, recorders), (self.permitted_pub, recorders),
+                                (self.diag_pub, recorders))):
                 return  # the plant re-sends the tick until the reference comes
             self.subscribers_met = True
         try:

@@ -40,6 +40,7 @@ from ato_common.ros import (
     command_from_msg,
     decoded,
     diagnostic_status,
+    first_unmatched,
     freeze_startup_objects,
     node_usage,
     qos_profile,
@@ -78,10 +79,14 @@ PARAMS = (
           '(0: run until shut down)', minimum=0.0, maximum=1e7),
     Param('wait_for_subscribers', 0, 'number of subscribers of train/state to wait for before '
           'the first step (so a monitor or recorder misses nothing)', minimum=0, maximum=100),
-    Param('start_delay_s', 0.0, 'wall time to wait after wait_for_subscribers is met before the '
-          'first step: DDS matches each topic separately, and an observer matched on '
-          'train/state may still be matching on /clock or train/state/measured', minimum=0.0,
-          maximum=60.0),
+    Param('wait_for_recorders', 0, 'observers that record every topic (e.g. the recorder): the '
+          'first step also waits until /clock, train/state/measured, the actuator topics and '
+          '/diagnostics each have this many subscribers (DDS matches each topic separately: '
+          'one matched on train/state may still be matching on the others), in lockstep '
+          'beside the profile on /clock and the controller on the measured state',
+          minimum=0, maximum=100),
+    Param('start_delay_s', 0.0, 'wall time to wait after wait_for_subscribers and '
+          'wait_for_recorders are met before the first step', minimum=0.0, maximum=60.0),
     Param('resend_period_s', 0.2, 'lockstep: re-publish the current step after this much wall '
           'time without its command', minimum=0.01, maximum=10.0),
     Param('max_substep_s', 0.1, 'longest internal integration step, s', minimum=1e-4,
@@ -290,6 +295,16 @@ class TrainPlantNode(RunNodeHooks, Node):
         else:
             self.get_logger().info('safety functions released: the ATO is in control again')
 
+    def unmatched_output(self) -> str:
+        """The first of the plant's outputs that has fewer subscribers than the start waits
+        for (``wait_for_recorders``, plus the loop's own reader in lockstep), '' if none."""
+        recorders = self.params['wait_for_recorders']
+        loop = int(self.lockstep)  # the profile on /clock, the controller on the measured state
+        return recorders and first_unmatched((
+            (self.clock_pub, recorders + loop), (self.measured_pub, recorders + loop),
+            (self.commanded_pub, recorders), (self.applied_pub, recorders),
+            (self.diag_pub, recorders)))
+
     def observers_lost(self) -> str:
         """'' while train/state has the subscribers the start waited for, else what is missing
         (an observer, e.g. the recorder, went away: the loop goes on without it)."""
@@ -384,7 +399,8 @@ class TrainPlantNode(RunNodeHooks, Node):
         if self.finished:
             return
         if not self.started:
-            if self.truth_pub.get_subscription_count() < self.params['wait_for_subscribers']:
+            if (self.truth_pub.get_subscription_count() < self.params['wait_for_subscribers']
+                    or self.unmatched_output()):
                 return
             now = time.monotonic()
             if self.ready_since is None:
