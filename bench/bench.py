@@ -44,7 +44,7 @@ from ato_bringup.compare import plan_jobs
 from ato_bringup.offline import clear_plan_cache, run_offline
 from ato_bringup.provenance import results_page_provenance, write_results_page
 from ato_bringup.runner import STEADY_WINDOW, prepare, process_cpu_s, run_lockstep
-from ato_bringup.stack import StackConfig, executable_path
+from ato_bringup.stack import RUN_DIAGNOSTICS_PERIOD_S, StackConfig, executable_path
 from ato_common.domains import free_domain
 from ato_common.middleware import with_middleware_defaults
 from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
@@ -76,7 +76,8 @@ def graph_rtf(scenario: str, executor: str, domain_id: int, record: bool = False
     with tempfile.TemporaryDirectory() as logs:
         bag = Path(logs) / 'bag' if record else None
         config = StackConfig(scenario=scenario, domain_id=domain_id, log_dir=Path(logs),
-                             record_to=bag, composed=composed, monitor='lean')
+                             record_to=bag, composed=composed, monitor='lean',
+                             diagnostics_period_s=RUN_DIAGNOSTICS_PERIOD_S)
         if live:
             with watched_live_view(domain_id, Path(logs)) as (watch, received, pid):
                 _, end_s = prepare(config)
@@ -119,7 +120,8 @@ def graph_row(label: str, run: GraphRun, extra: str = '-') -> str:
 
 def lockstep_section(scenario: str, domain_id: int) -> list[str]:
     lines = ['## Lockstep through the ROS graph', '',
-             'The run monitor of `run_scenario` (the truth per step and the diagnostics) beside '
+             'The run monitor of `run_scenario` (the truth and the reference per step, the '
+             f'diagnostics every {RUN_DIAGNOSTICS_PERIOD_S:g} s of simulated time) beside '
              'the three node processes, or the three nodes composed in one (`--composed`, '
              '`ato_stack`); real-time factor = simulated time / wall time, overall (start-up '
              'and teardown included) and steady (10 % to 90 % of the run); start-up = starting '

@@ -37,7 +37,7 @@ from pathlib import Path
 
 from ato_bringup.compare import DEFAULT_DEMO_LAW, DEFAULT_OUT, ranked_demo_law
 from ato_bringup.runner import RunFailed, run_lockstep
-from ato_bringup.stack import StackConfig
+from ato_bringup.stack import RUN_DIAGNOSTICS_PERIOD_S, StackConfig
 from ato_common.domains import NoFreeDomain, free_domain
 from ato_common.knowledge import knowledge_of
 from ato_common.metrics import format_summary
@@ -47,6 +47,17 @@ from ato_common.validation import ConfigError
 from ato_controller_node.laws import LAWS
 from recorder.bag import BagError
 from recorder.report import load_run, plot
+
+
+def positive_seconds(text: str) -> float:
+    """A period in seconds, finite and from 0.01 s to an hour (the nodes' own bounds)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a number of seconds') from None
+    if not 0.01 <= value <= 3600.0:
+        raise argparse.ArgumentTypeError(f'{text!r}: must be from 0.01 to 3600 s')
+    return value
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -67,6 +78,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument('--log-dir', type=Path, default=None,
                         help='where each node writes its log and the recording goes '
                              '(default: runs/<time>-<scenario>-<controller>)')
+    parser.add_argument('--diagnostics-period', type=positive_seconds,
+                        default=RUN_DIAGNOSTICS_PERIOD_S, metavar='S',
+                        help='period of the plant\'s and the controller\'s periodic diagnostics, '
+                             's of simulated time (safety reactions and law switches are '
+                             'reported at once); default %(default)g')
     parser.add_argument('--composed', action='store_true',
                         help='the plant, the profile and the controller in one process on one '
                              'executor (ato_stack) instead of three processes')
@@ -142,7 +158,8 @@ def run(args: argparse.Namespace) -> int:
     record_to = None if args.no_record else log_dir / 'bag'
     config = StackConfig(scenario=args.scenario, controller=args.controller,
                          domain_id=args.domain_id, log_dir=log_dir, record_to=record_to,
-                         composed=args.composed, monitor='lean')
+                         composed=args.composed, monitor='lean',
+                         diagnostics_period_s=args.diagnostics_period)
     print(f'running {args.scenario} with {args.controller} in lockstep'
           f"{', composed in one process' if args.composed else ''} "
           f'(ROS_DOMAIN_ID={args.domain_id}, node logs in {log_dir})', file=sys.stderr)

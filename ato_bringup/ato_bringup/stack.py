@@ -66,6 +66,12 @@ LEAN = ('state', 'reference', 'diagnostics')
 """What a run's summary needs: the truth and the reference per step, and the diagnostics."""
 MONITORS = {'full': (FULL, ()), 'lean': (LEAN, ('state', 'reference'))}
 """Each monitor: what it watches, and which of those it takes in batches (``Monitor.batch``)."""
+RUN_DIAGNOSTICS_PERIOD_S = 10.0
+"""The periodic diagnostics of the plant and the controller in a ``run_scenario`` run, s of
+simulated time: at a lockstep's 150x, 1 s of simulated time is 150 reports per node and wall
+second, about a tenth of the loop's CPU with the monitor's share. What a run's summary and
+report need of them is published at once (a safety reaction, a rejected command, a failure, a
+law switch) and at the end; the counters are cumulative."""
 
 
 def executable_path(package: str, executable: str) -> str:
@@ -253,6 +259,7 @@ class StackConfig:
     namespace: str = ''  # push the stack into it, with its own /clock ('' : the root)
     composed: bool = False  # the three loop nodes in one process (ato_stack) instead of three
     monitor: str = 'full'  # what the run monitor watches: 'full' (FULL) or 'lean' (LEAN)
+    diagnostics_period_s: float = 1.0  # of the plant and the controller, s of simulated time
 
 
 class Stack:
@@ -293,13 +300,14 @@ class Stack:
         return {
             'plant': {**common, 'end_time_s': float(c.end_time_s),
                       'wait_for_subscribers': 1 + recorder, 'wait_for_recorders': recorder,
-                      **c.plant_params},
+                      'diagnostics_period_s': float(c.diagnostics_period_s), **c.plant_params},
             # the monitor's reference, watched or batched, counts: it must miss none
             'profile': {**common, 'wait_for_subscribers': 2 + recorder,
                         'wait_for_recorders': recorder, **c.profile_params},
             'controller': {**common, 'controller': c.controller,
                            'wait_for_subscribers': 1 + recorder + ('command' in watch),
                            'wait_for_recorders': recorder,
+                           'diagnostics_period_s': float(c.diagnostics_period_s),
                            **c.controller_params},
             'recorder': {},
         }

@@ -112,12 +112,13 @@ PARAMS = (
     Param('command_wait_limit_s', 5.0, 'lockstep: wall time to wait for the command of a step '
           'before reporting the wait (WARN diagnostics and log, again each such period), s',
           minimum=0.1, maximum=3600.0, read_only=False),
+    Param('diagnostics_period_s', 1.0, 'period of the diagnostics, s of (simulated) time; a '
+          'safety reaction, a rejected command and an injected failure are reported at once',
+          minimum=0.01, maximum=3600.0, read_only=False),
     Param('final_delivery_timeout_s', 5.0, 'at end_time_s: wall time to wait for every matched '
           'subscriber to acknowledge the last step before exiting, s', minimum=0.0,
           maximum=60.0),
 )
-
-DIAGNOSTIC_PERIOD_S = 1.0
 
 
 class TrainPlantNode(RunNodeHooks, Node):
@@ -263,7 +264,8 @@ class TrainPlantNode(RunNodeHooks, Node):
             self.next_diagnostic_ns = 0
         if self.sim.stamp_ns >= self.next_diagnostic_ns:
             self.publish_diagnostics()
-            self.next_diagnostic_ns = self.sim.stamp_ns + nanoseconds(DIAGNOSTIC_PERIOD_S)
+            period_ns = nanoseconds(self.params['diagnostics_period_s'])
+            self.next_diagnostic_ns = self.sim.stamp_ns + period_ns
 
     def _msg(self, state: TrainState, stamp_ns: int) -> bytes:
         # Run time since the start, so real-time subscribers can relate stamps to the curve.
