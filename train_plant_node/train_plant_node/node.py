@@ -301,8 +301,10 @@ class TrainPlantNode(RunNodeHooks, Node):
         """The first of the plant's outputs that has fewer subscribers than the start waits
         for (``wait_for_recorders``, plus the loop's own reader in lockstep), '' if none."""
         recorders = self.params['wait_for_recorders']
+        if not recorders:  # no recorder: the loop's own readers are not waited for either
+            return ''
         loop = int(self.lockstep)  # the profile on /clock, the controller on the measured state
-        return recorders and first_unmatched((
+        return first_unmatched((
             (self.clock_pub, recorders + loop), (self.measured_pub, recorders + loop),
             (self.commanded_pub, recorders), (self.applied_pub, recorders),
             (self.diag_pub, recorders)))
