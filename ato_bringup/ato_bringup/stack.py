@@ -70,7 +70,7 @@ RUN_DIAGNOSTICS_PERIOD_S = 10.0
 """The periodic diagnostics of the plant and the controller in a ``run_scenario`` run, s of
 simulated time: at a lockstep's 150x, 1 s of simulated time is 150 reports per node and wall
 second (10 s instead of 1 s measured, interleaved: the monitor 0.113 -> 0.086 ms and the plant
-0.315 -> 0.289 ms of CPU per step, docs/development.md). What a run's summary and
+0.315 -> 0.289 ms of CPU per step on 2 cores, 2026-12-02). What a run's summary and
 report need of them is published at once (a safety reaction, a rejected command, a failure, a
 law switch) and at the end; the counters are cumulative."""
 
