@@ -10,7 +10,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from trajectory_msgs.msg import JointTrajectory
 
-from ato_bringup.stack import Stack, StackConfig
+from ato_bringup.stack import NODE_NAMES, Stack, StackConfig
+from ato_common.conventions import LOCKSTEP_READERS
 from ato_common.ros import (
     command_from_msg,
     from_time,
@@ -36,10 +37,24 @@ def test_typed_subscribers_see_standard_messages_of_every_per_step_topic(tmp_pat
             stack.node.create_subscription(kind, topic(key).name, received[key].append,
                                            qos_profile(topic(key).qos))
         stack.start()
+        assert stack.spin_until(lambda: stack.monitor.last_stamp_ns >= 0, 60.0), \
+            'the run did not start'
+        readers = {}
+
+        def loop_readers_named():  # the graph learns the nodes' names a little after their ends
+            infos = {key: stack.node.get_subscriptions_info_by_topic(topic(key).name)
+                     for key in LOCKSTEP_READERS}
+            readers.update({key: sorted(i.node_name for i in found if i.node_name.startswith(
+                tuple(NODE_NAMES.values()))) for key, found in infos.items()})
+            return not any(i.node_name.startswith('_') for f in infos.values() for i in f)
+
+        assert stack.spin_until(loop_readers_named, 20.0), readers
         assert stack.spin_until(lambda: stack.monitor.last_stamp_ns >= END_NS, 120.0), \
             'the run did not reach its end'
         stack.spin_for(0.5)
         samples = dict(stack.monitor.complete_samples())
+    # the plant waits for these (and the recorders) before its first step: the table is right
+    assert readers == {key: sorted(names) for key, names in LOCKSTEP_READERS.items()}
     clock = [from_time(m.clock) for m in received['clock']]
     # (/clock keeps the last 10: a subscriber that lags may lose ticks, never get wrong ones)
     assert clock[-1] == END_NS and clock == sorted(clock)

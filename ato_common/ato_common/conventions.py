@@ -128,6 +128,18 @@ TOPICS = {
 
 REFERENCE_JOINT = 'train'
 
+#: The loop's own readers of the plant's per-step outputs in lockstep, as the ROS graph names
+#: their nodes: the profile is driven by /clock and samples the measured state at its replan
+#: checks (on a node of its own that no executor spins), the controller steps on the measured
+#: state. A plant that waits for recorders (``wait_for_recorders``) waits for these and the
+#: recorders on each topic: counting one reader too few let the first measured state go out
+#: before the recorder had matched it (a recording without step 0). tests/test_wire_graph.py
+#: checks this table against a running lockstep graph.
+LOCKSTEP_READERS = {
+    'clock': ('profile_node',),
+    'state_measured': ('ato_controller_node', 'profile_node_measured_sampler'),
+}
+
 
 def stack_remaps(namespace: str) -> list[tuple[str, str]]:
     """The remappings that push a stack into ``namespace`` with a clock of its own: every node

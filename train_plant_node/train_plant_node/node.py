@@ -29,6 +29,7 @@ from std_msgs.msg import Header, String
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_common import units, wire
+from ato_common.conventions import LOCKSTEP_READERS
 from ato_common.identity import scenario_identity
 from ato_common.params import Param, ParameterTable
 from ato_common.plant_setup import parse_failure_injection
@@ -83,7 +84,8 @@ PARAMS = (
           'first step also waits until /clock, train/state/measured, the actuator topics and '
           '/diagnostics each have this many subscribers (DDS matches each topic separately: '
           'one matched on train/state may still be matching on the others), in lockstep '
-          'beside the profile on /clock and the controller on the measured state',
+          'beside the loop\'s own readers (the profile on /clock, the controller and the '
+          'profile on the measured state: conventions.LOCKSTEP_READERS)',
           minimum=0, maximum=100),
     Param('start_delay_s', 0.0, 'wall time to wait after wait_for_subscribers and '
           'wait_for_recorders are met before the first step', minimum=0.0, maximum=60.0),
@@ -303,9 +305,10 @@ class TrainPlantNode(RunNodeHooks, Node):
         recorders = self.params['wait_for_recorders']
         if not recorders:  # no recorder: the loop's own readers are not waited for either
             return ''
-        loop = int(self.lockstep)  # the profile on /clock, the controller on the measured state
+        loop = LOCKSTEP_READERS if self.lockstep else {}  # the profile, the controller
         return first_unmatched((
-            (self.clock_pub, recorders + loop), (self.measured_pub, recorders + loop),
+            (self.clock_pub, recorders + len(loop.get('clock', ()))),
+            (self.measured_pub, recorders + len(loop.get('state_measured', ()))),
             (self.commanded_pub, recorders), (self.applied_pub, recorders),
             (self.diag_pub, recorders)))
 
