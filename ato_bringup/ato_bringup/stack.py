@@ -298,6 +298,8 @@ class Stack:
         # would cost each a /clock subscription taking every step).
         recorder = int(c.record_to is not None)
         watch = self.monitor.watch
+        # every monitor reads /diagnostics (FULL and LEAN): each node's first status too
+        common['wait_for_diagnostics_readers'] = int('diagnostics' in watch)
         return {
             'plant': {**common, 'end_time_s': float(c.end_time_s),
                       'wait_for_subscribers': 1 + recorder, 'wait_for_recorders': recorder,

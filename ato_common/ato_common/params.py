@@ -98,3 +98,13 @@ class ParameterTable:
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
+
+
+#: Every node of the loop: its first output also waits for the readers of its /diagnostics (a
+#: run monitor). DDS matches each topic separately, so a monitor matched on a node's main
+#: output may still be matching on /diagnostics, and a status sent once (the profile's plan)
+#: would be lost to it.
+WAIT_FOR_DIAGNOSTICS_READERS = Param(
+    'wait_for_diagnostics_readers', 0, 'lockstep: observers of /diagnostics besides the '
+    'recorders (e.g. the run monitor of run_scenario): nothing is published before '
+    '/diagnostics has these and wait_for_recorders subscribers', minimum=0, maximum=100)

@@ -34,7 +34,7 @@ from trajectory_msgs.msg import JointTrajectory
 from ato_common import wire
 from ato_common.identity import scenario_identity
 from ato_common.knowledge import knowledge_of
-from ato_common.params import Param, ParameterTable
+from ato_common.params import WAIT_FOR_DIAGNOSTICS_READERS, Param, ParameterTable
 from ato_common.ros import (
     MessageError,
     Publishing,
@@ -73,6 +73,7 @@ NODE_PARAMS = (
     Param('wait_for_recorders', 0, 'lockstep: observers that record every topic (e.g. the '
           'recorder): nothing is commanded before /diagnostics has this many subscribers too',
           minimum=0, maximum=100),
+    WAIT_FOR_DIAGNOSTICS_READERS,
     Param('stale_after_s', 0.5, 'real time: a measurement or a reference older than this is '
           'stale; the controller then commands nothing (and the plant watchdog brakes), s',
           minimum=0.01,
@@ -249,7 +250,8 @@ class AtoControllerNode(RunNodeHooks, Node):
             return
         if not self.subscribers_met:
             if first_unmatched(((self.command_pub, self.params['wait_for_subscribers']),
-                                (self.diag_pub, self.params['wait_for_recorders']))):
+                                (self.diag_pub, self.params['wait_for_recorders']
+                                 + self.params['wait_for_diagnostics_readers']))):
                 return  # the plant re-sends the step until the command comes
             self.subscribers_met = True
         if stamp_ns < self.last_stamp_ns:

@@ -58,7 +58,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from ato_common import wire
 from ato_common.identity import scenario_identity
-from ato_common.params import Param, ParameterTable
+from ato_common.params import WAIT_FOR_DIAGNOSTICS_READERS, Param, ParameterTable
 from ato_common.ros import (
     MessageError,
     Observation,
@@ -127,6 +127,7 @@ PARAMS = (
     Param('wait_for_recorders', 0, 'lockstep: observers that record every topic (e.g. the '
           'recorder): nothing is published before the distance to go, the permitted speed and '
           '/diagnostics each have this many subscribers too', minimum=0, maximum=100),
+    WAIT_FOR_DIAGNOSTICS_READERS,
     Param('curve_sample_period_s', 1.0, 'spacing of the latched whole-curve samples, s',
           minimum=0.01, maximum=60.0),
     Param('replan_check_period_s', CHECK_PERIOD_S, 'lockstep: simulated time between two '
@@ -281,7 +282,8 @@ class ProfileNode(RunNodeHooks, Node):
             recorders = self.params['wait_for_recorders']
             if first_unmatched(((self.reference_pub, self.params['wait_for_subscribers']),
                                 (self.dtg_pub, recorders), (self.permitted_pub, recorders),
-                                (self.diag_pub, recorders))):
+                                (self.diag_pub,
+                                 recorders + self.params['wait_for_diagnostics_readers']))):
                 return  # the plant re-sends the tick until the reference comes
             self.subscribers_met = True
         try:

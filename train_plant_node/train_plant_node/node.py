@@ -31,7 +31,7 @@ from trajectory_msgs.msg import JointTrajectory
 from ato_common import units, wire
 from ato_common.conventions import LOCKSTEP_READERS
 from ato_common.identity import scenario_identity
-from ato_common.params import Param, ParameterTable
+from ato_common.params import WAIT_FOR_DIAGNOSTICS_READERS, Param, ParameterTable
 from ato_common.plant_setup import parse_failure_injection
 from ato_common.ros import (
     MessageError,
@@ -87,6 +87,7 @@ PARAMS = (
           'beside the loop\'s own readers (the profile on /clock, the controller and the '
           'profile on the measured state: conventions.LOCKSTEP_READERS)',
           minimum=0, maximum=100),
+    WAIT_FOR_DIAGNOSTICS_READERS,
     Param('start_delay_s', 0.0, 'wall time to wait after wait_for_subscribers and '
           'wait_for_recorders are met before the first step', minimum=0.0, maximum=60.0),
     Param('resend_period_s', 0.2, 'lockstep: re-publish the current step after this much wall '
@@ -303,14 +304,14 @@ class TrainPlantNode(RunNodeHooks, Node):
         """The first of the plant's outputs that has fewer subscribers than the start waits
         for (``wait_for_recorders``, plus the loop's own reader in lockstep), '' if none."""
         recorders = self.params['wait_for_recorders']
+        diagnostics = (self.diag_pub, recorders + self.params['wait_for_diagnostics_readers'])
         if not recorders:  # no recorder: the loop's own readers are not waited for either
-            return ''
+            return first_unmatched((diagnostics,))
         loop = LOCKSTEP_READERS if self.lockstep else {}  # the profile, the controller
         return first_unmatched((
             (self.clock_pub, recorders + len(loop.get('clock', ()))),
             (self.measured_pub, recorders + len(loop.get('state_measured', ()))),
-            (self.commanded_pub, recorders), (self.applied_pub, recorders),
-            (self.diag_pub, recorders)))
+            (self.commanded_pub, recorders), (self.applied_pub, recorders), diagnostics))
 
     def observers_lost(self) -> str:
         """'' while train/state has the subscribers the start waited for, else what is missing
