@@ -8,6 +8,9 @@ CONTROLLER ?=
 CAMPAIGN ?=
 SCHEDULER ?=
 PYTEST_ARGS ?=
+# make test: two pytest workers, the graph tests one after the other on one of them
+# (tests/conftest.py), the unit tests on both
+PYTEST_WORKERS ?= 2
 
 .PHONY: help setup build demo compare campaign reproduce test test-unit test-integration lint docs docs-serve bench curves clean
 
@@ -53,7 +56,7 @@ reproduce: setup
 	@$(ENV) python -m ato_bringup.reproduction
 
 test: setup lint docs
-	@$(ENV) python -m pytest $(PYTEST_ARGS)
+	@$(ENV) python -m pytest -n $(PYTEST_WORKERS) --dist loadgroup $(PYTEST_ARGS)
 
 lint: setup
 	@$(ENV) ruff check .

@@ -15,6 +15,11 @@ def pytest_collection_modifyitems(items):
     for item in items:
         if '/tests/' in str(item.fspath):
             item.add_marker(pytest.mark.integration)
+            # With pytest-xdist (make test: -n 2 --dist loadgroup) the graph tests run one
+            # after the other on one worker, each with the whole graph to itself, while the
+            # other worker takes the unit tests: two graphs at once on two cores would make
+            # the wall-clock limits of the real-time tests a matter of luck.
+            item.add_marker(pytest.mark.xdist_group('graph'))
 
 
 @pytest.fixture(scope='session')

@@ -33,7 +33,11 @@ STREAM = QosSpec(reliable=True, transient_local=False, depth=0)
 # Data a late joiner needs (the whole target curve): latched.
 LATCHED = QosSpec(reliable=True, transient_local=True, depth=1)
 CLOCK = QosSpec(reliable=True, transient_local=False, depth=10)
-DIAGNOSTICS = QosSpec(reliable=True, transient_local=False, depth=10)
+# A status sent once (a replan, a safety reaction) must reach a run monitor that lags: /diagnostics
+# is unkeyed, so a keep-last reader keeps one history for all its publishers, and at a lockstep's
+# pace ten statuses of three nodes pass in a few ms of wall time (a monitor on a loaded machine
+# lost a replan's status that way). Keep-all, as the streams.
+DIAGNOSTICS = QosSpec(reliable=True, transient_local=False, depth=0)
 
 
 # How often each topic is published. Per lockstep step the loop needs only the measured state,
