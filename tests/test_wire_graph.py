@@ -10,8 +10,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from trajectory_msgs.msg import JointTrajectory
 
-from ato_bringup.stack import NODE_NAMES, Stack, StackConfig
-from ato_common.conventions import LOCKSTEP_READERS
+from ato_bringup.stack import Stack, StackConfig
 from ato_common.ros import (
     command_from_msg,
     from_time,
@@ -75,22 +74,3 @@ def test_typed_subscribers_see_standard_messages_of_every_per_step_topic(tmp_pat
     assert len(received['distance_to_go']) > 250
     assert received['diagnostics']
 
-
-def test_the_loop_readers_the_plant_waits_for_are_those_of_the_graph(tmp_path, domain_id):
-    """A plant that waits for recorders waits for the loop's own readers of /clock and the
-    measured state beside them (conventions.LOCKSTEP_READERS): one too few and its first step
-    goes out before the recorder has matched. The profile and the controller, waiting for a
-    plant that never comes, hold their subscriptions still while the graph is read."""
-    expected = {key: sorted(names) for key, names in LOCKSTEP_READERS.items()}
-    readers = {}
-    with Stack(StackConfig(scenario='short_line', domain_id=domain_id,
-                           log_dir=tmp_path)) as stack:
-        stack.start(order=('controller', 'profile'))
-
-        def loop_readers():  # the graph learns the others' endpoints and names a little late
-            readers.update({key: sorted(
-                i.node_name for i in stack.node.get_subscriptions_info_by_topic(topic(key).name)
-                if i.node_name.startswith(tuple(NODE_NAMES.values()))) for key in expected})
-            return readers == expected
-
-        assert stack.spin_until(loop_readers, 30.0), (readers, expected)

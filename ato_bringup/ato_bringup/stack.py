@@ -293,23 +293,24 @@ class Stack:
         c = self.config
         common = {'scenario': c.scenario, 'lockstep': c.lockstep}
         # Nobody publishes into the loop before the observers (the monitor, the recorder) are
-        # matched: they must see every step. The profile and the controller are driven by the
-        # stamps of /clock and of the messages in lockstep: they need no use_sim_time (which
-        # would cost each a /clock subscription taking every step).
+        # matched: they must see every step. The monitor subscribes to the topics it watches,
+        # the recorder to the step records and /diagnostics (it takes the per-step topics from
+        # the step records: ato_common.step_records). The profile and the controller are driven
+        # by the stamps of /clock and of the messages in lockstep: they need no use_sim_time
+        # (which would cost each a /clock subscription taking every step).
         recorder = int(c.record_to is not None)
         watch = self.monitor.watch
         # every monitor reads /diagnostics (FULL and LEAN): each node's first status too
         common['wait_for_diagnostics_readers'] = int('diagnostics' in watch)
+        common['wait_for_recorders'] = recorder
         return {
             'plant': {**common, 'end_time_s': float(c.end_time_s),
-                      'wait_for_subscribers': 1 + recorder, 'wait_for_recorders': recorder,
+                      'wait_for_subscribers': 1,  # the monitor's truth
                       'diagnostics_period_s': float(c.diagnostics_period_s), **c.plant_params},
-            # the monitor's reference, watched or batched, counts: it must miss none
-            'profile': {**common, 'wait_for_subscribers': 2 + recorder,
-                        'wait_for_recorders': recorder, **c.profile_params},
+            # the controller's and the monitor's reference, watched or batched: none missed
+            'profile': {**common, 'wait_for_subscribers': 2, **c.profile_params},
             'controller': {**common, 'controller': c.controller,
-                           'wait_for_subscribers': 1 + recorder + ('command' in watch),
-                           'wait_for_recorders': recorder,
+                           'wait_for_subscribers': 1 + ('command' in watch),
                            'diagnostics_period_s': float(c.diagnostics_period_s),
                            **c.controller_params},
             'recorder': {},
@@ -340,8 +341,11 @@ class Stack:
         return self.start_process('loop', {}, extra_ros_args=['--params-file', str(path)])
 
     def start_process(self, name: str, params: dict, args: list[str] = (),
-                      extra_ros_args: list[str] = ()) -> subprocess.Popen:
-        package, executable = EXECUTABLES[name]
+                      extra_ros_args: list[str] = (), kind: str | None = None
+                      ) -> subprocess.Popen:
+        """Start the executable of ``kind`` (``EXECUTABLES``; default ``name``) as the process
+        ``name`` of the stack, its log in ``<log_dir>/<name>.log``."""
+        package, executable = EXECUTABLES[kind or name]
         self.config.log_dir.mkdir(parents=True, exist_ok=True)
         log = self.config.log_dir / f'{name}.log'
         self.logs[name] = log
@@ -422,9 +426,10 @@ class Stack:
 
     def stop(self, names=None, timeout_s: float = 10.0) -> dict[str, int]:
         """Stop the processes one at a time: SIGINT, wait, abort what does not end; exit codes.
-        The recorder goes last, so that it records everything the others sent."""
+        The recorders go last, so that they record everything the others sent."""
         names = list(names or self.processes)
-        order = [n for n in names if n != 'recorder'] + [n for n in names if n == 'recorder']
+        order = [n for n in names if not n.startswith('recorder')] + \
+            [n for n in names if n.startswith('recorder')]
         codes, error = {}, None
         for name in order:
             process = self.processes[name]

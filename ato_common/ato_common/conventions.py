@@ -128,21 +128,21 @@ TOPICS = {
                          rate='every 1 s of simulated time per node (the controller: its '
                          'diagnostics_period_s), and at once on a safety change or a rejected '
                          'input'),
+    'step_records': Topic('ato/step_records', 'std_msgs/msg/UInt8MultiArray', STREAM, '-',
+                          'train_plant_node, profile_node, ato_controller_node', 'recorder',
+                          'per-step messages of a node bundled for the recorders (the bytes of '
+                          'each message of STEP_RECORDED it published, with its topic, log and '
+                          'publish times; layout in ato_common.step_records)',
+                          rate='every 0.2 s of simulated time (at most 0.05 s of wall time) '
+                          'while a recorder subscribes'),
 }
+
+#: The per-step topics the loop nodes put in their step records (``step_records``): the recorder
+#: takes them from there instead of subscribing to each (ato_common.step_records).
+STEP_RECORDED = ('clock', 'state', 'state_measured', 'reference', 'distance_to_go',
+                 'permitted_speed', 'command', 'actuators_commanded', 'actuators_applied')
 
 REFERENCE_JOINT = 'train'
-
-#: The loop's own readers of the plant's per-step outputs in lockstep, as the ROS graph names
-#: their nodes: the profile is driven by /clock and samples the measured state at its replan
-#: checks (on a node of its own that no executor spins), the controller steps on the measured
-#: state. A plant that waits for recorders (``wait_for_recorders``) waits for these and the
-#: recorders on each topic: counting one reader too few let the first measured state go out
-#: before the recorder had matched it (a recording without step 0). tests/test_wire_graph.py
-#: checks this table against a running lockstep graph.
-LOCKSTEP_READERS = {
-    'clock': ('profile_node',),
-    'state_measured': ('ato_controller_node', 'profile_node_measured_sampler'),
-}
 
 
 def stack_remaps(namespace: str) -> list[tuple[str, str]]:

@@ -270,6 +270,63 @@ class Observation:
         return False
 
 
+#: a loop node about to exit: how long its last step records may take to reach the recorders, s
+#: of wall time (a recorder that died never acknowledges them)
+RECORDS_DELIVERY_TIMEOUT_S = 2.0
+
+
+class StepRecorder:
+    """A loop node's step records (``ato_common.step_records``): its per-step messages bundled
+    for the recorders on ``step_records``. Each step the node asks ``begin_step`` (is a recorder
+    subscribed?), ``add``s every per-step message it publishes while one is, and calls
+    ``end_step``, which publishes the bundle once it is due; ``close`` publishes what is left
+    and waits until it is delivered (a node about to exit)."""
+
+    def __init__(self, node, publishing: Publishing, period_s: float | None = None):
+        from std_msgs.msg import UInt8MultiArray
+
+        from ato_common.step_records import PERIOD_S, Bundle
+        spec = TOPICS['step_records']
+        self.publisher = node.create_publisher(UInt8MultiArray, spec.name, qos_profile(spec.qos))
+        self.publishing = publishing
+        self.bundle = Bundle(PERIOD_S if period_s is None else period_s)
+        self.active = False
+        self.bundles = 0
+        self.names: dict[object, str] = {}  # publisher -> its topic's full name
+
+    def begin_step(self) -> bool:
+        """Whether a recorder subscribes, asked when a bundle begins (a recorder that leaves
+        while one is under way is sent the rest of it all the same); without one, nothing is
+        kept."""
+        if not len(self.bundle):
+            self.active = self.publisher.get_subscription_count() > 0
+        return self.active
+
+    def add(self, publisher, log_time_ns: int, data: bytes) -> None:
+        """A per-step message of ``publisher`` (its bytes as published), logged at
+        ``log_time_ns``; only while ``active``."""
+        if self.active:
+            name = self.names.get(publisher)
+            if name is None:
+                name = self.names[publisher] = publisher.topic_name
+            self.bundle.add(name, log_time_ns, data)
+
+    def end_step(self, stamp_ns: int) -> None:
+        if self.bundle.due(stamp_ns):
+            self.flush()
+
+    def flush(self) -> None:
+        data = self.bundle.take()
+        if data is not None and self.publishing(self.publisher, data):
+            self.bundles += 1
+
+    def close(self, timeout_s: float = RECORDS_DELIVERY_TIMEOUT_S) -> bool:
+        """Publish what is left and wait until every recorder has it (False if one did not
+        acknowledge within ``timeout_s``)."""
+        self.flush()
+        return wait_until_delivered([self.publisher], timeout_s)
+
+
 def watch_plant_identity(node, own_identity: str, refusal: str):
     """Subscribe ``node`` to the plant's latched identity (``train/identity``): a plant that
     simulates another scenario than ``own_identity``'s (or an identity that is not one) makes

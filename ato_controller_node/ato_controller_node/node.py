@@ -39,6 +39,7 @@ from ato_common.ros import (
     MessageError,
     Publishing,
     RunNodeHooks,
+    StepRecorder,
     decoded,
     diagnostic_status,
     first_unmatched,
@@ -70,9 +71,10 @@ NODE_PARAMS = (
           '(false: on a wall-clock timer)'),
     Param('wait_for_subscribers', 0, 'lockstep: command nothing before ato/command has this '
           'many subscribers (so a monitor or recorder misses nothing)', minimum=0, maximum=100),
-    Param('wait_for_recorders', 0, 'lockstep: observers that record every topic (e.g. the '
-          'recorder): nothing is commanded before /diagnostics has this many subscribers too',
-          minimum=0, maximum=100),
+    Param('wait_for_recorders', 0, 'lockstep: recorders of the run (the suite\'s recorder, '
+          'which takes the commands from ato/step_records): nothing is commanded before '
+          'ato/step_records and /diagnostics each have this many subscribers too', minimum=0,
+          maximum=100),
     WAIT_FOR_DIAGNOSTICS_READERS,
     Param('stale_after_s', 0.5, 'real time: a measurement or a reference older than this is '
           'stale; the controller then commands nothing (and the plant watchdog brakes), s',
@@ -156,6 +158,8 @@ class AtoControllerNode(RunNodeHooks, Node):
 
         self.command_pub = self.create_publisher(JointState, topic('command').name,
                                                  qos_profile(topic('command').qos))
+        # The commands for the recorders, bundled (ato_common.step_records).
+        self.records = StepRecorder(self, self.publishing)
         self.diag_pub = self.create_publisher(DiagnosticArray, topic('diagnostics').name,
                                               qos_profile(topic('diagnostics').qos))
         # The per-step inputs are taken as bytes and read by ato_common.wire (no rclpy message
@@ -244,13 +248,15 @@ class AtoControllerNode(RunNodeHooks, Node):
             if stamp_ns in self.states and self.last_command_msg is not None:
                 self.states.pop(stamp_ns, None)
                 self.references.pop(stamp_ns, None)
-                self.publishing(self.command_pub, self.last_command_msg)  # asked again
+                self.send_command(self.last_command_msg, stamp_ns)  # asked again
             return
         if stamp_ns not in self.states or stamp_ns not in self.references:
             return
         if not self.subscribers_met:
+            recorders = self.params['wait_for_recorders']
             if first_unmatched(((self.command_pub, self.params['wait_for_subscribers']),
-                                (self.diag_pub, self.params['wait_for_recorders']
+                                (self.records.publisher, recorders),
+                                (self.diag_pub, recorders
                                  + self.params['wait_for_diagnostics_readers']))):
                 return  # the plant re-sends the step until the command comes
             self.subscribers_met = True
@@ -317,13 +323,24 @@ class AtoControllerNode(RunNodeHooks, Node):
         self.step_times_s.append(time.perf_counter() - started)
         msg = wire.encode_command(Command(stamp_ns, self.knowledge.actuator_names,
                                           result.forces_n, result.law))
-        self.publishing(self.command_pub, msg)
+        self.send_command(msg, stamp_ns)
         self.last_command_msg = msg
         self.last_stamp_ns = stamp_ns
         self.last_result = result
         if stamp_ns >= self.next_diagnostic_ns:
             self.publish_diagnostics(stamp_ns)
             self.next_diagnostic_ns = stamp_ns + int(self.params['diagnostics_period_s'] * 1e9)
+
+    def send_command(self, msg: bytes, stamp_ns: int) -> None:
+        self.publishing(self.command_pub, msg)
+        if self.records.begin_step():
+            self.records.add(self.command_pub, stamp_ns, msg)
+        self.records.end_step(stamp_ns)
+
+    def close_outputs(self) -> None:
+        if not self.records.close():  # the last commands' records
+            self.get_logger().warning('a recorder did not acknowledge the last step records '
+                                      'in time (gone?)')
 
     def report_stale(self, age_s: float, what: str = 'measurement') -> None:
         message = (f'{what} stale for {age_s:.1f} s (limit {self.params["stale_after_s"]:g} '

@@ -64,6 +64,7 @@ from ato_common.ros import (
     Observation,
     Publishing,
     RunNodeHooks,
+    StepRecorder,
     decoded,
     diagnostic_status,
     first_unmatched,
@@ -124,9 +125,10 @@ PARAMS = (
     Param('wait_for_subscribers', 0, 'lockstep: publish no reference before ato/reference has '
           'this many subscribers (so a monitor or recorder misses nothing)', minimum=0,
           maximum=100),
-    Param('wait_for_recorders', 0, 'lockstep: observers that record every topic (e.g. the '
-          'recorder): nothing is published before the distance to go, the permitted speed and '
-          '/diagnostics each have this many subscribers too', minimum=0, maximum=100),
+    Param('wait_for_recorders', 0, 'lockstep: recorders of the run (the suite\'s recorder, '
+          'which takes the per-step topics from ato/step_records): nothing is published before '
+          'ato/step_records and /diagnostics each have this many subscribers too', minimum=0,
+          maximum=100),
     WAIT_FOR_DIAGNOSTICS_READERS,
     Param('curve_sample_period_s', 1.0, 'spacing of the latched whole-curve samples, s',
           minimum=0.01, maximum=60.0),
@@ -171,6 +173,8 @@ class ProfileNode(RunNodeHooks, Node):
                                              qos_profile(topic('distance_to_go').qos))
         self.permitted_pub = self.create_publisher(Float64, topic('permitted_speed').name,
                                                    qos_profile(topic('permitted_speed').qos))
+        # The per-step messages for the recorders, bundled (ato_common.step_records).
+        self.records = StepRecorder(self, self.publishing)
         self.dtg_observation = Observation(self, self.dtg_pub)
         self.permitted_observation = Observation(self, self.permitted_pub)
         curve_pub = self.create_publisher(JointTrajectory, topic('curve').name,
@@ -217,6 +221,9 @@ class ProfileNode(RunNodeHooks, Node):
         self.checks = []
 
     def close_outputs(self) -> None:
+        if not self.records.close():  # the last steps' records
+            self.get_logger().warning('a recorder did not acknowledge the last step records '
+                                      'in time (gone?)')
         if self.sampler is not None:
             self.sampler.destroy_node()
             self.sampler = None
@@ -249,22 +256,30 @@ class ProfileNode(RunNodeHooks, Node):
 
     def publish(self, stamp_ns: int) -> None:
         # as CDR bytes packed from a template (ato_common.wire): a standard JointTrajectory
-        self.publishing(self.reference_pub, wire.encode_reference(self.reference_at(stamp_ns)))
+        data = wire.encode_reference(self.reference_at(stamp_ns))
+        self.publishing(self.reference_pub, data)
+        self.records.add(self.reference_pub, stamp_ns, data)
 
     def publish_supervision(self, stamp_ns: int) -> None:
         """Distance to go and permitted speed now (unstamped: only ever for the current tick),
-        each computed and published only while it has a subscriber (``ros.Observation``)."""
+        each computed only while it has a subscriber (``ros.Observation``) or a recorder records
+        (``records``), published only while it has a subscriber."""
         dtg, permitted = self.dtg_observation.due(), self.permitted_observation.due()
-        if not (dtg or permitted):
+        recording = self.records.active
+        if not (dtg or permitted or recording):
             return
         plan = self.plan_for(stamp_ns)
         now = plan.trajectory.at(seconds(stamp_ns - self.time_origin_ns))
-        if dtg:
-            target = plan.next_target(now.position, now.time_s)
-            self.publishing(self.dtg_pub, wire.encode_float64(target.location_m - now.position))
-        if permitted:
-            self.publishing(self.permitted_pub, wire.encode_float64(
-                plan.permitted_speed(now.position, now.time_s)))
+        for due, publisher, value in (
+                (dtg, self.dtg_pub, lambda: plan.next_target(now.position, now.time_s)
+                 .location_m - now.position),
+                (permitted, self.permitted_pub,
+                 lambda: plan.permitted_speed(now.position, now.time_s))):
+            if due or recording:
+                data = wire.encode_float64(value())
+                if due:
+                    self.publishing(publisher, data)
+                self.records.add(publisher, stamp_ns, data)
 
     def publish_plan(self, stamp_ns: int, why: str, plan: Plan | None = None) -> None:
         """The plan on diagnostics: only when it changes (start, replan, resume)."""
@@ -281,7 +296,7 @@ class ProfileNode(RunNodeHooks, Node):
         if not self.subscribers_met:
             recorders = self.params['wait_for_recorders']
             if first_unmatched(((self.reference_pub, self.params['wait_for_subscribers']),
-                                (self.dtg_pub, recorders), (self.permitted_pub, recorders),
+                                (self.records.publisher, recorders),
                                 (self.diag_pub,
                                  recorders + self.params['wait_for_diagnostics_readers']))):
                 return  # the plant re-sends the tick until the reference comes
@@ -297,6 +312,7 @@ class ProfileNode(RunNodeHooks, Node):
             self.checks.append(tick)
         if not self.plan_reported:
             self.publish_plan(tick, f'{self.plan.strategy} plan')
+        self.records.begin_step()
         if tick != self.sent_ahead_ns or tick == self.last_tick_ns:
             # not sent ahead, or the plant re-sent the tick
             if not self.decided_until(tick):
@@ -309,6 +325,7 @@ class ProfileNode(RunNodeHooks, Node):
                 self.sent_ahead_ns = ahead
                 self.publish(ahead)
         self.last_tick_ns = tick
+        self.records.end_step(tick)
 
     def restart_lockstep(self) -> None:
         """A new plant (its simulated time went back): the run and the curve start again."""
@@ -431,8 +448,10 @@ class ProfileNode(RunNodeHooks, Node):
             now = self.get_clock().now().nanoseconds
             if not self.plan_reported:
                 self.publish_plan(now, f'{self.plan.strategy} plan')
+            self.records.begin_step()
             self.publish(now)
             self.publish_supervision(now)
+            self.records.end_step(now)
 
 
 def main(args=None) -> int:

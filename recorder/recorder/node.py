@@ -42,10 +42,13 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock as ClockMsg
+from std_msgs.msg import UInt8MultiArray as STEP_RECORDS_MSG
 
 from ato_common.conventions import TOPICS
 from ato_common.ros import RunNodeHooks, freeze_startup_objects, qos_profile, run_node
+from ato_common.step_records import decode_bundle, namespace_of, step_recorded
 from ato_common.validation import ConfigError
+from ato_common.wire import MessageError
 from recorder.bag import (
     DEFAULT_FLUSH_PERIOD_LOG_S,
     DEFAULT_FLUSH_PERIOD_S,
@@ -80,10 +83,13 @@ def logs_at_stamp(topic: str, type_name: str, log_time: str) -> bool:
         starts_with_stamp(type_name)
 
 
+STEP_RECORDS = TOPICS['step_records']
+
+
 class RecorderNode(RunNodeHooks, Node):
     def __init__(self, writer: BagWriter, topics: list[str] | None, discovery_period_s: float,
                  log_time: str = 'stamp', publish_time: str = 'source', sim_time: bool = False,
-                 take_period_s: float = DEFAULT_TAKE_PERIOD_S):
+                 take_period_s: float = DEFAULT_TAKE_PERIOD_S, step_records: bool = True):
         super().__init__('recorder')
         # The subscriptions' node: never spun, its messages are taken every take period.
         self.taker = Node(f'{self.get_name()}_subscriptions', context=self.context,
@@ -100,6 +106,10 @@ class RecorderNode(RunNodeHooks, Node):
         self.publish_time = publish_time
         self.wanted = set(topics) if topics else None
         self.subscribed: dict[str, object] = {}
+        # ato_common.step_records: the per-step topics of a namespace whose loop nodes publish
+        # step records are taken from those, not subscribed to one by one
+        self.step_records = step_records
+        self.bundled: set[str] = set()  # namespaces whose step records are subscribed to
         self.received = 0
         self.finished = False  # run_node stops spinning when True
         self.exit_code = 0
@@ -121,8 +131,18 @@ class RecorderNode(RunNodeHooks, Node):
             # the time only, not recorded
             self._subscribe(self.clock_topic, ClockMsg, qos_profile(TOPICS['clock'].qos),
                             lambda data, info: self._on_clock(data))
-        for topic, types in self.get_topic_names_and_types():
-            if topic in self.subscribed or (self.wanted is not None and topic not in self.wanted):
+        found = self.get_topic_names_and_types()
+        # the step records first: a per-step topic they carry is then not subscribed to
+        for topic, types in found:
+            if topic not in self.subscribed and self.is_step_records(topic, types):
+                self._subscribe_step_records(topic)
+        for topic, types in found:
+            if topic in self.subscribed or self.is_step_records(topic, types):
+                continue
+            recorded = step_recorded(topic) if self.step_records else None
+            if recorded is not None and recorded[1] in self.bundled:
+                continue  # taken from the step records
+            if self.wanted is not None and topic not in self.wanted:
                 continue
             if len(types) != 1:
                 self.get_logger().warning(f'{topic} has several types {types}; not recorded')
@@ -149,6 +169,84 @@ class RecorderNode(RunNodeHooks, Node):
                             self._handler(topic, stamped))
             self.get_logger().info(f'recording {topic} [{type_name}], logged at '
                                    f'{"its stamp" if stamped else "receipt"}')
+
+    def is_step_records(self, topic: str, types) -> bool:
+        return list(types) == [STEP_RECORDS.type_name] and \
+            namespace_of(topic, 'step_records') is not None
+
+    def _subscribe_step_records(self, topic: str) -> None:
+        """Take the per-step topics of ``topic``'s namespace from its step records (and drop a
+        subscription to one of them made before the step records were seen: the loop does not
+        start before the recorder has matched the step records, so it has received nothing).
+        Without step records (``--no-step-records``) the topic is left alone: nobody bundles
+        for this recorder."""
+        namespace = namespace_of(topic, 'step_records')
+        if not self.step_records or (self.wanted is not None and not any(
+                (step_recorded(t) or (None, None))[1] == namespace for t in self.wanted)):
+            self.subscribed[topic] = None
+            return
+        if not any(info.qos_profile for info in self.get_publishers_info_by_topic(topic)):
+            return  # no publisher yet
+        self.bundled.add(namespace)
+        for other in list(self.takes):
+            recorded = step_recorded(other)
+            if recorded is not None and recorded[1] == namespace:
+                subscription, _ = self.takes.pop(other)
+                self.taker.destroy_subscription(subscription)
+                del self.subscribed[other]
+        self._subscribe(topic, STEP_RECORDS_MSG, subscription_qos(
+            [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]),
+            self._on_step_records)
+        self.get_logger().info(f'recording the per-step topics of {namespace} from its step '
+                               f'records ({topic}), each logged at its step')
+
+    def _on_step_records(self, data: bytes, info: dict) -> None:
+        """Every message of a bundle under its own topic, at the log and publish times the
+        node gave it (``--log-time receipt``: on receipt; ``--publish-time log``: the log
+        time)."""
+        if self.finished:
+            return
+        try:
+            entries = decode_bundle(data)
+        except MessageError as error:
+            self.get_logger().warning(f'step records not read: {error}',
+                                      throttle_duration_sec=1.0)
+            return
+        write, source = self.writer.write, self.publish_time == 'source'
+        for topic, log_time_ns, publish_time_ns, message in entries:
+            if self.wanted is not None and topic not in self.wanted:
+                continue
+            if topic not in self.writer.topics and not self._add_recorded_topic(topic):
+                continue
+            if topic == self.clock_topic and self.sim_time:
+                self._on_clock(message)
+            if self.log_time != 'stamp':
+                log_time_ns = self.now_ns()
+            try:
+                write(topic, log_time_ns, message, publish_time_ns if source else None)
+            except BagError as error:
+                self.stop_on_error(error)
+                return
+            self.received += 1
+
+    def _add_recorded_topic(self, topic: str) -> bool:
+        """A topic first met in the step records: its type from the conventions, its QoS as
+        its publishers offer it (the conventions' if the graph does not show them yet)."""
+        recorded = step_recorded(topic)
+        if recorded is None:
+            self.get_logger().warning(f'{topic} in the step records is none of the per-step '
+                                      'topics; not recorded', throttle_duration_sec=1.0)
+            return False
+        spec = TOPICS[recorded[0]]
+        offered = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)] \
+            or [qos_profile(spec.qos)]
+        try:
+            self.writer.add_topic(topic, spec.type_name, offered_profiles(offered))
+        except BagError as error:
+            self.get_logger().warning(f'{error}; not recorded')
+            return False
+        self.get_logger().info(f'recording {topic} [{spec.type_name}] from the step records')
+        return True
 
     def _on_clock(self, data: bytes) -> None:
         stamp = cdr_stamp_ns(data)
@@ -268,6 +366,10 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                              '/clock (as use_sim_time, without its second /clock subscription)')
     parser.add_argument('--custom-data', action='append', default=[], metavar='KEY=VALUE',
                         help="a string pair for metadata.yaml's custom_data (repeatable)")
+    parser.add_argument('--no-step-records', dest='step_records', action='store_false',
+                        help="subscribe to the suite's per-step topics one by one, as to any "
+                             "other, instead of taking them from the loop nodes' step records "
+                             '(ato/step_records)')
     parser.add_argument('--discovery-period', type=float, default=0.1,
                         help='how often to look for new topics, s')
     return parser.parse_args(argv)
@@ -298,7 +400,8 @@ def main(args=None) -> int:
     try:
         return run_node(lambda: RecorderNode(writer, options.topics, options.discovery_period,
                                              options.log_time, options.publish_time,
-                                             options.sim_time, options.take_period), args)
+                                             options.sim_time, options.take_period,
+                                             options.step_records), args)
     finally:
         if not writer.closed:  # the node never came up
             try:

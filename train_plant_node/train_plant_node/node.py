@@ -29,7 +29,6 @@ from std_msgs.msg import Header, String
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_common import units, wire
-from ato_common.conventions import LOCKSTEP_READERS
 from ato_common.identity import scenario_identity
 from ato_common.params import WAIT_FOR_DIAGNOSTICS_READERS, Param, ParameterTable
 from ato_common.plant_setup import parse_failure_injection
@@ -38,6 +37,7 @@ from ato_common.ros import (
     Observation,
     Publishing,
     RunNodeHooks,
+    StepRecorder,
     command_from_msg,
     decoded,
     diagnostic_status,
@@ -80,13 +80,10 @@ PARAMS = (
           '(0: run until shut down)', minimum=0.0, maximum=1e7),
     Param('wait_for_subscribers', 0, 'number of subscribers of train/state to wait for before '
           'the first step (so a monitor or recorder misses nothing)', minimum=0, maximum=100),
-    Param('wait_for_recorders', 0, 'observers that record every topic (e.g. the recorder): the '
-          'first step also waits until /clock, train/state/measured, the actuator topics and '
-          '/diagnostics each have this many subscribers (DDS matches each topic separately: '
-          'one matched on train/state may still be matching on the others), in lockstep '
-          'beside the loop\'s own readers (the profile on /clock, the controller and the '
-          'profile on the measured state: conventions.LOCKSTEP_READERS)',
-          minimum=0, maximum=100),
+    Param('wait_for_recorders', 0, 'recorders of the run (the suite\'s recorder, which takes '
+          'the per-step topics from ato/step_records): the first step waits until '
+          'ato/step_records and /diagnostics each have this many subscribers (DDS matches each '
+          'topic separately)', minimum=0, maximum=100),
     WAIT_FOR_DIAGNOSTICS_READERS,
     Param('start_delay_s', 0.0, 'wall time to wait after wait_for_subscribers and '
           'wait_for_recorders are met before the first step', minimum=0.0, maximum=60.0),
@@ -194,6 +191,8 @@ class TrainPlantNode(RunNodeHooks, Node):
             qos_profile(topic('actuators_applied').qos))
         self.observations = tuple(Observation(self, p) for p in (
             self.truth_pub, self.commanded_pub, self.applied_pub))
+        # The per-step messages for the recorders, bundled (ato_common.step_records).
+        self.records = StepRecorder(self, self.publishing)
         self.identity_pub = self.create_publisher(String, topic('identity').name,
                                                   qos_profile(topic('identity').qos))
         self.identity = scenario_identity(self.scenario)
@@ -241,12 +240,16 @@ class TrainPlantNode(RunNodeHooks, Node):
                 self.get_logger().info(f'commands again after {self.waiting}')
                 self.waiting = ''
         messages = self.step_messages
-        publish = self.publishing
+        publish, records = self.publishing, self.records
+        recording = records.begin_step()  # a recorder takes every message of the step from it
         if self.clock_pub is not None:
             publish(self.clock_pub, messages[1])
+            records.add(self.clock_pub, stamp, messages[1])
         publish(self.measured_pub, messages[3])
-        # The observation topics (conventions.OBSERVED_STEP): built and published only while
-        # someone subscribes; the loop itself needs only the measured state and /clock.
+        records.add(self.measured_pub, stamp, messages[3])
+        # The observation topics (conventions.OBSERVED_STEP): built only while someone
+        # subscribes or a recorder records, published only while someone subscribes; the loop
+        # itself needs only the measured state and /clock.
         names = self.sim.actuator_names
         truth, commanded, applied = self.observations
         for index, observation, build in (
@@ -254,10 +257,14 @@ class TrainPlantNode(RunNodeHooks, Node):
                 (5, commanded, lambda: wire.encode_joint_forces(stamp, names, self.sim.commanded)),
                 (6, applied, lambda: wire.encode_joint_forces(stamp, names, self.sim.applied))):
             publisher = observation.publisher
-            if observation.due():
+            due = observation.due()
+            if due or recording:
                 if messages[index] is None:
                     messages[index] = build()
-                publish(publisher, messages[index])
+                if due:
+                    publish(publisher, messages[index])
+                records.add(publisher, stamp, messages[index])
+        records.end_step(stamp)
         self.steps_published += 1
         self.last_publish_wall = time.monotonic()
         safety_state = (self.sim.watchdog, self.sim.atp_intervention)
@@ -302,26 +309,27 @@ class TrainPlantNode(RunNodeHooks, Node):
 
     def unmatched_output(self) -> str:
         """The first of the plant's outputs that has fewer subscribers than the start waits
-        for (``wait_for_recorders``, plus the loop's own reader in lockstep), '' if none."""
+        for (``wait_for_recorders`` on the step records and, with
+        ``wait_for_diagnostics_readers``, on /diagnostics), '' if none."""
         recorders = self.params['wait_for_recorders']
-        diagnostics = (self.diag_pub, recorders + self.params['wait_for_diagnostics_readers'])
-        if not recorders:  # no recorder: the loop's own readers are not waited for either
-            return first_unmatched((diagnostics,))
-        loop = LOCKSTEP_READERS if self.lockstep else {}  # the profile, the controller
         return first_unmatched((
-            (self.clock_pub, recorders + len(loop.get('clock', ()))),
-            (self.measured_pub, recorders + len(loop.get('state_measured', ()))),
-            (self.commanded_pub, recorders), (self.applied_pub, recorders), diagnostics))
+            (self.records.publisher, recorders),
+            (self.diag_pub, recorders + self.params['wait_for_diagnostics_readers'])))
 
     def observers_lost(self) -> str:
-        """'' while train/state has the subscribers the start waited for, else what is missing
-        (an observer, e.g. the recorder, went away: the loop goes on without it)."""
-        wanted = self.params['wait_for_subscribers']
-        have = self.truth_pub.get_subscription_count()
-        if not self.started or have >= wanted:
+        """'' while train/state and the step records have the subscribers the start waited for,
+        else what is missing (an observer, e.g. a monitor or the recorder, went away: the loop
+        goes on without it)."""
+        if not self.started:
             return ''
-        return (f'train/state has {have} of the {wanted} subscribers the run started with '
-                '(an observer went away)')
+        for publisher, wanted, what in (
+                (self.truth_pub, self.params['wait_for_subscribers'], 'subscribers'),
+                (self.records.publisher, self.params['wait_for_recorders'], 'recorders')):
+            have = publisher.get_subscription_count()
+            if have < wanted:
+                return (f'{publisher.topic_name.lstrip("/")} has {have} of the {wanted} {what} '
+                        'the run started with (an observer went away)')
+        return ''
 
     def publish_diagnostics(self) -> None:
         safety = self.safety_message()
@@ -508,8 +516,10 @@ class TrainPlantNode(RunNodeHooks, Node):
         """The last step (and diagnostics) reach every matched subscriber before the exit."""
         if not self.started:
             return
+        self.records.flush()  # the last steps' records
         publishers = [self.truth_pub, self.measured_pub, self.commanded_pub, self.applied_pub,
-                      self.diag_pub] + ([self.clock_pub] if self.clock_pub else [])
+                      self.diag_pub, self.records.publisher] + (
+                          [self.clock_pub] if self.clock_pub else [])
         if not wait_until_delivered(publishers, self.params['final_delivery_timeout_s']):
             self.get_logger().warning(
                 'some subscribers did not acknowledge the last messages within '
