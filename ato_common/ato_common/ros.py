@@ -235,6 +235,33 @@ def samples_only(profile) -> bool:
     return profile.reliability == ReliabilityPolicy.BEST_EFFORT
 
 
+#: how often a per-step check of a publisher's subscribers asks the middleware again, s of wall
+#: time: the loop asks before every step (several times), a subscriber comes or goes rarely
+SUBSCRIBERS_REFRESH_S = 0.01
+
+
+class SubscriberCount:
+    """``publisher.get_subscription_count()``, asked again at most every ``refresh_s`` of
+    wall time (``SUBSCRIBERS_REFRESH_S``): a per-step check of who listens need not cross into
+    the middleware at every step of a loop that takes a fraction of a millisecond. A subscriber
+    that has just matched is seen within ``refresh_s``; the start of a lockstep run waits for
+    its observers with the count itself (``first_unmatched``), and ``fresh`` asks at once."""
+
+    def __init__(self, publisher, refresh_s: float = SUBSCRIBERS_REFRESH_S):
+        self.publisher, self.refresh_s = publisher, refresh_s
+        self.count, self.asked = 0, -math.inf
+
+    def __call__(self) -> int:
+        now = time.monotonic()
+        if now - self.asked >= self.refresh_s:
+            self.count, self.asked = self.publisher.get_subscription_count(), now
+        return self.count
+
+    def fresh(self) -> int:
+        self.asked = -math.inf
+        return self()
+
+
 class Observation:
     """When to publish an observation topic (``conventions.OBSERVED_STEP``: the truth, the
     actuator forces, the distance to go and the permitted speed), which the loop does not read:
@@ -246,12 +273,13 @@ class Observation:
 
     def __init__(self, node, publisher, period_s: float = SAMPLED_PERIOD_S):
         self.node, self.publisher, self.period_s = node, publisher, period_s
+        self.subscribers = SubscriberCount(publisher)
         self.count = 0
         self.every_step = True
         self.last_s = -math.inf
 
     def due(self) -> bool:
-        count = self.publisher.get_subscription_count()
+        count = self.subscribers()
         if count == 0:
             self.count = 0
             return False
@@ -290,6 +318,7 @@ class StepRecorder:
         self.publisher = node.create_publisher(UInt8MultiArray, spec.name, qos_profile(spec.qos))
         self.publishing = publishing
         self.bundle = Bundle(PERIOD_S if period_s is None else period_s)
+        self.recorders = SubscriberCount(self.publisher)
         self.active = False
         self.bundles = 0
         self.names: dict[object, str] = {}  # publisher -> its topic's full name
@@ -299,7 +328,7 @@ class StepRecorder:
         while one is under way is sent the rest of it all the same); without one, nothing is
         kept."""
         if not len(self.bundle):
-            self.active = self.publisher.get_subscription_count() > 0
+            self.active = self.recorders() > 0
         return self.active
 
     def add(self, publisher, log_time_ns: int, data: bytes) -> None:
