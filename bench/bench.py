@@ -5,7 +5,8 @@
    (start-up included) and steady (10 % to 90 % of the run), the start-up (starting the
    processes to the first step) and the CPU time per step of each process in the steady window
    (from /proc/<pid>/stat), with the EventsExecutor the nodes use and, for comparison, the
-   SingleThreadedExecutor; then with the recorder recording every topic (its throughput in
+   SingleThreadedExecutor; then with the recorder recording every topic, the per-step ones from
+   the loop nodes' step records (its throughput in
    messages per second and how much slower the run is).
 2. Controller step time (p50, p99, max) of every law on the same scenario, offline.
 3. Plant simulation speed standalone (simulated seconds per CPU second, one core), driven period
@@ -127,7 +128,9 @@ def lockstep_section(scenario: str, domain_id: int) -> list[str]:
              'and teardown included) and steady (10 % to 90 % of the run); start-up = starting '
              'the processes to the first step; teardown = the last step to the plant\'s exit; '
              'CPU per step of each process (user + system, /proc/<pid>/stat) in the steady '
-             f'window. The recorder and the live view are measured in turns with the runs '
+             'window. The recorder records every topic, the per-step ones from the loop '
+             'nodes\' step records (docs/guide/recording.md). '
+             f'The recorder and the live view are measured in turns with the runs '
              f'without them ({PAIRS} of each), their cost as the median of the pairs\' ratios. '
              'Goals: separate at least 150x steady, composed at least 250x, the recorder at '
              'most 10 % slower.', '',
@@ -328,8 +331,11 @@ def offline_loop_speed(repeats: int = 3) -> list[str]:
             '|---|---|---|---|---|']
     print('\n'.join(rows), flush=True)
     for job in jobs:
-        def run(job=job):
-            return run_offline(load_scenario(job.scenario), job.law, model=job.model,
+        # parsed once, as a campaign's worker parses each scenario once (task_scenario)
+        scenario = load_scenario(job.scenario)
+
+        def run(job=job, scenario=scenario):
+            return run_offline(scenario, job.law, model=job.model,
                                controller_rate_hz=job.rate_hz, end_time_s=job.end_time_s)
 
         done = run()  # compiles, and caches the plan
@@ -583,7 +589,8 @@ def measure(args: argparse.Namespace) -> int:
         '## Offline closed loop', '',
         f'`ato_bringup.offline.run_offline` (what `make compare` and the campaigns run) of every '
         f'law that applies to `{OFFLINE_SCENARIO}`, the whole run, at the rate `make compare` '
-        'gives it; real-time factor = simulated time / CPU time of one core, median of 3. Plan '
+        'gives it, the scenario parsed once (as a campaign\'s worker parses it); real-time '
+        'factor = simulated time / CPU time of one core, median of 3. Plan '
         'cached: the target curve planned once per scenario content and reused (a campaign\'s '
         'runs of one scenario share it); planning included: the plan cache cleared before each '
         'run. Goal for `pid`: at least 4000x with the plan cached.', '']

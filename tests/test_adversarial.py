@@ -190,9 +190,9 @@ def test_the_profile_killed_in_real_time_stops_the_train(line, tmp_path, domain_
     with Stack(config) as stack:
         stack.start()
         monitor = stack.monitor
-        assert stack.spin_until(
+        assert stack.spin_until(  # under way (real time: every m/s takes seconds each way)
             lambda: monitor.complete_samples() and
-            monitor.complete_samples()[-1][1].speeds[0] > 3.0, 120.0)
+            monitor.complete_samples()[-1][1].speeds[0] > 1.0, 120.0)
         stack.processes['profile'].send_signal(signal.SIGKILL)
         stack.processes['profile'].wait()
 
@@ -264,7 +264,7 @@ def test_the_reference_resumes_after_a_safety_brake_and_a_plant_restart(tmp_path
             stamps = [k for k, s in monitor.samples.items() if math.isfinite(s.ref_position)]
             return monitor.samples[max(stamps)].ref_position if stamps else math.nan
 
-        assert stack.spin_until(lambda: state() is not None and state().speeds[0] > 5.0, 120.0)
+        assert stack.spin_until(lambda: state() is not None and state().speeds[0] > 2.0, 120.0)
         stack.processes['controller'].send_signal(signal.SIGKILL)
         stack.processes['controller'].wait()
         assert stack.spin_until(lambda: state().speeds[0] == 0.0, 60.0)
