@@ -384,6 +384,24 @@ def _warm_up() -> None:
     run_offline(load_scenario(DEFAULT_SCENARIO), 'pid', end_time_s=5.0)
 
 
+def _warm_up_run_process() -> None:
+    """On a worker: its run process (ato_bringup.run_process) started and warmed up."""
+    from ato_bringup.run_process import worker_run_process
+    worker_run_process().call(_warm_up, None)
+
+
+def _bare_loop(tasks) -> tuple[float, float]:
+    """(wall s, CPU s) of the offline runs of ``tasks`` one after the other in this process,
+    its heap frozen first (what the engine's workers do after their first run)."""
+    from ato_bringup.campaign_engine import offline_metrics
+    gc.collect()
+    gc.freeze()
+    started, cpu = time.perf_counter(), _cpu_s()
+    for task in tasks:
+        offline_metrics(task)
+    return time.perf_counter() - started, _cpu_s() - cpu
+
+
 def _cpu_s() -> float:
     return time.process_time()
 
@@ -463,27 +481,23 @@ def campaign_throughput(scenario: str) -> list[str]:
     from one minute to the next by more than the overhead sought (the same runs measured twice
     in a row): the three are measured in ``CAMPAIGN_ROUNDS`` rounds, one after the other in a
     rotating order, and each figure is the median over the rounds."""
-    from ato_bringup.campaign_engine import offline_metrics, parse_campaign
+    from ato_bringup.campaign_engine import parse_campaign
     data = {'name': 'bench', 'seed': 1, 'draws': BENCH_CAMPAIGN_DRAWS, 'scenarios': [scenario],
             'laws': list(BENCH_CAMPAIGN_LAWS), 'uncertainty': 'default'}
     campaign = parse_campaign(data, 'bench', Path.cwd())
     tasks = campaign.tasks()
     n = len(tasks)
-    _warm_up()
 
     def bare() -> tuple[float, float]:
-        # as a worker runs them: its heap frozen out of the cyclic collector's sight after its
-        # first run (campaign_engine.freeze_worker_heap); this process's heap is larger than a
-        # worker's (the bench's own imports), and a full collection visits all of it
-        gc.collect()
-        gc.freeze()
-        try:
-            started, cpu = time.perf_counter(), _cpu_s()
-            for task in tasks:
-                offline_metrics(task)
-            return time.perf_counter() - started, _cpu_s() - cpu
-        finally:
-            gc.unfreeze()
+        # in a new process of its own, as a worker is (this one has run graphs and clusters,
+        # and holds their threads and its larger heap), warmed up and its heap frozen after
+        # the warm-up as a worker's run process's is after its first run (run_process.serve)
+        import concurrent.futures
+        import multiprocessing
+        with concurrent.futures.ProcessPoolExecutor(
+                1, mp_context=multiprocessing.get_context('spawn')) as pool:
+            pool.submit(_warm_up).result()
+            return pool.submit(_bare_loop, tasks).result()
 
     engines = {'bare': bare, 1: lambda: _campaign_on(campaign, 1),
                2: lambda: _campaign_on(campaign, 2)}
@@ -514,7 +528,7 @@ def campaign_throughput(scenario: str) -> list[str]:
     ratios = [r[1][0] / r[2][0] for r in rounds]
     load = ', '.join(f'{x:.1f}' for x in os.getloadavg())
     return [
-        row('bare offline loop, this process', 'bare', '-'),
+        row('bare offline loop, a process of its own', 'bare', '-'),
         row('Dask LocalCluster, 1 worker', 1, f'{median(lambda r: overhead(r, 1, 0)):+.1f} % '
                                               f'(rounds: {spread})'),
         row('Dask LocalCluster, 2 workers', 2, '-'),
@@ -535,7 +549,7 @@ def _campaign_on(campaign, workers: int) -> tuple[float, float]:
     from ato_bringup.campaign_engine import open_client, run_campaign
     client, cluster = open_client(workers=workers)
     with tempfile.TemporaryDirectory() as out, cluster, client:
-        client.run(_warm_up)
+        client.run(_warm_up_run_process)
         before, cpu = client.run(_cpu_s), _cpu_s()
         started = time.perf_counter()
         run_campaign(campaign, Path(out), client=client, progress=False)

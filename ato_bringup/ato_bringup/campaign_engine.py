@@ -32,15 +32,12 @@ goes on. A large speed or stop error alone is not a status: the metrics show it.
 
 from __future__ import annotations
 
-import ctypes
 import hashlib
 import json
 import math
 import os
 import sys
-import threading
 import time
-import traceback
 import uuid
 from dataclasses import dataclass, field
 from functools import partial
@@ -50,6 +47,7 @@ from typing import Any, Callable, Iterable, Mapping
 import numpy as np
 import yaml
 
+from ato_bringup.run_process import RunDied, RunFailed, RunTimeout, limited
 from ato_common import uncertainty
 from ato_common.knowledge import knowledge_of
 from ato_common.run_events import run_events, stations_of
@@ -69,7 +67,6 @@ STANDSTILL_MPS = 0.01
 KEY = ('scenario', 'law', 'draw')
 STATUSES = ('ok', 'diverged', 'error', 'timeout')
 #: a row's field (not written) asking the engine to restart the worker a hung run is left on
-RESTART = '_restart_worker'
 #: the per-run metrics every row has (NaN when the run did not produce them)
 METRICS = ('rms_speed_error_kmh', 'max_speed_error_kmh', 'rms_position_error_m',
            'max_position_error_m', 'stop_error_m', 'arrival_error_s', 'traction_energy_kwh',
@@ -292,64 +289,6 @@ def load_campaign(path: str | Path) -> Campaign:
 
 # --- one run ------------------------------------------------------------------------------------
 
-class RunTimeout(BaseException):
-    """A run exceeded its wall-time limit (a BaseException: a law's own ``except Exception``
-    does not swallow it). ``lingering``: the run's thread did not stop (it is blocked in
-    compiled code); its worker should be restarted."""
-
-    def __init__(self, limit_s: float, lingering: bool = False):
-        super().__init__(f'exceeded the wall-time limit of {limit_s:g} s')
-        self.limit_s, self.lingering = limit_s, lingering
-
-
-#: after its time limit, a run's thread has this long to stop before it is left behind, s
-STOP_GRACE_S = 5.0
-
-
-def _raise_in(thread_id: int) -> None:
-    ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(thread_id),
-                                               ctypes.py_object(RunTimeout))
-
-
-def with_time_limit(function: Callable[[], Any], limit_s: float | None) -> Any:
-    """``function()`` in a thread of its own, waited for ``limit_s`` s of wall time; past it,
-    RunTimeout is raised in that thread (a law that loops in Python stops at its next
-    bytecode) and here. A thread blocked in compiled code cannot be stopped: RunTimeout then
-    says ``lingering`` and the caller restarts the worker."""
-    if not limit_s:
-        return function()
-    outcome: dict = {}
-
-    def body():
-        try:
-            outcome['value'] = function()
-        except BaseException as error:  # noqa: BLE001 -- handed to the waiting thread
-            outcome['error'] = error
-
-    thread = threading.Thread(target=body, daemon=True, name='campaign run')
-    thread.start()
-    thread.join(limit_s)
-    if thread.is_alive():
-        _raise_in(thread.ident)
-        thread.join(STOP_GRACE_S)
-        raise RunTimeout(limit_s, lingering=thread.is_alive())
-    if 'error' in outcome:
-        error = outcome['error']
-        if isinstance(error, RunTimeout):  # raised just as the run finished
-            raise RunTimeout(limit_s) from None
-        raise error
-    return outcome['value']
-
-
-def worker_address() -> str:
-    """The address of the Dask worker this runs on ('' outside a worker)."""
-    try:
-        from distributed import get_worker
-        return get_worker().address
-    except (ImportError, ValueError):
-        return ''
-
-
 def base_row(task: Mapping) -> dict:
     row = {k: task[k] for k in ('campaign', 'fingerprint', 'scenario', 'law', 'law_name',
                                 'draw', 'model', 'rate_hz')}
@@ -361,24 +300,21 @@ def base_row(task: Mapping) -> dict:
 
 
 def run_task(task: Mapping, runner: Callable[[Mapping], dict] | None = None) -> dict:
-    """One run of a campaign as a row; never raises (a failure is the row's status)."""
+    """One run of a campaign as a row; never raises (a failure is the row's status). On a Dask
+    worker the run goes to the worker's run process (ato_bringup.run_process)."""
     row = base_row(task)
     started = time.perf_counter()
     try:
-        row.update(with_time_limit(lambda: (runner or offline_metrics)(task), task['timeout_s']))
+        row.update(limited(partial(runner or offline_metrics, task), task['timeout_s']))
         why = row.pop('unfinished', '')
         if why:
             row.update(status='diverged', reason=f'did not finish: {why}')
-    except RunTimeout as timeout:
+    except RunTimeout:
         row.update(status='timeout', reason=f'exceeded the wall-time limit of '
                                             f'{task["timeout_s"]:g} s (timeout_s)')
-        if timeout.lingering:
-            row[RESTART] = worker_address()
-    except Exception as error:  # noqa: BLE001 -- any failure of a law is a result to show
-        row.update(status='error', reason=f'{type(error).__name__}: {error} '
-                   f'[{traceback.format_exc(limit=-1).splitlines()[-3].strip()}]')
+    except (RunFailed, RunDied) as error:  # any failure of a law is a result to show
+        row.update(status='error', reason=str(error))
     row['wall_s'] = time.perf_counter() - started
-    freeze_worker_heap()
     return row
 
 
@@ -399,25 +335,6 @@ def task_scenario(name_or_path: str) -> Scenario:
     if scenario is None:
         scenario = _SCENARIOS[key] = load_scenario(name_or_path)
     return scenario
-
-
-_frozen = False
-
-
-def freeze_worker_heap() -> None:
-    """Once per Dask worker process, after its first run (the imports, the plant's kernels and
-    the first plan are in memory): collect, then move what is alive out of the cyclic garbage
-    collector's sight, as the nodes do (``ato_common.ros.freeze_startup_objects``). A worker's
-    heap (numba, scipy, distributed) is some 170 000 objects; a full collection visits each,
-    about 0.1 s, every few runs, and the objects each task leaves (Dask's task records) make
-    them more frequent. Outside a worker (a serial campaign, a test) nothing is frozen."""
-    global _frozen
-    if _frozen or not worker_address():
-        return
-    import gc
-    gc.collect()
-    gc.freeze()
-    _frozen = True
 
 
 def offline_metrics(task: Mapping) -> dict:
@@ -563,9 +480,7 @@ def missing(campaign: Campaign, folder: Path) -> list[dict]:
 def run_serial(items: Iterable, function: Callable[[Any], dict],
                finished: Callable[[dict], None]) -> None:
     for item in items:
-        row = function(item)
-        row.pop(RESTART, None)
-        finished(row)
+        finished(function(item))
 
 
 #: the Dask configuration of a LocalCluster (its scheduler, in this process, and its workers):
@@ -606,8 +521,7 @@ def run_dask(client, items: list, function: Callable[[Any], dict],
              finished: Callable[[dict], None], lost: Callable[[Any, str], dict]) -> None:
     """``function(item)`` for every item on the cluster of ``client``; ``finished`` gets each
     row as it arrives. A run that the cluster itself loses (its worker died more often than
-    Dask's allowed-failures) is ``lost(item, reason)``; a worker where a hung run was left
-    behind is restarted."""
+    Dask's allowed-failures) is ``lost(item, reason)``."""
     from distributed import as_completed
     futures = {client.submit(function, item, key=f'run-{uuid.uuid4().hex}', pure=False): item
                for item in items}
@@ -618,9 +532,6 @@ def run_dask(client, items: list, function: Callable[[Any], dict],
             except Exception as error:  # noqa: BLE001 -- the cluster lost the run
                 row = lost(futures[future], f'the cluster lost the run: '
                                             f'{type(error).__name__}: {error}')
-            address = row.pop(RESTART, '')
-            if address:
-                client.restart_workers([address], raise_for_error=False)
             finished(row)
     finally:
         for future in futures:

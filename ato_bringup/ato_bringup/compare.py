@@ -60,18 +60,15 @@ import numpy as np
 
 from ato_bringup.campaign_engine import (
     FASTER_RATES_HZ,
-    RESTART,
-    RunTimeout,
     events_of,
     execute,
     failed_measurement,
     plant_model_for,
     unfinished,
-    with_time_limit,
-    worker_address,
 )
 from ato_bringup.offline import run_end_time_s
 from ato_bringup.provenance import results_page_provenance, write_results_page
+from ato_bringup.run_process import RunDied, RunFailed, RunTimeout, limited
 from ato_common import uncertainty
 from ato_common.knowledge import knowledge_of
 from ato_common.scenario import builtin_scenarios, load_scenario
@@ -223,16 +220,17 @@ def run_job(job: Job) -> dict:
 
 
 def _limited(job: Job, run: Callable[[Job], dict], timeout_s: float | None) -> dict:
-    """``run(job)`` within ``timeout_s`` of wall time (ato_bringup.campaign_engine)."""
+    """``run(job)`` within ``timeout_s`` of wall time (ato_bringup.run_process: on a worker, in
+    its run process)."""
     started = time.perf_counter()
     try:
-        return with_time_limit(lambda: run(job), timeout_s)
-    except RunTimeout as timeout:
-        result = dict(job_fields(job), status='timeout', wall_s=time.perf_counter() - started,
-                      reason=f'exceeded the wall-time limit of {timeout_s:g} s (--timeout-s)')
-        if timeout.lingering:
-            result[RESTART] = worker_address()
-        return result
+        return limited(partial(run, job), timeout_s)
+    except RunTimeout:
+        return dict(job_fields(job), status='timeout', wall_s=time.perf_counter() - started,
+                    reason=f'exceeded the wall-time limit of {timeout_s:g} s (--timeout-s)')
+    except (RunFailed, RunDied) as error:
+        return dict(job_fields(job), status='error', wall_s=time.perf_counter() - started,
+                    reason=str(error))
 
 
 def _lost(job: Job, reason: str) -> dict:

@@ -491,23 +491,33 @@ def test_a_worker_parses_a_scenario_once_per_file_version(tmp_path):
     assert task_scenario(str(path)).name == 'edited'   # an edited file is parsed again
 
 
-def _worker_view():
-    import gc
-
+def _worker_settings():
     import dask
-    return ({key: dask.config.get(key) for key in engine.WORKER_SETTINGS}, gc.get_freeze_count())
+    return {key: dask.config.get(key) for key in engine.WORKER_SETTINGS}
 
 
-def test_the_local_cluster_s_workers_run_without_the_profiler_and_freeze_after_a_run():
+def _run_process_view():
+    """On a worker: the process id and the frozen objects of its run process (asked through
+    the run process itself)."""
+    import gc
+    import os
+
+    from ato_bringup.run_process import worker_run_process
+    return worker_run_process().call(lambda: (os.getpid(), gc.get_freeze_count()), None), \
+        os.getpid()
+
+
+def test_the_local_cluster_s_workers_run_without_the_profiler_and_their_runs_in_a_process():
     client, cluster = engine.open_client(workers=1)
     try:
-        (settings, frozen), = client.run(_worker_view).values()
-        assert settings == engine.WORKER_SETTINGS and frozen == 0
+        (settings,) = client.run(_worker_settings).values()
+        assert settings == engine.WORKER_SETTINGS
         assert settings['distributed.worker.profile.enabled'] is False
         task = dict(engine.parse_campaign(TINY, 'tiny', Path.cwd()).tasks()[0], end_time_s=5.0)
         assert client.submit(run_task, task, pure=False).result()['status'] == 'ok'
-        (_, frozen), = client.run(_worker_view).values()
-        assert frozen > 0   # the heap after the first run is out of the collector's sight
+        (run_pid, frozen), worker_pid = client.submit(_run_process_view, pure=False).result()
+        assert run_pid != worker_pid   # the run ran in a process of its own
+        assert frozen > 0   # whose heap after its first run is out of the collector's sight
     finally:
         client.close()
         cluster.close()

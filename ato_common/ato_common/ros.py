@@ -24,9 +24,11 @@ from rclpy.duration import Duration as RclpyDuration
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
+from std_msgs.msg import UInt8MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ato_common.conventions import REFERENCE_JOINT, TOPICS, QosSpec, Topic
+from ato_common.step_records import Bundle
 from ato_common.types import NS_PER_S, Command, Reference, TrainState
 from ato_common.wire import (
     MessageError,
@@ -245,7 +247,7 @@ class SubscriberCount:
     wall time (``SUBSCRIBERS_REFRESH_S``): a per-step check of who listens need not cross into
     the middleware at every step of a loop that takes a fraction of a millisecond. A subscriber
     that has just matched is seen within ``refresh_s``; the start of a lockstep run waits for
-    its observers with the count itself (``first_unmatched``), and ``fresh`` asks at once."""
+    its observers with the count itself (``first_unmatched``)."""
 
     def __init__(self, publisher, refresh_s: float = SUBSCRIBERS_REFRESH_S):
         self.publisher, self.refresh_s = publisher, refresh_s
@@ -256,10 +258,6 @@ class SubscriberCount:
         if now - self.asked >= self.refresh_s:
             self.count, self.asked = self.publisher.get_subscription_count(), now
         return self.count
-
-    def fresh(self) -> int:
-        self.asked = -math.inf
-        return self()
 
 
 class Observation:
@@ -310,17 +308,13 @@ class StepRecorder:
     ``end_step``, which publishes the bundle once it is due; ``close`` publishes what is left
     and waits until it is delivered (a node about to exit)."""
 
-    def __init__(self, node, publishing: Publishing, period_s: float | None = None):
-        from std_msgs.msg import UInt8MultiArray
-
-        from ato_common.step_records import PERIOD_S, Bundle
+    def __init__(self, node, publishing: Publishing):
         spec = TOPICS['step_records']
         self.publisher = node.create_publisher(UInt8MultiArray, spec.name, qos_profile(spec.qos))
         self.publishing = publishing
-        self.bundle = Bundle(PERIOD_S if period_s is None else period_s)
+        self.bundle = Bundle()
         self.recorders = SubscriberCount(self.publisher)
         self.active = False
-        self.bundles = 0
         self.names: dict[object, str] = {}  # publisher -> its topic's full name
 
     def begin_step(self) -> bool:
@@ -346,8 +340,8 @@ class StepRecorder:
 
     def flush(self) -> None:
         data = self.bundle.take()
-        if data is not None and self.publishing(self.publisher, data):
-            self.bundles += 1
+        if data is not None:
+            self.publishing(self.publisher, data)
 
     def close(self, timeout_s: float = RECORDS_DELIVERY_TIMEOUT_S) -> bool:
         """Publish what is left and wait until every recorder has it (False if one did not

@@ -126,8 +126,10 @@ class RecorderNode(RunNodeHooks, Node):
         freeze_startup_objects()
 
     def discover(self) -> None:
+        clock = step_recorded(self.clock_topic)
         if self.sim_time and self.clock_topic not in self.subscribed and \
-                self.wanted is not None and self.clock_topic not in self.wanted:
+                self.wanted is not None and self.clock_topic not in self.wanted and \
+                (clock is None or clock[1] not in self.bundled):  # else from the step records
             # the time only, not recorded
             self._subscribe(self.clock_topic, ClockMsg, qos_profile(TOPICS['clock'].qos),
                             lambda data, info: self._on_clock(data))
@@ -185,7 +187,8 @@ class RecorderNode(RunNodeHooks, Node):
                 (step_recorded(t) or (None, None))[1] == namespace for t in self.wanted)):
             self.subscribed[topic] = None
             return
-        if not any(info.qos_profile for info in self.get_publishers_info_by_topic(topic)):
+        offered = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
+        if not offered:
             return  # no publisher yet
         self.bundled.add(namespace)
         for other in list(self.takes):
@@ -194,9 +197,8 @@ class RecorderNode(RunNodeHooks, Node):
                 subscription, _ = self.takes.pop(other)
                 self.taker.destroy_subscription(subscription)
                 del self.subscribed[other]
-        self._subscribe(topic, STEP_RECORDS_MSG, subscription_qos(
-            [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]),
-            self._on_step_records)
+        self._subscribe(topic, STEP_RECORDS_MSG, subscription_qos(offered),
+                        self._on_step_records)
         self.get_logger().info(f'recording the per-step topics of {namespace} from its step '
                                f'records ({topic}), each logged at its step')
 
@@ -214,12 +216,12 @@ class RecorderNode(RunNodeHooks, Node):
             return
         write, source = self.writer.write, self.publish_time == 'source'
         for topic, log_time_ns, publish_time_ns, message in entries:
+            if topic == self.clock_topic and self.sim_time:
+                self._on_clock(message)  # the recorder's time, /clock recorded or not
             if self.wanted is not None and topic not in self.wanted:
                 continue
             if topic not in self.writer.topics and not self._add_recorded_topic(topic):
                 continue
-            if topic == self.clock_topic and self.sim_time:
-                self._on_clock(message)
             if self.log_time != 'stamp':
                 log_time_ns = self.now_ns()
             try:

@@ -1,0 +1,75 @@
+"""A run in a process of its own (ato_bringup.run_process): its value comes back, its failure
+as the same reason a thread gives, a run past its limit is killed with its process and the next
+run gets a new one, a process that dies is reported, and what a run prints does not break the
+exchange."""
+
+import os
+import time
+
+import pytest
+
+from ato_bringup.run_process import (
+    RunDied,
+    RunFailed,
+    RunProcess,
+    RunTimeout,
+    limited,
+    with_time_limit,
+)
+
+
+def fails():
+    raise ZeroDivisionError('estimate reached zero')
+
+
+@pytest.fixture
+def process():
+    run = RunProcess()
+    yield run
+    run.stop()
+
+
+def test_a_value_comes_back_and_the_process_is_kept_for_the_next_run(process):
+    first = process.call(os.getpid, 10.0)
+    assert first != os.getpid()
+    assert process.call(lambda: [1.5, {'a': 'b'}], 10.0) == [1.5, {'a': 'b'}]
+    assert process.call(os.getpid, None) == first
+
+
+def test_a_failure_gives_the_reason_a_thread_gives(process):
+    with pytest.raises(RunFailed) as in_process:
+        process.call(fails, 10.0)
+    with pytest.raises(RunFailed) as in_thread:
+        with_time_limit(fails, 10.0)
+    assert str(in_process.value) == str(in_thread.value)
+    assert str(in_thread.value).startswith('ZeroDivisionError: estimate reached zero [File ')
+    assert 'in fails]' in str(in_thread.value)
+
+
+def test_a_run_past_its_limit_is_killed_and_the_next_gets_a_new_process(process):
+    first = process.call(os.getpid, 10.0)
+    started = time.monotonic()
+    with pytest.raises(RunTimeout, match='1 s'):
+        process.call(lambda: time.sleep(600), 1.0)   # where no exception reaches it
+    assert time.monotonic() - started < 30.0
+    second = process.call(os.getpid, 10.0)
+    assert second != first
+    with pytest.raises(ProcessLookupError):
+        os.kill(first, 0)   # gone, not left behind
+
+
+def test_a_process_that_dies_is_reported_with_its_exit_status(process):
+    with pytest.raises(RunDied, match='exit status 7'):
+        process.call(lambda: os._exit(7), 10.0)
+    assert process.call(lambda: 'again', 10.0) == 'again'
+
+
+def test_what_a_run_prints_goes_to_standard_error(process, capfd):
+    assert process.call(lambda: print('a law that prints') or 42, 10.0) == 42
+    assert 'a law that prints' in capfd.readouterr().err
+
+
+def test_outside_a_dask_worker_a_run_is_a_thread_of_this_process():
+    assert limited(os.getpid, 10.0) == os.getpid()
+    with pytest.raises(RunTimeout):
+        limited(lambda: [None for _ in iter(int, 1)], 0.5)   # loops in Python: interrupted
