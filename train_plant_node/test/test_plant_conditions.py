@@ -205,6 +205,33 @@ def test_actuator_dead_time_delays_the_request_exactly_then_the_lag_acts():
         scenario(plant={'actuators': {'dead_time_s': -1.0}})
 
 
+def test_the_traction_limit_applies_after_the_dead_time_at_the_speed_of_then():
+    """A request passes the dead time, then the traction characteristic at the speed of the
+    moment limits it: full traction asked at standstill delivers what the power allows at the
+    speed reached. The request changes only with the command, so a saturated run with a dead
+    time and a lag splits a period at most once, where a new request takes effect."""
+    sim = TrainSimulation(scenario(plant={'actuators': {'dead_time_s': 0.25,
+                                                        'time_constant_s': 0.5}}))
+    steps = []
+    model_step = sim.model.step
+
+    def counted(*args, **kwargs):
+        steps.append(sim.time_s)
+        return model_step(*args, **kwargs)
+    sim.model.step = counted
+    periods = 600
+    run(sim, periods / 10, (1e7,) * 4)   # far above the characteristic: saturated throughout
+    assert len(steps) <= periods + 1     # the first request's one split
+    traction = sim.scenario.train.traction
+    speed = sim.lead_speed()
+    assert speed > 20.0                  # on the power hyperbola
+    limit = traction.max_traction_at(speed) / 4
+    assert limit < traction.max_traction_at(0.0) / 4   # below the standstill force
+    assert sim.targets() == [pytest.approx(limit, rel=1e-12)] * 4
+    # the lag follows the limit as it falls with the speed: a little above it
+    assert limit < sim.applied[0] < limit * 1.02
+
+
 def test_odometry_scale_error_reads_speed_and_the_distance_since_the_last_reset():
     sensors = {'position': {'bias': 0.5, 'scale_error': 0.01, 'reset_positions_m': [100.0]},
                'speed': {'scale_error': 0.01}}

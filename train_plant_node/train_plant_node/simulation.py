@@ -344,21 +344,33 @@ class TrainSimulation:
             return -self._eb_share
         return -self._eb_share * max(time_s - since, 0.0) / self._build_up_s
 
-    def targets(self) -> list[float]:
-        """What each healthy drive is asked for: the command within the unit's share of the
-        physical limits (traction characteristic, emergency brake), unless a safety function
-        overrides it."""
-        traction = self.scenario.train.traction
+    def requests(self) -> list[float]:
+        """What each healthy drive is asked for: the command, unless a safety function
+        overrides it. It changes only when the command or a safety function does: this is what
+        passes the dead time."""
         n = len(self.commanded)
-        share = 1.0 / n
         missed, safety = self.missed_periods, self.safety  # ``watchdog``, inlined: per step
         if self.atp_intervention or missed >= safety.emergency_periods:
             return [0.0] * n  # traction cut; the emergency brake is added in ``_failed``
         if missed >= safety.watchdog_periods:
-            return [-traction.max_service_brake_force_n * share] * n
+            return [-self.scenario.train.traction.max_service_brake_force_n / n] * n
+        return list(self.commanded)
+
+    def _limited(self, requests: list[float]) -> list[float]:
+        """Each request within its unit's share of the physical limits now: the traction
+        characteristic at the lead car's speed (force, power P/v) and the emergency brake. The
+        limit applies where the force is delivered, after the dead time: a drive asked for full
+        traction a dead time ago delivers what the characteristic allows at today's speed."""
+        traction = self.scenario.train.traction
+        share = 1.0 / len(requests)
         highest = traction.max_traction_at(self.lead_speed()) * share
         lowest = -traction.max_emergency_brake_force_n * share
-        return [lowest if f < lowest else highest if f > highest else f for f in self.commanded]
+        return [lowest if f < lowest else highest if f > highest else f for f in requests]
+
+    def targets(self) -> list[float]:
+        """What each healthy drive delivers without actuator dynamics: its request within the
+        physical limits now."""
+        return self._limited(self.requests())
 
     def _failed(self, drive: Sequence[float], time_s: float, h: float = 0.0) -> tuple:
         """What acts on the train: the drives (failures included), traction cut under a
@@ -393,12 +405,13 @@ class TrainSimulation:
     def _actuate(self, time_s: float, h: float) -> tuple:
         """The forces held during the integration step [time_s, time_s + h]."""
         settings = self.setup.actuators
-        targets = self.targets()
         if self._instant_actuators:
-            self._drive = targets
+            self._drive = self.targets()
         else:
+            requests = self.requests()
             if self._dead_time_s:
-                targets = self._delayed(time_s, targets)
+                requests = self._delayed(time_s, requests)
+            targets = self._limited(requests)
             gain = 1.0 - math.exp(-h / settings.time_constant_s) if settings.time_constant_s \
                 else 1.0
             max_change = settings.rate_limit_n_per_s * h if settings.rate_limit_n_per_s \
@@ -407,14 +420,14 @@ class TrainSimulation:
                            for f, target in zip(self._drive, targets)]
         return self._failed(self._drive, time_s, h)
 
-    def _ask(self, time_s: float, targets: list[float]) -> None:
+    def _ask(self, time_s: float, requests: list[float]) -> None:
         """Note what the drives are asked for from ``time_s`` on (dead time)."""
-        if targets != self._asked[-1][1]:
-            self._asked.append((time_s, targets))
+        if requests != self._asked[-1][1]:
+            self._asked.append((time_s, requests))
 
-    def _delayed(self, time_s: float, targets: list[float]) -> list[float]:
+    def _delayed(self, time_s: float, requests: list[float]) -> list[float]:
         """What the drives act on at ``time_s``: the request of ``dead_time_s`` earlier."""
-        self._ask(time_s, targets)
+        self._ask(time_s, requests)
         asked, then = self._asked, time_s - self._dead_time_s + EVENT_TOLERANCE_S
         while len(asked) > 1 and asked[1][0] <= then:
             asked.pop(0)
@@ -422,7 +435,7 @@ class TrainSimulation:
 
     def _dead_time_events(self, start_s: float, end_s: float) -> list[float]:
         """Times in (start_s, end_s) at which a delayed request takes effect."""
-        self._ask(start_s, self.targets())
+        self._ask(start_s, self.requests())
         return [t + self._dead_time_s for t, _ in self._asked
                 if start_s + EVENT_TOLERANCE_S < t + self._dead_time_s < end_s - EVENT_TOLERANCE_S]
 
