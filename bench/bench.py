@@ -374,7 +374,9 @@ class Page:
 
 
 #: the campaign of the throughput measurement: whole runs of the scenario, default uncertainty
-BENCH_CAMPAIGN_DRAWS = 12
+#: (as many draws as the default campaign: about half a second a run, so that the last runs
+#: left to two workers are a small part of the whole)
+BENCH_CAMPAIGN_DRAWS = 30
 BENCH_CAMPAIGN_LAWS = ('pid', 'luo_xu')
 
 

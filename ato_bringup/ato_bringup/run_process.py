@@ -29,6 +29,11 @@ the planned target curves stay in it. Three reasons:
 The two processes talk over the child's standard input and a duplicate of its standard output:
 each message is 8 bytes of length (little-endian) and a cloudpickle payload; the child sends its
 own standard output to its standard error, so a run that prints cannot break the exchange. The
+child says when a run starts (an empty message, once it has unpickled the function and so
+imported what it needs), and the time limit counts from there: starting the process, importing
+the run's modules and loading the plant's compiled kernels are not the run's time (a worker's
+first run on a loaded machine took longer than a short limit for them alone). Start-up has a
+limit of its own, :data:`START_LIMIT_S`. The
 child leaves when its input closes (its worker ended). After its first run the child moves what
 is alive out of the cyclic garbage collector's sight (as the nodes do after start-up,
 ``ato_common.ros.freeze_startup_objects``): a full collection would otherwise visit the imported
@@ -95,6 +100,10 @@ def limited(function: Callable[[], Any], limit_s: float | None) -> Any:
 
 #: after its time limit, a run's thread has this long to stop before it is left behind, s
 STOP_GRACE_S = 5.0
+
+#: a run process has this long, s, to start and unpickle a run (import its modules) before the
+#: run is reported as timed out; generous: a cold start on a loaded machine takes seconds
+START_LIMIT_S = 120.0
 
 
 def _raise_in(thread_id: int) -> None:
@@ -173,7 +182,18 @@ class RunProcess:
         return value
 
     def _receive(self, process: subprocess.Popen, limit_s: float | None) -> bytes:
-        out = process.stdout
+        """The answer: first the run's start (an empty message) within START_LIMIT_S, then
+        the answer within ``limit_s`` of the start."""
+        started = self._message(process, START_LIMIT_S)
+        if started:  # the run's process could not load the run: its reason, as an answer
+            return started
+        return self._message(process, limit_s)
+
+    @staticmethod
+    def _message(process: subprocess.Popen, limit_s: float | None) -> bytes:
+        # read from the descriptor, unbuffered: a buffered reader could hold the answer that
+        # came with the start, where select() no longer sees it
+        out = process.stdout.fileno()
         if limit_s and not select.select([out], [], [], limit_s)[0]:
             raise RunTimeout(limit_s)
         (length,) = _LENGTH.unpack(_read_exactly(out, _LENGTH.size))
@@ -195,10 +215,11 @@ class RunProcess:
         return code
 
 
-def _read_exactly(stream, count: int) -> bytes:
+def _read_exactly(source, count: int) -> bytes:
+    """``count`` bytes from a stream or a file descriptor; EOFError if it ends first."""
     parts, left = [], count
     while left:
-        part = stream.read(left)
+        part = os.read(source, left) if isinstance(source, int) else source.read(left)
         if not part:
             raise EOFError(f'{count - left} of {count} bytes')
         parts.append(part)
@@ -227,12 +248,20 @@ def serve(requests, answers) -> None:
         header = requests.read(_LENGTH.size)
         if len(header) < _LENGTH.size:
             return
-        function = cloudpickle.loads(_read_exactly(requests, _LENGTH.unpack(header)[0]))
+        payload = _read_exactly(requests, _LENGTH.unpack(header)[0])
         try:
-            answer = (True, function())
-        except Exception as error:  # noqa: BLE001 -- the run's failure, as its reason
-            answer = (False, failure_reason(error))
-        del function
+            function = cloudpickle.loads(payload)
+        except Exception as error:  # noqa: BLE001 -- a run that cannot be loaded, as its reason
+            answer = (False, 'the run could not be loaded in its process: '
+                      + failure_reason(error))
+        else:
+            answers.write(_LENGTH.pack(0))  # the run starts: its time limit counts from here
+            answers.flush()
+            try:
+                answer = (True, function())
+            except Exception as error:  # noqa: BLE001 -- the run's failure, as its reason
+                answer = (False, failure_reason(error))
+            del function
         data = cloudpickle.dumps(answer)
         answers.write(_LENGTH.pack(len(data)) + data)
         answers.flush()

@@ -1,7 +1,7 @@
 """A run in a process of its own (ato_bringup.run_process): its value comes back, its failure
 as the same reason a thread gives, a run past its limit is killed with its process and the next
-run gets a new one, a process that dies is reported, and what a run prints does not break the
-exchange."""
+run gets a new one, a process that dies is reported, what a run prints does not break the
+exchange, and the time limit counts the run, not the loading of it."""
 
 import os
 import time
@@ -20,6 +20,34 @@ from ato_bringup.run_process import (
 
 def fails():
     raise ZeroDivisionError('estimate reached zero')
+
+
+class SlowToLoad:
+    """A run whose unpickling takes ``load_s`` (as importing a law's modules on a loaded
+    machine does); calling it returns 'ran'."""
+
+    def __init__(self, load_s: float):
+        self.load_s = load_s
+
+    def __reduce__(self):
+        return (_loaded_after, (self.load_s,))
+
+    def __call__(self):
+        return 'ran'
+
+
+def _loaded_after(load_s: float) -> SlowToLoad:
+    time.sleep(load_s)
+    return SlowToLoad(load_s)
+
+
+class Unloadable:
+    def __reduce__(self):
+        return (_cannot_load, ())
+
+
+def _cannot_load():
+    raise ImportError('no module named lost_law')
 
 
 @pytest.fixture
@@ -73,3 +101,14 @@ def test_outside_a_dask_worker_a_run_is_a_thread_of_this_process():
     assert limited(os.getpid, 10.0) == os.getpid()
     with pytest.raises(RunTimeout):
         limited(lambda: [None for _ in iter(int, 1)], 0.5)   # loops in Python: interrupted
+
+
+def test_the_limit_counts_the_run_not_the_loading_of_it(process):
+    assert process.call(SlowToLoad(2.0), 1.0) == 'ran'
+
+
+def test_a_run_that_cannot_be_loaded_is_a_failure_with_its_reason(process):
+    with pytest.raises(RunFailed, match='could not be loaded in its process: ImportError: no '
+                                        'module named lost_law'):
+        process.call(Unloadable(), 10.0)
+    assert process.call(lambda: 'again', 10.0) == 'again'
