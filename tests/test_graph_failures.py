@@ -88,7 +88,11 @@ def test_a_wait_for_a_command_is_reported_and_a_restarted_plant_resumes(tmp_path
         # the controller answers the new run's steps (stamped from 0 again), one command each
         assert stack.spin_until(lambda: monitor.counts['command'] >= commands + 30, 120.0), \
             stack.log_tail('controller')
-        assert 'the plant started again' in stack.log_tail('controller', 200)
+        controller_log = stack.log_tail('controller', 200)
+        assert 'the plant started again' in controller_log, (
+            f'controller log:\n{controller_log}\nplant log:\n{stack.log_tail("plant")}\n'
+            f'commands {commands} -> {monitor.counts}, processes '
+            f'{ {n: p.poll() for n, p in stack.processes.items()} }')
         assert min(monitor.samples) == 0 and monitor.samples[0].law == 'pid'
         codes = stack.stop()
     assert codes == {'plant': 0, 'profile': 0, 'controller': 0}
