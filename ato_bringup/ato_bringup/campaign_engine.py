@@ -66,7 +66,6 @@ STANDSTILL_MPS = 0.01
 #: the key of a row: which run it is
 KEY = ('scenario', 'law', 'draw')
 STATUSES = ('ok', 'diverged', 'error', 'timeout')
-#: a row's field (not written) asking the engine to restart the worker a hung run is left on
 #: the per-run metrics every row has (NaN when the run did not produce them)
 METRICS = ('rms_speed_error_kmh', 'max_speed_error_kmh', 'rms_position_error_m',
            'max_position_error_m', 'stop_error_m', 'arrival_error_s', 'traction_energy_kwh',
