@@ -29,7 +29,9 @@ import time
 from ato_common.conventions import STEP_RECORDED, TOPICS
 from ato_common.wire import MessageError
 
-#: a bundle is published once its entries span this much of the node's stamps, s
+#: a bundle is published once its entries span this much of the node's stamps, s (what a node
+#: holds is lost with a SIGKILLed recorder: this keeps a SIGKILL in lockstep within the 1 s of
+#: simulated time that docs/guide/recording.md promises, tests/test_recording_jazzy.py)
 PERIOD_S = 0.2
 #: ... or once its first entry is this old in wall time (a real-time run), s
 WALL_PERIOD_S = 0.05
