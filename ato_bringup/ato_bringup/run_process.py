@@ -101,8 +101,8 @@ def limited(function: Callable[[], Any], limit_s: float | None) -> Any:
 #: after its time limit, a run's thread has this long to stop before it is left behind, s
 STOP_GRACE_S = 5.0
 
-#: a run process has this long, s, to start and unpickle a run (import its modules) before the
-#: run is reported as timed out; generous: a cold start on a loaded machine takes seconds
+#: a run process has this long, s, to start and unpickle a run (import its modules), else the
+#: run is an error (RunDied) naming it; generous: a cold start on a loaded machine takes seconds
 START_LIMIT_S = 120.0
 
 
@@ -182,9 +182,15 @@ class RunProcess:
         return value
 
     def _receive(self, process: subprocess.Popen, limit_s: float | None) -> bytes:
-        """The answer: first the run's start (an empty message) within START_LIMIT_S, then
-        the answer within ``limit_s`` of the start."""
-        started = self._message(process, START_LIMIT_S)
+        """The answer: first the run's start (an empty message) within START_LIMIT_S (else
+        RunDied: the process, not the run, failed), then the answer within ``limit_s`` of the
+        start."""
+        try:
+            started = self._message(process, START_LIMIT_S)
+        except RunTimeout:
+            self.stop()
+            raise RunDied(f"the run's process did not load the run within {START_LIMIT_S:g} s "
+                          '(run_process.START_LIMIT_S)') from None
         if started:  # the run's process could not load the run: its reason, as an answer
             return started
         return self._message(process, limit_s)

@@ -8,6 +8,7 @@ import time
 
 import pytest
 
+from ato_bringup import run_process
 from ato_bringup.run_process import (
     RunDied,
     RunFailed,
@@ -105,6 +106,14 @@ def test_outside_a_dask_worker_a_run_is_a_thread_of_this_process():
 
 def test_the_limit_counts_the_run_not_the_loading_of_it(process):
     assert process.call(SlowToLoad(2.0), 1.0) == 'ran'
+
+
+def test_a_process_that_does_not_load_the_run_in_time_is_named(process, monkeypatch):
+    monkeypatch.setattr(run_process, 'START_LIMIT_S', 0.5)
+    with pytest.raises(RunDied, match="the run's process did not load the run within 0.5 s"):
+        process.call(SlowToLoad(30.0), 10.0)
+    assert process.process is None   # killed, not left loading
+    assert process.call(lambda: 'again', 10.0) == 'again'
 
 
 def test_a_run_that_cannot_be_loaded_is_a_failure_with_its_reason(process):
