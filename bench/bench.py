@@ -378,6 +378,8 @@ class Page:
 #: left to two workers are a small part of the whole)
 BENCH_CAMPAIGN_DRAWS = 30
 BENCH_CAMPAIGN_LAWS = ('pid', 'luo_xu')
+#: rounds of the campaign throughput (bare, 1 worker, 2 workers each, in a rotating order)
+CAMPAIGN_ROUNDS = 3
 
 
 def _warm_up() -> None:
@@ -507,7 +509,7 @@ def campaign_throughput(scenario: str) -> list[str]:
     rounds: list[dict] = []
     for k in range(CAMPAIGN_ROUNDS):
         measured = {}
-        for engine in order[k % 3:] + order[:k % 3]:
+        for engine in order[k % len(order):] + order[:k % len(order)]:
             measured[engine] = engines[engine]()
             print(f'  round {k + 1}, {engine}: {measured[engine][0]:.1f} s wall, '
                   f'{measured[engine][1]:.1f} s CPU', flush=True)
@@ -538,10 +540,6 @@ def campaign_throughput(scenario: str) -> list[str]:
         f'{", ".join(f"{x:.2f}" for x in ratios)}) | | |', '',
         f'Medians of {CAMPAIGN_ROUNDS} rounds. Load average at the end: {load} (on '
         f'{os.cpu_count()} cores).']
-
-
-#: rounds of the campaign throughput (bare, 1 worker, 2 workers each, in a rotating order)
-CAMPAIGN_ROUNDS = 3
 
 
 def _campaign_on(campaign, workers: int) -> tuple[float, float]:

@@ -224,6 +224,38 @@ def test_the_step_records_give_the_bytes_a_recorder_of_each_topic_gets(tmp_path,
             assert a == b, topic
 
 
+def test_a_malformed_step_record_is_reported_and_the_recording_goes_on(tmp_path, domain_id):
+    """A bundle that does not parse is named in the recorder's log and dropped; the recorder
+    lives on and writes the next good bundle's messages under their own topics."""
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import UInt8MultiArray
+
+    from ato_common.ros import qos_profile, topic
+    from ato_common.step_records import Bundle
+
+    state = JointTrajectory()
+    state.header.stamp.sec = 7
+    data = serialize_message(state)
+    good = Bundle()
+    good.add('/train/state', 7_000_000_000, data)
+    with Stack(StackConfig(scenario='short_line', domain_id=domain_id,
+                           log_dir=tmp_path / 'logs')) as stack:
+        publisher = stack.node.create_publisher(UInt8MultiArray, topic('step_records').name,
+                                                qos_profile(topic('step_records').qos))
+        stack.start_process('recorder', {}, ['-o', str(tmp_path / 'bag')])
+        assert stack.spin_until(lambda: publisher.get_subscription_count() >= 1, 60.0), \
+            stack.log_tail('recorder')
+        publisher.publish(b'\x00\x01\x00\x00' + b'\xff' * 12)  # a layout that does not parse
+        publisher.publish(good.take())
+        assert stack.spin_until(lambda: 'recording /train/state' in stack.log_tail('recorder'),
+                                30.0), stack.log_tail('recorder')
+        log = stack.log_tail('recorder')
+        assert stack.stop()['recorder'] == 0
+    assert 'step records not read: step records:' in log, log
+    recorded = list(read_messages(tmp_path / 'bag', ['/train/state']))
+    assert [(m.log_time_ns, m.data) for m in recorded] == [(7_000_000_000, data)]
+
+
 def test_replay_of_a_broken_file_says_what_is_wrong(tmp_path, domain_id):
     bogus = tmp_path / 'bogus.mcap'
     bogus.write_bytes(b'not a bag')

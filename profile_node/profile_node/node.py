@@ -270,16 +270,20 @@ class ProfileNode(RunNodeHooks, Node):
             return
         plan = self.plan_for(stamp_ns)
         now = plan.trajectory.at(seconds(stamp_ns - self.time_origin_ns))
-        for due, publisher, value in (
-                (dtg, self.dtg_pub, lambda: plan.next_target(now.position, now.time_s)
-                 .location_m - now.position),
-                (permitted, self.permitted_pub,
-                 lambda: plan.permitted_speed(now.position, now.time_s))):
-            if due or recording:
-                data = wire.encode_float64(value())
-                if due:
-                    self.publishing(publisher, data)
-                self.records.add(publisher, stamp_ns, data)
+        if dtg or recording:
+            self.observe(self.dtg_pub, dtg, stamp_ns,
+                         plan.next_target(now.position, now.time_s).location_m - now.position)
+        if permitted or recording:
+            self.observe(self.permitted_pub, permitted, stamp_ns,
+                         plan.permitted_speed(now.position, now.time_s))
+
+    def observe(self, publisher, due: bool, stamp_ns: int, value: float) -> None:
+        """An observation's value: published if ``due``, in the step records (which keep it
+        only while a recorder records)."""
+        data = wire.encode_float64(value)
+        if due:
+            self.publishing(publisher, data)
+        self.records.add(publisher, stamp_ns, data)
 
     def publish_plan(self, stamp_ns: int, why: str, plan: Plan | None = None) -> None:
         """The plan on diagnostics: only when it changes (start, replan, resume)."""
