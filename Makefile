@@ -55,12 +55,8 @@ campaign: setup
 reproduce: setup
 	@$(ENV) python -m ato_bringup.reproduction
 
-# The tests marked alone (pytest.ini) measure what the machine's load decides: they run after
-# the others, with the machine to themselves (exit status 5: PYTEST_ARGS selected no test).
 test: setup lint docs
-	@$(ENV) python -m pytest -n $(PYTEST_WORKERS) --dist loadgroup -m "not alone" $(PYTEST_ARGS) \
-	  || [ $$? -eq 5 ]
-	@$(ENV) python -m pytest -m alone $(PYTEST_ARGS) || [ $$? -eq 5 ]
+	@$(ENV) python -m pytest -n $(PYTEST_WORKERS) --dist loadgroup $(PYTEST_ARGS)
 
 lint: setup
 	@$(ENV) ruff check .

@@ -152,6 +152,8 @@ def test_help_prints_usage_and_every_parameter_and_starts_nothing(name):
      '60001 preview points per step, more than 100'),
     ('plant', {'lockstep': False, 'use_sim_time': True},
      'use_sim_time is true on a real-time plant'),
+    ('plant', {'recorder_lead_s': 0.5},
+     'recorder_lead_s 0.5 s is under the least lead of this loop, 0.8 s'),
 ])
 def test_harmful_parameter_combinations_are_refused_with_the_reason(tmp_path, domain_id, name,
                                                                      params, reason):

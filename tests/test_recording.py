@@ -186,8 +186,12 @@ def test_the_step_records_give_the_bytes_a_recorder_of_each_topic_gets(tmp_path,
     second recorder beside it (``--no-step-records``) subscribes to each of them. From the
     moment both record, they hold the same messages, byte for byte, at the same log times, and
     the first does not record the bundles themselves."""
+    # the loop starts once the second recorder takes the truth and the reference too (it is
+    # not waited for on the step records: it takes none)
     config = StackConfig(scenario='short_line', domain_id=domain_id, end_time_s=100.0,
-                         log_dir=tmp_path / 'logs', record_to=tmp_path / 'bundled')
+                         log_dir=tmp_path / 'logs', record_to=tmp_path / 'bundled',
+                         plant_params={'wait_for_subscribers': 2},
+                         profile_params={'wait_for_subscribers': 3})
     with Stack(config) as stack:
         stack.start_process('recorder_each', {}, ['-o', str(tmp_path / 'each'), '--sim-time',
                                                   '--no-step-records'],
@@ -220,6 +224,10 @@ def test_the_step_records_give_the_bytes_a_recorder_of_each_topic_gets(tmp_path,
             n = min(len(a), len(b)) - 2
             assert any(a[i:i + n] == b[j:j + n] for i in range(3) for j in range(3)), \
                 topic
+        elif topic == '/clock':
+            # keep last 10 (the conventions' /clock QoS): a subscriber that lags more than ten
+            # steps loses ticks, as any /clock subscriber would; what it got, the bundles hold
+            assert set(b) <= set(a) and a == sorted(set(a)), topic
         else:
             assert a == b, topic
 
@@ -274,3 +282,123 @@ def test_two_sources_of_simulated_time_are_refused_naming_both(tmp_path, domain_
     assert done.returncode == 2
     assert '--sim-time and use_sim_time' in done.stderr + done.stdout
     assert 'Traceback' not in done.stderr
+
+
+def test_the_recorder_acknowledges_step_records_once_they_are_in_its_file(tmp_path, domain_id):
+    """The acknowledgement (``ato/recorded``, a std_msgs/Header) names the recorder and the
+    stamp up to which the namespace's step records are written; a copy of the file taken then,
+    recovered, holds them: what is acknowledged survives a SIGKILL."""
+    import shutil
+
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import Header, UInt8MultiArray
+
+    from ato_common.ros import qos_profile, topic
+    from ato_common.step_records import ACK_PERIOD_S, Bundle
+
+    state = JointTrajectory()
+    with Stack(StackConfig(scenario='short_line', domain_id=domain_id,
+                           log_dir=tmp_path / 'logs')) as stack:
+        publisher = stack.node.create_publisher(UInt8MultiArray, topic('step_records').name,
+                                                qos_profile(topic('step_records').qos))
+        acknowledged = []
+        stack.node.create_subscription(Header, topic('recorded').name, acknowledged.append,
+                                       qos_profile(topic('recorded').qos))
+        stack.start_process('recorder', {}, ['-o', str(tmp_path / 'bag')])
+        assert stack.spin_until(lambda: publisher.get_subscription_count() >= 1, 60.0), \
+            stack.log_tail('recorder')
+        stamps = [7_000_000_000 + k * 100_000_000 for k in range(4)]
+        for stamp in stamps:
+            bundle = Bundle()
+            state.header.stamp.sec, state.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+            bundle.add('/train/state', stamp, serialize_message(state))
+            publisher.publish(bundle.take())
+        # the first bundle is acknowledged, then one ACK_PERIOD_S of stamps later
+        wanted = [s for s in stamps if s == stamps[0] or
+                  s - stamps[0] >= round(ACK_PERIOD_S * 1e9)][:2]
+        assert stack.spin_until(lambda: len(acknowledged) >= 2, 30.0), stack.log_tail('recorder')
+        assert [(from_time(a.stamp), a.frame_id) for a in acknowledged] == \
+            [(s, '/recorder') for s in wanted]
+        shutil.copytree(tmp_path / 'bag', tmp_path / 'copy')  # as a SIGKILL would leave it
+        assert stack.stop()['recorder'] == 0
+    recover(tmp_path / 'copy')
+    in_copy = [m.log_time_ns for m in read_messages(tmp_path / 'copy', ['/train/state'])]
+    assert in_copy[:len(stamps[:3])] == stamps[:3] and max(in_copy) >= wanted[-1]
+
+
+def test_a_recorder_that_falls_behind_holds_the_lockstep_and_loses_nothing(tmp_path,
+                                                                             domain_id):
+    """Back-pressure (plant parameter recorder_lead_s): a recorder stopped (SIGSTOP, as a
+    recorder starved of CPU) holds the plant at most the lead past what it acknowledged; the
+    plant reports the wait and names the recorder; the loop goes on once the recorder does,
+    and the bag holds every step. What the file holds while the loop waits (a copy, recovered,
+    as a SIGKILL would leave it) is within the lead of the last step published."""
+    import shutil
+
+    from ato_common.step_records import LEAD_S
+
+    # long enough that the loop (a few seconds of wall time) is under way at the SIGSTOP
+    config = StackConfig(scenario='short_line', domain_id=domain_id, end_time_s=900.0,
+                         log_dir=tmp_path / 'logs', record_to=tmp_path / 'bag',
+                         plant_params={'command_wait_limit_s': 1.0})
+    with Stack(config) as stack:
+        stack.start()
+        monitor = stack.monitor
+        assert stack.spin_until(lambda: monitor.last_stamp_ns > 2_000_000_000, 120.0)
+        recorder = stack.processes['recorder']
+        recorder.send_signal(signal.SIGSTOP)
+        try:
+            stack.spin_until(lambda: False, 3.0)
+            held_at = monitor.last_stamp_ns
+            stack.spin_until(lambda: False, 1.0)
+            assert monitor.last_stamp_ns == held_at, (
+                f'the loop went on without the recorder: {held_at} ns, then '
+                f"{monitor.last_stamp_ns} ns\n{stack.log_tail('plant', 400)}\n"
+                f"{stack.log_tail('recorder', 400)}")
+            assert held_at < 800_000_000_000, f'the run was at its end ({held_at} ns) at the stop'
+            log = stack.log_tail('plant', 400)
+            shutil.copytree(tmp_path / 'bag', tmp_path / 'copy')
+        finally:
+            recorder.send_signal(signal.SIGCONT)
+        assert stack.spin_until(lambda: monitor.last_stamp_ns > held_at, 30.0), \
+            stack.log_tail('plant')
+        assert stack.spin_until(lambda: stack.processes['plant'].poll() is not None, 300.0)
+        codes = stack.stop()
+        final_log = stack.log_tail('plant', 400)
+    assert codes['plant'] == 0 and codes['recorder'] == 0, codes
+    assert 'for recorder /recorder, whose file holds the step records up to' in log, log
+    assert 'the recorders caught up after' in final_log, final_log
+    assert 'steps waited' in final_log, final_log
+    recorded = sorted({state_stamp(m) for m in read_messages(tmp_path / 'bag',
+                                                             ['/train/state'])})
+    assert recorded == [k for k, _ in monitor.complete_samples()]  # every step
+    recover(tmp_path / 'copy')
+    in_file = [state_stamp(m) for m in read_messages(tmp_path / 'copy', ['/train/state'])]
+    assert held_at - in_file[-1] <= round(LEAD_S * 1e9), (held_at, in_file[-1])
+
+
+def test_a_composed_stack_records_every_step_from_one_bundle(tmp_path, domain_id):
+    """The three nodes in one process (``ato_stack``) share their step records: one publisher
+    of ``ato/step_records`` carries the per-step topics of all three, and the bag holds each of
+    them at every step."""
+    from rclpy.qos import QoSProfile
+
+    states = []
+    config = StackConfig(scenario='short_line', domain_id=domain_id, end_time_s=30.0,
+                         composed=True, log_dir=tmp_path / 'logs', record_to=tmp_path / 'bag')
+    with Stack(config) as stack:
+        stack.node.create_subscription(JointTrajectory, '/train/state', states.append,
+                                       QoSProfile(depth=1000))
+        stack.start()
+        assert stack.spin_until(lambda: len(states) > 10, 120.0), stack.log_tail('loop')
+        publishers = stack.node.get_publishers_info_by_topic('/ato/step_records')
+        assert stack.spin_until(lambda: stack.processes['loop'].poll() is not None, 300.0)
+        codes = stack.stop()
+    assert set(codes.values()) == {0}, codes
+    assert [i.node_name for i in publishers] == ['train_plant_node']
+    info = bag_info(tmp_path / 'bag')
+    steps = len({state_stamp(m) for m in read_messages(tmp_path / 'bag', ['/train/state'])})
+    assert steps >= 301
+    for topic in ('/clock', '/train/state/measured', '/ato/reference', '/ato/distance_to_go',
+                  '/ato/permitted_speed', '/ato/command', '/train/actuators/applied'):
+        assert info.topics[topic].message_count >= steps - 1, topic

@@ -321,10 +321,13 @@ class Stack:
         params = self.node_params()
         if self.config.record_to is not None:
             # unstamped topics are logged at simulated time in lockstep: that of the /clock the
-            # recorder records (--sim-time: no second subscription to /clock)
+            # recorder records (--sim-time: no second subscription to /clock); it runs at the
+            # lowest CPU priority (--background), on the CPU the loop leaves: the plant waits for
+            # it when it falls behind (recorder_lead_s)
             self.start_process('recorder', params['recorder'],
                                ['-o', str(self.config.record_to),
-                                *(['--sim-time'] if self.config.lockstep else [])])
+                                *(['--sim-time', '--background'] if self.config.lockstep
+                                  else [])])
         if self.config.composed:
             self.start_composed(params)
             return

@@ -38,6 +38,8 @@ CLOCK = QosSpec(reliable=True, transient_local=False, depth=10)
 # pace ten statuses of three nodes pass in a few ms of wall time (a monitor on a loaded machine
 # lost a replan's status that way). Keep-all, as the streams.
 DIAGNOSTICS = QosSpec(reliable=True, transient_local=False, depth=0)
+# Only the latest acknowledgement of each recorder matters; several recorders share the topic.
+ACKNOWLEDGEMENTS = QosSpec(reliable=True, transient_local=False, depth=10)
 
 
 # How often each topic is published. Per lockstep step the loop needs only the measured state,
@@ -133,8 +135,16 @@ TOPICS = {
                           'per-step messages of a node bundled for the recorders (the bytes of '
                           'each message of STEP_RECORDED it published, with its topic, log and '
                           'publish times; layout in ato_common.step_records)',
-                          rate='every 0.2 s of simulated time (at most 0.05 s of wall time) '
+                          rate='every 0.4 s of simulated time (at most 0.05 s of wall time) '
                           'while a recorder subscribes'),
+    'recorded': Topic('ato/recorded', 'std_msgs/msg/Header', ACKNOWLEDGEMENTS, 's',
+                      'recorder', 'train_plant_node',
+                      "a recorder's acknowledgement of the namespace's step records: stamp = "
+                      'every step record stamped up to it is in its file, frame_id = the '
+                      "recorder's node name; in lockstep the plant runs at most "
+                      'recorder_lead_s past the oldest acknowledgement (ato_common.ros.'
+                      'RecorderLead)',
+                      rate='every 0.2 s of simulated time of step records written'),
 }
 
 #: The per-step topics the loop nodes put in their step records (``step_records``): the recorder

@@ -24,16 +24,17 @@ from rclpy.duration import Duration as RclpyDuration
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from std_msgs.msg import UInt8MultiArray
+from std_msgs.msg import Header, UInt8MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ato_common.conventions import REFERENCE_JOINT, TOPICS, QosSpec, Topic
-from ato_common.step_records import Bundle
-from ato_common.types import NS_PER_S, Command, Reference, TrainState
+from ato_common.step_records import Acknowledgements, Bundle
+from ato_common.types import NS_PER_S, Command, Reference, TrainState, nanoseconds, seconds
 from ato_common.wire import (
     MessageError,
     UnknownEncoding,
     command_from_fields,
+    decode_header,
     reference_from_fields,
     state_from_fields,
 )
@@ -350,6 +351,119 @@ class StepRecorder:
         return wait_until_delivered([self.publisher], timeout_s)
 
 
+#: while ``run_nodes`` builds several nodes for one process: their step recorders, per namespace
+_shared_step_recorders: dict[str, StepRecorder] | None = None
+
+
+def step_recorder(node, publishing: Publishing) -> StepRecorder:
+    """The node's :class:`StepRecorder`. Nodes that ``run_nodes`` builds together in one process
+    (the composed stack, ``ato_bringup.composed``) share one per namespace: one bundle, one
+    publish per period and one take by the recorder instead of one of each per node (the first
+    node's publisher carries it)."""
+    shared = _shared_step_recorders
+    if shared is None:
+        return StepRecorder(node, publishing)
+    recorder = shared.get(node.get_namespace())
+    if recorder is None:
+        recorder = shared[node.get_namespace()] = StepRecorder(node, publishing)
+    return recorder
+
+
+def node_full_name(namespace: str, name: str) -> str:
+    """A node's fully qualified name, as ``Node.get_fully_qualified_name`` gives it, from the
+    namespace and name the graph reports."""
+    return namespace.rstrip('/') + '/' + name
+
+
+class RecorderLead:
+    """Back-pressure of the recorders in lockstep (the plant's side). A lockstep loop runs as
+    fast as its nodes answer; without this, a recorder starved of CPU falls behind it, and
+    what it has not yet written is lost with it on a SIGKILL while what the publishers keep
+    for it (reliable, keep all) grows. The suite's recorder acknowledges each namespace's step
+    records on ``recorded`` (the stamp up to which they are in its file, its node name:
+    ``ato_common.step_records.Written``); ``holds(stamp_ns)`` says whether the step at
+    ``stamp_ns`` must wait: it is more than ``lead_s`` past the oldest acknowledgement of the
+    recorders in the graph (the publishers of ``recorded``; one not yet heard from counts as
+    having acknowledged the step at which it was first seen). A recorder that acknowledges
+    nothing (any other subscriber of the step records, ``ros2 bag record``) holds nothing back;
+    one that leaves lets go. The publishers of ``recorded`` are counted at most every
+    ``SUBSCRIBERS_REFRESH_S`` of wall time and named again when their number changes.
+    ``on_release`` is called when an acknowledgement, or a recorder's leaving, lets a held step
+    go; ``check`` (the node's timer, while holding) names the recorders in the graph again."""
+
+    def __init__(self, node, lead_s: float, on_release: Callable[[], None],
+                 refresh_s: float = SUBSCRIBERS_REFRESH_S):
+        spec = TOPICS['recorded']
+        self.node, self.on_release, self.refresh_s = node, on_release, refresh_s
+        self.acknowledgements = Acknowledgements(nanoseconds(lead_s))
+        self.held: int | None = None  # the stamp of the step that waits
+        self.held_since = 0.0
+        self.steps_held = 0  # steps that waited, and for how long in all (s of wall time)
+        self.held_s = 0.0
+        self.publishers, self.asked = 0, -math.inf
+        self.subscription = node.create_subscription(
+            Header, spec.name, self.on_acknowledgement, qos_profile(spec.qos), raw=True)
+
+    def on_acknowledgement(self, data: bytes) -> None:
+        try:
+            stamp_ns, recorder = decode_header(data)
+        except MessageError as error:
+            self.node.get_logger().warning(
+                f'{self.subscription.topic_name}: an acknowledgement that does not read '
+                f'({error}): ignored', throttle_duration_sec=1.0)
+            return
+        self.acknowledgements.acknowledged(recorder, stamp_ns)
+        self.release_if_free()
+
+    def holds(self, stamp_ns: int) -> bool:
+        now = time.monotonic()
+        if now - self.asked >= self.refresh_s:
+            self.asked = now
+            count = self.subscription.get_publisher_count()
+            if count != self.publishers:
+                self.publishers = count
+                self.name_recorders(stamp_ns)
+        if self.acknowledgements.behind(stamp_ns) is None:
+            self.held = None
+            return False
+        if self.held != stamp_ns:
+            self.held, self.held_since = stamp_ns, now
+            self.steps_held += 1
+        return True
+
+    def name_recorders(self, stamp_ns: int) -> None:
+        """Forget the recorders no longer in the graph; one new to it is taken as having
+        acknowledged ``stamp_ns``."""
+        live = {node_full_name(i.node_namespace, i.node_name)
+                for i in self.node.get_publishers_info_by_topic(self.subscription.topic_name)}
+        acknowledgements = self.acknowledgements
+        acknowledgements.keep(live)
+        for recorder in live:
+            acknowledgements.appeared(recorder, stamp_ns)
+
+    def check(self) -> None:
+        if self.held is not None:
+            self.name_recorders(self.held)
+            self.release_if_free()
+
+    def release_if_free(self) -> None:
+        if self.held is not None and self.acknowledgements.behind(self.held) is None:
+            self.held = None
+            self.held_s += time.monotonic() - self.held_since
+            self.on_release()
+
+    def waiting(self) -> str:
+        """What a held step waits for ('' if none)."""
+        behind = self.acknowledgements.behind(self.held) if self.held is not None else None
+        if behind is None:
+            return ''
+        recorder, stamp_ns = behind
+        return (f'the step at {seconds(self.held):.3f} s has waited '
+                f'{time.monotonic() - self.held_since:.1f} s of wall time for recorder '
+                f'{recorder}, whose file holds the step records up to {seconds(stamp_ns):.3f} s '
+                f'(lead {seconds(self.acknowledgements.lead_ns):g} s)')
+
+
 def watch_plant_identity(node, own_identity: str, refusal: str):
     """Subscribe ``node`` to the plant's latched identity (``train/identity``): a plant that
     simulates another scenario than ``own_identity``'s (or an identity that is not one) makes
@@ -520,8 +634,11 @@ def run_nodes(makers: Sequence[Callable[[], RunNodeHooks]], args=None,
 
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
+    global _shared_step_recorders
     try:
         nodes = []
+        if len(makers) > 1:
+            _shared_step_recorders = {}  # step_recorder: one bundle for the nodes built here
         for make_node in makers:
             try:
                 node = make_node()
@@ -538,6 +655,7 @@ def run_nodes(makers: Sequence[Callable[[], RunNodeHooks]], args=None,
                                 'declare the hooks run_node calls (finished, exit_code, '
                                 'close_outputs): inherit ato_common.ros.RunNodeHooks')
             nodes.append(node)
+        _shared_step_recorders = None
         executor = make_executor()
         for node in nodes:
             executor.add_node(node)
@@ -550,6 +668,7 @@ def run_nodes(makers: Sequence[Callable[[], RunNodeHooks]], args=None,
         tear_down(executor, nodes)
         return next((int(n.exit_code) for n in nodes if n.exit_code), 0)
     finally:
+        _shared_step_recorders = None
         if rclpy.ok():
             rclpy.shutdown()
         # From here the process only tears down. A second SIGINT, as Ctrl-C in a launch sends one

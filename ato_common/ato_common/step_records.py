@@ -19,6 +19,14 @@ int64 log time ns, int64 publish time ns) followed by the message's serialised b
 its encapsulation header, as published) and zeros up to a multiple of 8 bytes. The log time
 is the step's stamp (simulated time in lockstep), the publish time the node's wall clock when
 it published the message.
+
+A recorder acknowledges what it has written of a namespace's step records on ``recorded`` (a
+``std_msgs/msg/Header``: the stamp up to which every record of the namespace is in its file,
+flushed; ``frame_id`` its node name) once that has moved on by ``ACK_PERIOD_S`` (``Written``).
+In lockstep the plant does not publish a step more than its lead (``LEAD_S`` by default) past
+the oldest acknowledgement of the recorders in the graph (``Acknowledgements``;
+``ato_common.ros.RecorderLead``): back-pressure, so that a recorder starved of CPU holds the loop
+instead of falling behind it, and a SIGKILL loses at most the lead.
 """
 
 from __future__ import annotations
@@ -29,12 +37,31 @@ import time
 from ato_common.conventions import STEP_RECORDED, TOPICS
 from ato_common.wire import MessageError
 
-#: a bundle is published once its entries span this much of the node's stamps, s (what a node
-#: holds is lost with a SIGKILLed recorder: this keeps a SIGKILL in lockstep within the 1 s of
-#: simulated time that docs/guide/recording.md promises, tests/test_recording_jazzy.py)
-PERIOD_S = 0.2
+#: a bundle is published once its entries span this much of the node's stamps, s (fewer
+#: bundles cost the loop less: about 0.1 ms of CPU per publish and per take on a 2-core machine;
+#: what a node holds is lost with a SIGKILLed recorder, which the recorder's lead bounds: LEAD_S)
+PERIOD_S = 0.4
 #: ... or once its first entry is this old in wall time (a real-time run), s
 WALL_PERIOD_S = 0.05
+#: a recorder acknowledges a namespace's step records (topic ``recorded``) once the oldest of
+#: what it has written of them has advanced by this much since its last acknowledgement, s of
+#: their stamps (half a bundle: the nodes' bundles of a period arrive one after the other)
+ACK_PERIOD_S = PERIOD_S / 2
+#: in lockstep the plant runs at most this far past the oldest acknowledgement of the recorders
+#: that acknowledge (back-pressure: ``ato_common.ros.RecorderLead``), s of simulated time: what
+#: a SIGKILLed recorder can lose (docs/guide/recording.md; the plant's recorder_lead_s)
+LEAD_S = 0.9
+
+
+def least_lead_s(control_period_s: float) -> float:
+    """The least lead that cannot stall a lockstep loop whose recorder keeps up. With the plant
+    held before publishing step s, every node has published its records up to s - 2 control
+    periods at the latest (the controller answers a step after the plant and the profile),
+    less its bundle in the making (under ``PERIOD_S`` of stamps); the recorder acknowledges
+    once the oldest of them has advanced by ``ACK_PERIOD_S``. A lead under this sum would wait
+    for records that no node sends before the plant's next step."""
+    return PERIOD_S + ACK_PERIOD_S + 2.0 * control_period_s
+
 
 ENTRY = struct.Struct('<IIqq')
 _U32 = struct.Struct('<I')
@@ -171,3 +198,64 @@ class Bundle:
         data = encode_bundle(self.names, self.counts, bytes(self.body))
         self.clear()
         return data
+
+
+class Written:
+    """What a recorder has written of one namespace's step records: the stamp of the latest
+    entry of each topic. The namespace's records are in the file up to the oldest of these
+    (``on_disk_ns``) once the file is flushed; ``acknowledgement`` says when that has moved by
+    ``ACK_PERIOD_S`` (or back: a restarted plant begins its time again) since the last one."""
+
+    def __init__(self, period_s: float = ACK_PERIOD_S):
+        self.period_ns = int(round(period_s * 1e9))
+        self.latest: dict[str, int] = {}
+        self.acknowledged: int | None = None
+
+    def wrote(self, topic: str, stamp_ns: int) -> None:
+        self.latest[topic] = stamp_ns
+
+    def on_disk_ns(self) -> int | None:
+        return min(self.latest.values()) if self.latest else None
+
+    def acknowledgement(self) -> int | None:
+        """The stamp to acknowledge now (then counted as acknowledged), else None."""
+        stamp = self.on_disk_ns()
+        if stamp is None or (self.acknowledged is not None
+                             and 0 <= stamp - self.acknowledged < self.period_ns):
+            return None
+        self.acknowledged = stamp
+        return stamp
+
+
+class Acknowledgements:
+    """The plant's side of the recorders' acknowledgements (topic ``recorded``; the rclpy side
+    is ``ato_common.ros.RecorderLead``): the latest stamp each recorder has acknowledged, and
+    whether a step is more than ``lead_ns`` past the oldest of them. A recorder seen in the graph
+    before it has acknowledged anything counts as having acknowledged the step at which it was
+    seen (``appeared``): one that stops before its first acknowledgement holds the loop too."""
+
+    def __init__(self, lead_ns: int):
+        self.lead_ns = lead_ns
+        self.stamps: dict[str, int] = {}  # recorder's node name -> stamp acknowledged
+
+    def acknowledged(self, recorder: str, stamp_ns: int) -> None:
+        self.stamps[recorder] = stamp_ns
+
+    def appeared(self, recorder: str, stamp_ns: int) -> None:
+        """``recorder`` is in the graph at the step ``stamp_ns`` (nothing changes for one
+        already known)."""
+        self.stamps.setdefault(recorder, stamp_ns)
+
+    def behind(self, stamp_ns: int) -> tuple[str, int] | None:
+        """(recorder, stamp it acknowledged) of the oldest recorder if ``stamp_ns`` is more
+        than the lead past it, else None."""
+        if not self.stamps:
+            return None
+        recorder = min(self.stamps, key=self.stamps.__getitem__)
+        acknowledged = self.stamps[recorder]
+        return (recorder, acknowledged) if stamp_ns - acknowledged > self.lead_ns else None
+
+    def keep(self, live: set[str]) -> None:
+        """Forget the recorders not in ``live`` (gone from the graph)."""
+        for recorder in [r for r in self.stamps if r not in live]:
+            del self.stamps[recorder]

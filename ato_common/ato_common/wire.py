@@ -254,6 +254,18 @@ def encode_joint_forces(stamp_ns: int, names: Sequence[str], forces: Sequence[fl
     return layout.pack((*_time_parts(stamp_ns), *(float(f) for f in forces)))
 
 
+@lru_cache(maxsize=16)
+def _header_layout(frame_id: str):
+    p = _Layout()
+    _header(p, frame_id)
+    return p.build()
+
+
+def encode_header(stamp_ns: int, frame_id: str) -> bytes:
+    """``std_msgs/msg/Header``."""
+    return _header_layout(frame_id).pack(_time_parts(stamp_ns))
+
+
 def encode_command(command: Command) -> bytes:
     return encode_joint_forces(command.stamp_ns, command.actuator_names, command.forces,
                                command.law)
@@ -377,6 +389,13 @@ def stamp_of(data: bytes) -> int | None:
 def decode_clock(data: bytes) -> int:
     """A ``rosgraph_msgs/msg/Clock``: its time, ns."""
     return _Reader(data).time_ns()
+
+
+@_read
+def decode_header(data: bytes) -> tuple[int, str]:
+    """A ``std_msgs/msg/Header``: (stamp ns, frame_id)."""
+    r = _Reader(data)
+    return r.time_ns(), r.string()
 
 
 @_read

@@ -1,6 +1,7 @@
 """A bundle of step records is a standard std_msgs/msg/UInt8MultiArray (checked against rclpy's
 own serialisation both ways), holds every message added, in order, with its topic and times,
-and a damaged one is refused with the reason."""
+and a damaged one is refused with the reason. A recorder acknowledges what it has written of a
+namespace's records, and the plant's lead is measured from the oldest acknowledgement."""
 
 import random
 import struct
@@ -12,10 +13,16 @@ from std_msgs.msg import MultiArrayDimension, UInt8MultiArray
 from ato_common import wire
 from ato_common.conventions import STEP_RECORDED, TOPICS
 from ato_common.step_records import (
+    ACK_PERIOD_S,
     ENTRY,
+    LEAD_S,
+    PERIOD_S,
+    Acknowledgements,
     Bundle,
+    Written,
     decode_bundle,
     encode_bundle,
+    least_lead_s,
     step_recorded,
 )
 from ato_common.wire import MessageError
@@ -122,3 +129,73 @@ def test_the_per_step_topics_are_found_in_any_namespace():
 def test_the_entry_header_is_24_bytes_little_endian():
     assert ENTRY.size == 24 and ENTRY.format == '<IIqq'
     assert struct.calcsize(ENTRY.format) == 24
+
+
+# --- acknowledgements and the plant's lead (back-pressure in lockstep) --------------------------
+
+S = 1_000_000_000
+
+
+def test_a_namespace_is_on_disk_up_to_the_oldest_topic_written():
+    written = Written()
+    assert written.on_disk_ns() is None and written.acknowledgement() is None
+    written.wrote('/clock', 5 * S)
+    written.wrote('/ato/command', 4 * S)
+    assert written.on_disk_ns() == 4 * S
+    written.wrote('/ato/command', 6 * S)
+    assert written.on_disk_ns() == 5 * S
+
+
+def test_an_acknowledgement_comes_once_the_oldest_moved_on_by_its_period():
+    written = Written(period_s=0.2)
+    written.wrote('/clock', 1 * S)
+    assert written.acknowledgement() == 1 * S  # the first
+    written.wrote('/clock', 1 * S + 150_000_000)
+    assert written.acknowledgement() is None  # 0.15 s on: not yet
+    written.wrote('/clock', 1 * S + 200_000_000)
+    assert written.acknowledgement() == 1 * S + 200_000_000
+    assert written.acknowledgement() is None  # said once
+    written.wrote('/clock', 100_000_000)  # a restarted plant begins its time again
+    assert written.acknowledgement() == 100_000_000
+
+
+def test_the_plant_is_held_past_the_lead_of_the_oldest_recorder_only():
+    acks = Acknowledgements(lead_ns=900_000_000)
+    assert acks.behind(100 * S) is None  # nobody acknowledges: nothing held
+    acks.acknowledged('/recorder', 10 * S)
+    acks.acknowledged('/other', 9 * S)
+    assert acks.behind(9 * S + 900_000_000) is None  # exactly the lead: goes
+    assert acks.behind(9 * S + 900_000_001) == ('/other', 9 * S)
+    acks.keep({'/recorder'})  # /other left the graph
+    assert acks.behind(9 * S + 900_000_001) is None
+    assert acks.behind(10 * S + 900_000_001) == ('/recorder', 10 * S)
+    acks.keep(set())
+    assert acks.behind(10**6 * S) is None
+
+
+def test_a_recorder_seen_before_its_first_acknowledgement_holds_from_that_step():
+    acks = Acknowledgements(lead_ns=900_000_000)
+    acks.appeared('/recorder', 3 * S)
+    assert acks.behind(3 * S + 900_000_000) is None
+    assert acks.behind(4 * S) == ('/recorder', 3 * S)  # stopped before it said anything
+    acks.appeared('/recorder', 8 * S)  # seen again: still what it was
+    assert acks.behind(4 * S) == ('/recorder', 3 * S)
+    acks.acknowledged('/recorder', 5 * S)
+    assert acks.behind(5 * S + 900_000_000) is None
+
+
+@pytest.mark.parametrize('rate_hz', [1.0, 10.0, 200.0])
+def test_the_least_lead_covers_a_bundle_an_acknowledgement_and_two_steps(rate_hz):
+    period = 1.0 / rate_hz
+    assert least_lead_s(period) == pytest.approx(PERIOD_S + ACK_PERIOD_S + 2 * period)
+    assert LEAD_S >= least_lead_s(0.1)  # the default fits the suite's 10 Hz scenarios
+
+
+def test_an_acknowledgement_is_a_standard_header():
+    from std_msgs.msg import Header
+    data = wire.encode_header(12 * S + 5, '/ns/recorder')
+    msg = deserialize_message(data, Header)
+    assert (msg.stamp.sec, msg.stamp.nanosec, msg.frame_id) == (12, 5, '/ns/recorder')
+    assert wire.decode_header(serialize_message(msg)) == (12 * S + 5, '/ns/recorder')
+    with pytest.raises(MessageError):
+        wire.decode_header(data[:10])

@@ -39,7 +39,6 @@ from ato_common.ros import (
     MessageError,
     Publishing,
     RunNodeHooks,
-    StepRecorder,
     decoded,
     diagnostic_status,
     first_unmatched,
@@ -50,6 +49,7 @@ from ato_common.ros import (
     run_node,
     state_from_msg,
     status_name,
+    step_recorder,
     to_time,
     topic,
     watch_plant_identity,
@@ -159,7 +159,7 @@ class AtoControllerNode(RunNodeHooks, Node):
         self.command_pub = self.create_publisher(JointState, topic('command').name,
                                                  qos_profile(topic('command').qos))
         # The commands for the recorders, bundled (ato_common.step_records).
-        self.records = StepRecorder(self, self.publishing)
+        self.records = step_recorder(self, self.publishing)
         self.diag_pub = self.create_publisher(DiagnosticArray, topic('diagnostics').name,
                                               qos_profile(topic('diagnostics').qos))
         # The per-step inputs are taken as bytes and read by ato_common.wire (no rclpy message

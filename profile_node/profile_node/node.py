@@ -64,7 +64,6 @@ from ato_common.ros import (
     Observation,
     Publishing,
     RunNodeHooks,
-    StepRecorder,
     decoded,
     diagnostic_status,
     first_unmatched,
@@ -77,6 +76,7 @@ from ato_common.ros import (
     run_node,
     state_from_msg,
     status_name,
+    step_recorder,
     to_time,
     topic,
     watch_plant_identity,
@@ -174,7 +174,7 @@ class ProfileNode(RunNodeHooks, Node):
         self.permitted_pub = self.create_publisher(Float64, topic('permitted_speed').name,
                                                    qos_profile(topic('permitted_speed').qos))
         # The per-step messages for the recorders, bundled (ato_common.step_records).
-        self.records = StepRecorder(self, self.publishing)
+        self.records = step_recorder(self, self.publishing)
         self.dtg_observation = Observation(self, self.dtg_pub)
         self.permitted_observation = Observation(self, self.permitted_pub)
         curve_pub = self.create_publisher(JointTrajectory, topic('curve').name,

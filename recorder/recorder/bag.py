@@ -53,7 +53,7 @@ MCAP_MAGIC = b'\x89MCAP0\r\n'
 METADATA_RECORD = 'rosbag2'  # the MCAP metadata record rosbag2 writes its metadata into
 DEFAULT_CHUNK_SIZE = 256 * 1024
 DEFAULT_FLUSH_PERIOD_S = 0.5
-DEFAULT_FLUSH_PERIOD_LOG_S = 0.25
+DEFAULT_FLUSH_PERIOD_LOG_S = 0.5
 
 
 class BagError(RuntimeError):
@@ -192,26 +192,39 @@ class BagWriter:
     def write(self, topic: str, log_time_ns: int, data: bytes,
               publish_time_ns: int | None = None) -> None:
         """Add one message; BagError if the file cannot be written (a full disk)."""
+        self.write_many(((topic, log_time_ns, data, publish_time_ns),))
+
+    def write_many(self, messages) -> None:
+        """Add messages, each (topic, log time ns, data, publish time ns or None: the log
+        time), in order, then close the chunk if a flush period has passed; BagError if the
+        file cannot be written (a full disk)."""
         if self.failed:
             raise BagError(f'{self.path}: the recording stopped after a write error')
-        info = self.topics[topic]
+        add, channels, topics = self._writer.add_message, self._channels, self.topics
+        start, end = self.start_ns, self.end_ns
         try:
-            # Sequence 0, as rosbag2 writes it.
-            self._writer.add_message(self._channels[topic], log_time=log_time_ns, data=data,
-                                     publish_time=log_time_ns if publish_time_ns is None
-                                     else publish_time_ns, sequence=0)
+            for topic, log_time_ns, data, publish_time_ns in messages:
+                # Sequence 0, as rosbag2 writes it.
+                add(channels[topic], log_time=log_time_ns, data=data,
+                    publish_time=log_time_ns if publish_time_ns is None else publish_time_ns,
+                    sequence=0)
+                topics[topic].message_count += 1
+                if start is None or log_time_ns < start:
+                    start = log_time_ns
+                if log_time_ns > end:
+                    end = log_time_ns
+                if self._last_flush_log_ns is None:
+                    self._last_flush_log_ns = log_time_ns
         except OSError as error:
             raise self._failed(error) from None
-        info.message_count += 1
-        if self.start_ns is None or log_time_ns < self.start_ns:
-            self.start_ns = log_time_ns
-        self.end_ns = max(self.end_ns, log_time_ns)
+        finally:
+            self.start_ns, self.end_ns = start, end
         if self._last_flush_log_ns is None:
-            self._last_flush_log_ns = log_time_ns
+            return  # nothing written
         now = time.monotonic()
         if (now - self._last_flush >= self.flush_period_s
-                or log_time_ns - self._last_flush_log_ns >= self.flush_period_log_ns):
-            self.flush(now, log_time_ns)
+                or end - self._last_flush_log_ns >= self.flush_period_log_ns):
+            self.flush(now, end)
 
     def flush(self, now: float | None = None, log_time_ns: int | None = None) -> None:
         """Close the open chunk and push it to the file (what a SIGKILL cannot take back)."""

@@ -23,17 +23,25 @@ the source timestamp) and writes them in the order they were received. An execut
 once per message and, for the message info, would have to be rclpy's single-threaded one; taking
 in batches costs a fraction of that, which matters because the recorder shares the machine with
 the loop it records. A message is on disk at most a take period plus a flush period after it was
-received; SIGINT and SIGTERM take what is left before closing.
+received; SIGINT and SIGTERM take what is left before closing. The loop nodes' step records
+(``ato_common.step_records``) are taken by the executor as they come: once what is written of a
+namespace's records has moved on by ``ACK_PERIOD_S`` of their stamps, the file is flushed and
+the stamp acknowledged on ``recorded`` in that namespace, and in lockstep the plant waits for
+that acknowledgement when it is more than its ``recorder_lead_s`` ahead (back-pressure:
+``ato_common.ros.RecorderLead``). ``--background`` runs the recorder at the lowest CPU priority,
+on the CPU the loop leaves (what ``run_scenario`` does in lockstep).
 
 SIGINT and SIGTERM close the file properly; a SIGKILL loses at most the last take and flush
 periods: chunks are flushed every ``--flush-period`` of wall time (0.5 s) and every
-``--flush-period-log`` of log time (0.25 s, simulated time in a lockstep run), whichever comes
-first; ``ros2 run recorder recover <bag>`` makes a valid bag of the rest.
+``--flush-period-log`` of log time (0.5 s, simulated time in a lockstep run), whichever comes
+first, and before each acknowledgement (in lockstep, what the plant's lead bounds: 0.9 s of
+simulated time by default); ``ros2 run recorder recover <bag>`` makes a valid bag of the rest.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from datetime import datetime
 from pathlib import Path
@@ -42,13 +50,14 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock as ClockMsg
+from std_msgs.msg import Header
 from std_msgs.msg import UInt8MultiArray as STEP_RECORDS_MSG
 
 from ato_common.conventions import TOPICS
 from ato_common.ros import RunNodeHooks, freeze_startup_objects, qos_profile, run_node
-from ato_common.step_records import decode_bundle, namespace_of, step_recorded
+from ato_common.step_records import Written, decode_bundle, namespace_of, step_recorded
 from ato_common.validation import ConfigError
-from ato_common.wire import MessageError
+from ato_common.wire import MessageError, encode_header
 from recorder.bag import (
     DEFAULT_FLUSH_PERIOD_LOG_S,
     DEFAULT_FLUSH_PERIOD_S,
@@ -84,6 +93,9 @@ def logs_at_stamp(topic: str, type_name: str, log_time: str) -> bool:
 
 
 STEP_RECORDS = TOPICS['step_records']
+RECORDED = TOPICS['recorded']
+#: --background: the recorder's nice value (the lowest CPU priority)
+BACKGROUND_NICE = 19
 
 
 class RecorderNode(RunNodeHooks, Node):
@@ -110,6 +122,9 @@ class RecorderNode(RunNodeHooks, Node):
         # step records are taken from those, not subscribed to one by one
         self.step_records = step_records
         self.bundled: set[str] = set()  # namespaces whose step records are subscribed to
+        self.written: dict[str, Written] = {}  # namespace -> what is written of its records
+        self.step_subscriptions: list = []
+        self.name = self.get_fully_qualified_name()
         self.received = 0
         self.finished = False  # run_node stops spinning when True
         self.exit_code = 0
@@ -139,7 +154,8 @@ class RecorderNode(RunNodeHooks, Node):
             if topic not in self.subscribed and self.is_step_records(topic, types):
                 self._subscribe_step_records(topic)
         for topic, types in found:
-            if topic in self.subscribed or self.is_step_records(topic, types):
+            if topic in self.subscribed or self.is_step_records(topic, types) or \
+                    self.is_acknowledgements(topic, types):
                 continue
             recorded = step_recorded(topic) if self.step_records else None
             if recorded is not None and recorded[1] in self.bundled:
@@ -176,6 +192,12 @@ class RecorderNode(RunNodeHooks, Node):
         return list(types) == [STEP_RECORDS.type_name] and \
             namespace_of(topic, 'step_records') is not None
 
+    def is_acknowledgements(self, topic: str, types) -> bool:
+        """The recorders' acknowledgements of step records (``recorded``) say how a recording
+        goes, not how the run does: not recorded, as the step records themselves are not."""
+        return list(types) == [RECORDED.type_name] and \
+            namespace_of(topic, 'recorded') is not None
+
     def _subscribe_step_records(self, topic: str) -> None:
         """Take the per-step topics of ``topic``'s namespace from its step records (and drop a
         subscription to one of them made before the step records were seen: the loop does not
@@ -197,15 +219,25 @@ class RecorderNode(RunNodeHooks, Node):
                 subscription, _ = self.takes.pop(other)
                 self.taker.destroy_subscription(subscription)
                 del self.subscribed[other]
-        self._subscribe(topic, STEP_RECORDS_MSG, subscription_qos(offered),
-                        self._on_step_records)
+        # Taken as they come (an executor's subscription, not the take period's): in lockstep
+        # the plant waits for their acknowledgement (ato_common.ros.RecorderLead).
+        written = self.written[namespace] = Written()
+        acknowledgements = self.create_publisher(
+            Header, namespace.rstrip('/') + '/' + RECORDED.name, qos_profile(RECORDED.qos))
+        self.step_subscriptions.append(self.create_subscription(
+            STEP_RECORDS_MSG, topic,
+            lambda data: self._on_step_records(data, written, acknowledgements),
+            subscription_qos(offered), raw=True))
+        self.subscribed[topic] = self.step_subscriptions[-1]
         self.get_logger().info(f'recording the per-step topics of {namespace} from its step '
-                               f'records ({topic}), each logged at its step')
+                               f'records ({topic}), each logged at its step, acknowledged on '
+                               f'{acknowledgements.topic_name}')
 
-    def _on_step_records(self, data: bytes, info: dict) -> None:
+    def _on_step_records(self, data: bytes, written: Written, acknowledgements) -> None:
         """Every message of a bundle under its own topic, at the log and publish times the
         node gave it (``--log-time receipt``: on receipt; ``--publish-time log``: the log
-        time)."""
+        time); then, once what is written of the namespace's records has moved on by
+        ``ACK_PERIOD_S``, the file flushed and that acknowledged (``recorded``)."""
         if self.finished:
             return
         try:
@@ -214,22 +246,30 @@ class RecorderNode(RunNodeHooks, Node):
             self.get_logger().warning(f'step records not read: {error}',
                                       throttle_duration_sec=1.0)
             return
-        write, source = self.writer.write, self.publish_time == 'source'
-        for topic, log_time_ns, publish_time_ns, message in entries:
+        source, topics, by_stamp = self.publish_time == 'source', self.writer.topics, \
+            self.log_time == 'stamp'
+        messages = []
+        for topic, stamp_ns, publish_time_ns, message in entries:
             if topic == self.clock_topic and self.sim_time:
                 self._on_clock(message)  # the recorder's time, /clock recorded or not
             if self.wanted is not None and topic not in self.wanted:
                 continue
-            if topic not in self.writer.topics and not self._add_recorded_topic(topic):
+            if topic not in topics and not self._add_recorded_topic(topic):
                 continue
-            if self.log_time != 'stamp':
-                log_time_ns = self.now_ns()
-            try:
-                write(topic, log_time_ns, message, publish_time_ns if source else None)
-            except BagError as error:
-                self.stop_on_error(error)
-                return
-            self.received += 1
+            messages.append((topic, stamp_ns if by_stamp else self.now_ns(), message,
+                             publish_time_ns if source else None))
+            written.wrote(topic, stamp_ns)
+        try:
+            self.writer.write_many(messages)
+        except BagError as error:
+            self.stop_on_error(error)
+            return
+        self.received += len(messages)
+        stamp_ns = written.acknowledgement()
+        if stamp_ns is not None:
+            self.flush()
+            if not self.finished:  # a write error stops the recording: nothing to vouch for
+                acknowledgements.publish(encode_header(stamp_ns, self.name))
 
     def _add_recorded_topic(self, topic: str) -> bool:
         """A topic first met in the step records: its type from the conventions, its QoS as
@@ -283,6 +323,16 @@ class RecorderNode(RunNodeHooks, Node):
         for _, _, handler, (data, info) in taken:
             handler(data, info)
 
+    def take_step_records(self) -> None:
+        """The step records delivered but not yet handed to the executor's callbacks."""
+        for subscription in self.step_subscriptions:
+            with subscription.handle:
+                for _ in range(MAX_TAKES):
+                    message = subscription.handle.take_message(subscription.msg_type, True)
+                    if message is None:
+                        break
+                    subscription.callback(message[0])
+
     def _handler(self, topic: str, stamped: bool):
         write = self.writer.write
         is_clock = topic == self.clock_topic
@@ -325,6 +375,7 @@ class RecorderNode(RunNodeHooks, Node):
         self.outputs_closed = True
         if not self.finished:  # what came before the stop is recorded too
             try:
+                self.take_step_records()
                 self.take()
             except Exception as error:  # noqa: BLE001 - the bag must be closed all the same
                 self.get_logger().error(f'the last messages could not be taken: {error}')
@@ -372,6 +423,11 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                         help="subscribe to the suite's per-step topics one by one, as to any "
                              "other, instead of taking them from the loop nodes' step records "
                              '(ato/step_records)')
+    parser.add_argument('--background', action='store_true',
+                        help=f'run at the lowest CPU priority (nice {BACKGROUND_NICE}): the '
+                             'recorder takes only the CPU the loop leaves, and in lockstep the '
+                             'plant waits for its acknowledgements when it falls behind '
+                             '(recorder_lead_s)')
     parser.add_argument('--discovery-period', type=float, default=0.1,
                         help='how often to look for new topics, s')
     return parser.parse_args(argv)
@@ -392,6 +448,8 @@ def main(args=None) -> int:
         print(f'error: --take-period {options.take_period:g}: must be over 0 and at most 1 s',
               file=sys.stderr)
         return 2
+    if options.background:
+        os.setpriority(os.PRIO_PROCESS, 0, BACKGROUND_NICE)  # before any thread is started
     try:
         writer = BagWriter(output, options.compression, flush_period_s=options.flush_period,
                            flush_period_log_s=options.flush_period_log,

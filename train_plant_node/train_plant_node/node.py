@@ -36,8 +36,8 @@ from ato_common.ros import (
     MessageError,
     Observation,
     Publishing,
+    RecorderLead,
     RunNodeHooks,
-    StepRecorder,
     command_from_msg,
     decoded,
     diagnostic_status,
@@ -47,11 +47,13 @@ from ato_common.ros import (
     qos_profile,
     run_node,
     status_name,
+    step_recorder,
     to_time,
     topic,
     wait_until_delivered,
 )
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
+from ato_common.step_records import LEAD_S, least_lead_s
 from ato_common.types import TrainState, nanoseconds, seconds
 from ato_common.validation import ConfigError
 from train_plant_node.models import MODELS
@@ -87,6 +89,12 @@ PARAMS = (
     WAIT_FOR_DIAGNOSTICS_READERS,
     Param('start_delay_s', 0.0, 'wall time to wait after wait_for_subscribers and '
           'wait_for_recorders are met before the first step', minimum=0.0, maximum=60.0),
+    Param('recorder_lead_s', LEAD_S, 'lockstep: how far the plant may run ahead of what every '
+          "recorder that acknowledges (the suite's recorder) has written to its file, s of "
+          'simulated time: the most a SIGKILLed recorder loses; at least the step records\' '
+          'bundle and acknowledgement periods plus two control periods '
+          '(ato_common.step_records.least_lead_s); 0: do not wait for recorders',
+          minimum=0.0, maximum=3600.0),
     Param('resend_period_s', 0.2, 'lockstep: re-publish the current step after this much wall '
           'time without its command', minimum=0.01, maximum=10.0),
     Param('max_substep_s', 0.1, 'longest internal integration step, s', minimum=1e-4,
@@ -172,6 +180,8 @@ class TrainPlantNode(RunNodeHooks, Node):
         self.step_since_wall = 0.0      # when the current step was first published
         self.waiting_reported_wall = 0.0
         self.waiting = ''               # lockstep: the wait for a command beyond the limit
+        self.held_reported_wall = 0.0   # lockstep: a step held for a recorder, last reported
+        self.held = ''                  # lockstep: the wait for a recorder beyond the limit
         self.status_name = status_name(self, 'simulation')
 
         self.truth_pub = self.create_publisher(JointTrajectory, topic('state').name,
@@ -192,7 +202,20 @@ class TrainPlantNode(RunNodeHooks, Node):
         self.observations = tuple(Observation(self, p) for p in (
             self.truth_pub, self.commanded_pub, self.applied_pub))
         # The per-step messages for the recorders, bundled (ato_common.step_records).
-        self.records = StepRecorder(self, self.publishing)
+        self.records = step_recorder(self, self.publishing)
+        # Lockstep: a step waits while a recorder has not written the steps more than the lead
+        # before it (back-pressure: what a SIGKILLed recorder loses is bounded).
+        self.recorder_lead = None
+        if self.lockstep and p['recorder_lead_s'] > 0:
+            least = least_lead_s(seconds(self.period_ns))
+            if p['recorder_lead_s'] < least:
+                raise ConfigError(
+                    f"recorder_lead_s {p['recorder_lead_s']:g} s is under the least lead of "
+                    f'this loop, {least:g} s (the step records\' bundle and acknowledgement '
+                    'periods and two control periods: a smaller lead would wait for records no '
+                    'node sends before the next step); give at least that, or 0 not to wait '
+                    'for recorders')
+            self.recorder_lead = RecorderLead(self, p['recorder_lead_s'], self.publish_step)
         self.identity_pub = self.create_publisher(String, topic('identity').name,
                                                   qos_profile(topic('identity').qos))
         self.identity = scenario_identity(self.scenario)
@@ -227,7 +250,11 @@ class TrainPlantNode(RunNodeHooks, Node):
     # --- publishing ---------------------------------------------------------------------------
     def publish_step(self) -> None:
         stamp = self.stamp_ns()
-        if self.step_messages is None or self.step_messages[0] != stamp:
+        new_step = self.step_messages is None or self.step_messages[0] != stamp
+        if new_step and self.recorder_lead is not None and not (
+                self.end_ns and stamp >= self.end_ns) and self.recorder_lead.holds(stamp):
+            return  # published once a recorder acknowledges (RecorderLead.on_release)
+        if new_step:
             # Once per step: a re-sent step must repeat the same measurement (sensor noise is
             # drawn here), or lockstep runs would depend on how often a step was re-sent.
             truth = self.sim.truth()
@@ -239,6 +266,9 @@ class TrainPlantNode(RunNodeHooks, Node):
             if self.waiting:
                 self.get_logger().info(f'commands again after {self.waiting}')
                 self.waiting = ''
+            if self.held:
+                self.get_logger().info(f'the recorders caught up after {self.held}')
+                self.held = ''
         messages = self.step_messages
         publish, records = self.publishing, self.records
         recording = records.begin_step()  # a recorder takes every message of the step from it
@@ -337,7 +367,7 @@ class TrainPlantNode(RunNodeHooks, Node):
         failed = self.publishing.failures - self.failures_reported
         self.failures_reported = self.publishing.failures
         warning = (self.waiting and f'{self.waiting} (is the controller, or the profile, '
-                   'running?)') or self.last_rejection or lost or (
+                   'running?)') or self.held or self.last_rejection or lost or (
             failed and f'{failed} publishes failed (last: {self.publishing.last_failure})')
         level = (DiagnosticStatus.ERROR if safety else
                  DiagnosticStatus.WARN if warning else DiagnosticStatus.OK)
@@ -362,6 +392,10 @@ class TrainPlantNode(RunNodeHooks, Node):
              'scheduled_failures': len(self.sim.failures),
              'waiting_for_command_s': (time.monotonic() - self.step_since_wall
                                        if self.waiting else 0.0),
+             'held_for_recorder_s': (time.monotonic() - self.recorder_lead.held_since
+                                     if self.held else 0.0),
+             'steps_held_for_recorders': (self.recorder_lead.steps_held
+                                          if self.recorder_lead else 0),
              'state_subscribers': self.truth_pub.get_subscription_count(),
              'identity': self.identity,
              **self.publishing.values()})
@@ -429,6 +463,11 @@ class TrainPlantNode(RunNodeHooks, Node):
             return
         if self.lockstep:
             now = time.monotonic()
+            lead = self.recorder_lead
+            if lead is not None and lead.held is not None:
+                lead.check()  # a recorder that left lets go
+                self.report_held(now)
+                return
             if now - self.last_publish_wall >= self.params['resend_period_s']:
                 self.publish_step()  # the command for this step has not come: say it again
             waited = now - self.step_since_wall
@@ -452,6 +491,20 @@ class TrainPlantNode(RunNodeHooks, Node):
             steps = min(max(behind_ns // self.period_ns, 1), nanoseconds(1.0) // self.period_ns)
             for _ in range(steps):
                 self.advance()
+
+    def report_held(self, now: float) -> None:
+        """A step held for a recorder beyond command_wait_limit_s is reported (WARN log and
+        diagnostics), again each such period."""
+        lead, limit = self.recorder_lead, self.params['command_wait_limit_s']
+        if lead.held is None or now - lead.held_since < limit or \
+                now - self.held_reported_wall < limit:
+            return
+        self.held_reported_wall = now
+        self.held = lead.waiting()
+        if self.held:
+            self.get_logger().warning(f'{self.held}: simulated time stands still until it '
+                                      'catches up or leaves')
+            self.publish_diagnostics()
 
     def on_command(self, data: bytes) -> None:
         if not self.started or self.finished:
@@ -509,7 +562,10 @@ class TrainPlantNode(RunNodeHooks, Node):
         self.publish_step()
         if self.end_ns and self.sim.stamp_ns >= self.end_ns:
             self.publish_diagnostics()
-            self.get_logger().info(f'end of run at t = {self.sim.time_s:.3f} s')
+            held = self.recorder_lead
+            self.get_logger().info(f'end of run at t = {self.sim.time_s:.3f} s' + (
+                f'; {held.steps_held} steps waited {held.held_s:.2f} s of wall time in all for '
+                'the recorders' if held and held.steps_held else ''))
             self.finished = True
 
     def close_outputs(self) -> None:
