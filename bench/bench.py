@@ -66,6 +66,7 @@ class GraphRun:
     teardown_s: float     # the last step to the plant's exit
     cpu_ms_per_step: dict[str, float]  # per process, in the steady window
     count: int            # messages recorded, or received by the live view's client
+    steps_held: int = 0   # steps the plant held for the recorder (back-pressure)
 
 
 def graph_rtf(scenario: str, executor: str, domain_id: int, record: bool = False,
@@ -94,13 +95,16 @@ def graph_rtf(scenario: str, executor: str, domain_id: int, record: bool = False
             count = bag_info(bag).message_count if record else 0
     cpu = {name: 1e3 * used / max(outcome.window_steps, 1)
            for name, used in outcome.window_cpu_s.items()}
+    held = [values.get('steps_held_for_recorders', 0) for _, name, values, _ in
+            outcome.diagnostics if name == 'train_plant_node: simulation']
     if len(live_cpu) == 2:
         (cpu0, stamp0), (cpu1, stamp1) = live_cpu['start'], live_cpu['end']
         steps = max((stamp1 - stamp0) // 100_000_000, 1)
         cpu['live view'] = 1e3 * (cpu1 - cpu0) / steps
     return GraphRun(outcome.metrics.simulated_time_s / outcome.wall_time_s,
                     outcome.steady_real_time_factor(), outcome.metrics.samples,
-                    outcome.startup_s, outcome.teardown_s, cpu, count)
+                    outcome.startup_s, outcome.teardown_s, cpu, count,
+                    int(held[-1]) if held else 0)
 
 
 PROCESS_ORDER = ('plant', 'profile', 'controller', 'loop', 'recorder', 'live view', 'monitor')
@@ -129,7 +133,9 @@ def lockstep_section(scenario: str, domain_id: int) -> list[str]:
              'the processes to the first step; teardown = the last step to the plant\'s exit; '
              'CPU per step of each process (user + system, /proc/<pid>/stat) in the steady '
              'window. The recorder records every topic, the per-step ones from the loop '
-             'nodes\' step records (docs/guide/recording.md). '
+             'nodes\' step records, at the lowest CPU priority, and the plant waits for it '
+             'when it falls more than recorder_lead_s behind (back-pressure, '
+             'docs/guide/recording.md): the steps held say how often. '
              f'The recorder and the live view are measured in turns with the runs '
              f'without them ({PAIRS} of each), their cost as the median of the pairs\' ratios. '
              'Goals: separate at least 150x steady, composed at least 250x, the recorder at '
@@ -165,7 +171,8 @@ def lockstep_section(scenario: str, domain_id: int) -> list[str]:
                               ('composed, with the recorder', composed, composed_recorded)):
         run = median_run(runs)
         add(graph_row(label, run, f'{run.count} messages, '
-                      f'{run.count * run.steady / (run.steps / 10):.0f} per second; '
+                      f'{run.count * run.steady / (run.steps / 10):.0f} per second, '
+                      f'{run.steps_held} steps held for the recorder; '
                       f'{slower(zip(base, runs)):+.0f} % slower steady (median of the pairs)'))
     single = graph_rtf(scenario, 'single', domain_id)
     add(graph_row('separate processes, SingleThreadedExecutor', single))
