@@ -7,7 +7,8 @@
    (from /proc/<pid>/stat), with the EventsExecutor the nodes use and, for comparison, the
    SingleThreadedExecutor; then with the recorder recording every topic, the per-step ones from
    the loop nodes' step records (its throughput in
-   messages per second and how much slower the run is).
+   messages per second and how much slower the run is), and beside a process that only burns
+   as much CPU as the recorder did (what any second process of its size costs the loop).
 2. Controller step time (p50, p99, max) of every law on the same scenario, offline.
 3. Plant simulation speed standalone (simulated seconds per CPU second, one core), driven period
    by period and given all its commands at once (``TrainSimulation.run_commands``).
@@ -18,7 +19,7 @@
 5. Campaign throughput (ato_bringup.campaign): runs per minute of a small campaign with 1 and 2
    Dask workers and their ratio, and the engine's overhead per run (Dask, the time limit, the
    Parquet row) against the bare offline loop of the same runs.
-5. Planning: CPU time to plan each built-in scenario's target curve, ``fastest`` and
+6. Planning: CPU time to plan each built-in scenario's target curve, ``fastest`` and
    ``timetable`` (profile_node.timetable), and the two strategies in closed loop offline (PID,
    nominal plant): arrival against the target time and traction energy.
 """
@@ -35,6 +36,7 @@ import re
 import signal
 import statistics
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -70,9 +72,13 @@ class GraphRun:
 
 
 def graph_rtf(scenario: str, executor: str, domain_id: int, record: bool = False,
-              live: bool = False, composed: bool = False) -> GraphRun:
+              live: bool = False, composed: bool = False, neighbour: float = 0.0) -> GraphRun:
     """One lockstep run through the graph as ``run_scenario`` runs it (the lean monitor); with
-    ``live``, the live view's own CPU per step in the steady window is given as ``live view``."""
+    ``live``, the live view's own CPU per step in the steady window is given as ``live view``;
+    with ``neighbour``, beside a process that only burns that share of a core (``burner``)."""
+    if neighbour:
+        with burner(neighbour):
+            return graph_rtf(scenario, executor, domain_id, record, live, composed)
     os.environ['ATO_EXECUTOR'] = executor
     live_cpu: dict[str, float] = {}
     with tempfile.TemporaryDirectory() as logs:
@@ -135,7 +141,9 @@ def lockstep_section(scenario: str, domain_id: int) -> list[str]:
              'window. The recorder records every topic, the per-step ones from the loop '
              'nodes\' step records, at the lowest CPU priority, and the plant waits for it '
              'when it falls more than recorder_lead_s behind (back-pressure, '
-             'docs/guide/recording.md): the steps held say how often. '
+             'docs/guide/recording.md): the steps held say how often. A process that only '
+             'burns as much CPU as the recorder did, at its priority, shows what any second '
+             'process of that size costs the loop on this machine before it records anything. '
              f'The recorder and the live view are measured in turns with the runs '
              f'without them ({PAIRS} of each), their cost as the median of the pairs\' ratios. '
              'Goals: separate at least 150x steady, composed at least 250x, the recorder at '
@@ -174,6 +182,18 @@ def lockstep_section(scenario: str, domain_id: int) -> list[str]:
                       f'{run.count * run.steady / (run.steps / 10):.0f} per second, '
                       f'{run.steps_held} steps held for the recorder; '
                       f'{slower(zip(base, runs)):+.0f} % slower steady (median of the pairs)'))
+    # The floor of an observer's cost on this machine: a process that burns as much CPU as the
+    # recorder did (its median share of a core in the steady window), and does nothing else.
+    share = statistics.median(cpu_share(run, 'recorder') for run in recorded)
+    bare, burnt = [], []
+    for _ in range(PAIRS):
+        bare.append(graph_rtf(scenario, 'events', domain_id))
+        burnt.append(graph_rtf(scenario, 'events', domain_id, neighbour=share))
+    add(graph_row(f'separate, beside a process that only burns the recorder\'s CPU '
+                  f'({100 * share:.0f} % of a core, nice 19, in {1e3 * BURNER_PERIOD_S:g} ms '
+                  'cycles)', median_run(burnt),
+                  f'-; {slower(zip(bare, burnt)):+.0f} % slower steady (median of the pairs): '
+                  'what any second process of the recorder\'s size costs the loop here'))
     single = graph_rtf(scenario, 'single', domain_id)
     add(graph_row('separate processes, SingleThreadedExecutor', single))
     watched = median_run(live)
@@ -186,6 +206,30 @@ def lockstep_section(scenario: str, domain_id: int) -> list[str]:
 
 #: runs without and with each observer (the recorder, the live view), in turns
 PAIRS = 3
+#: the burner's cycle (``burner``), s: a few lockstep steps at 200x
+BURNER_PERIOD_S = 1e-3
+
+
+@contextlib.contextmanager
+def burner(share: float):
+    """A process at the recorder's priority (nice 19) that does nothing but keep a core busy
+    for ``share`` of every ``BURNER_PERIOD_S`` and sleep the rest: what any second process of
+    the recorder's size costs a lockstep loop on this machine, before it records anything."""
+    busy, idle = share * BURNER_PERIOD_S, (1.0 - share) * BURNER_PERIOD_S
+    code = ('import os, time\nos.nice(19)\nclock = time.perf_counter\nwhile True:\n'
+            f'    start = clock()\n    while clock() - start < {busy!r}:\n        pass\n'
+            f'    time.sleep({idle!r})\n')
+    process = subprocess.Popen([sys.executable, '-c', code], stdin=subprocess.DEVNULL)
+    try:
+        yield process.pid
+    finally:
+        process.kill()
+        process.wait()
+
+
+def cpu_share(run: GraphRun, name: str) -> float:
+    """The share of a core that process ``name`` used in the steady window of ``run``."""
+    return run.cpu_ms_per_step[name] * 1e-3 * run.steady * 10.0
 
 
 def median_run(runs: list[GraphRun]) -> GraphRun:
