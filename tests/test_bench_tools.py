@@ -1,0 +1,33 @@
+"""The bench's own tools (bench/bench.py): the CPU burner that shows what a second process of
+the recorder's size costs the lockstep loop, and the share of a core a process used."""
+
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'bench'))
+
+import bench  # noqa: E402
+
+
+def stat_fields(pid: int) -> list[str]:
+    """/proc/<pid>/stat after the command name (which may hold spaces): field 3 on."""
+    return Path(f'/proc/{pid}/stat').read_text().rpartition(')')[2].split()
+
+
+def test_the_burner_runs_at_the_recorders_priority_and_is_gone_after_its_block():
+    with bench.burner(0.2) as pid:
+        deadline = time.monotonic() + 30  # the interpreter starts, then sets its nice
+        while int(stat_fields(pid)[16]) != 19 and time.monotonic() < deadline:  # field 19
+            time.sleep(0.01)
+        assert int(stat_fields(pid)[16]) == 19
+        assert stat_fields(pid)[0] != 'Z'
+    assert not Path(f'/proc/{pid}').exists()  # killed and reaped
+
+
+def test_cpu_share_is_the_core_a_process_used_in_the_steady_window():
+    run = bench.GraphRun(overall=100.0, steady=200.0, steps=9294, startup_s=1.0, teardown_s=0.2,
+                         cpu_ms_per_step={'recorder': 0.15, 'plant': 0.3}, count=0)
+    # 200x with 0.1 s steps: 2000 steps per second of wall time, 0.15 ms each
+    assert abs(bench.cpu_share(run, 'recorder') - 0.3) < 1e-12
+    assert abs(bench.cpu_share(run, 'plant') - 0.6) < 1e-12
