@@ -16,9 +16,8 @@ PYTEST_WORKERS ?= 2
 
 help:
 	@echo "make setup   create .venv with pinned packages and build ros_ws (idempotent)"
-	@echo "make demo    run the full stack on the default scenario in lockstep and print a summary"
-	@echo "             with the law that make compare ranked best on jinan_xuzhou, else pid"
-	@echo "             (SCENARIO=name-or-file CONTROLLER=law to override)"
+	@echo "make demo    run the full stack on the default scenario in lockstep with the PID baseline"
+	@echo "             and print a summary (SCENARIO=name-or-file CONTROLLER=law to override)"
 	@echo "make compare every applicable law on every built-in scenario, offline, in parallel:"
 	@echo "             runs/compare/compare.md (tables, ranking) and plots (SCENARIO=name-or-file:"
 	@echo "             one only); a campaign of one nominal draw"
@@ -44,16 +43,16 @@ demo: setup
 	python -m ato_bringup.run_scenario $(if $(SCENARIO),--scenario $(SCENARIO)) $(if $(CONTROLLER),--controller $(CONTROLLER))
 
 compare: setup
-	@$(ENV) python -m ato_bringup.compare \
+	@$(ENV) python -m ato_campaigns.compare \
 	  $(if $(SCENARIO),--scenario $(SCENARIO),--results-page docs/results/comparison.md)
 
 campaign: setup
-	@$(ENV) python -m ato_bringup.campaign \
+	@$(ENV) python -m ato_campaigns.campaign \
 	  $(if $(CAMPAIGN),$(CAMPAIGN),--results-page docs/results/campaign.md --readme README.md) \
 	  $(if $(SCHEDULER),--scheduler $(SCHEDULER))
 
 reproduce: setup
-	@$(ENV) python -m ato_bringup.reproduction
+	@$(ENV) python -m ato_tools.reproduction
 
 test: setup lint docs
 	@$(ENV) python -m pytest -n $(PYTEST_WORKERS) --dist loadgroup $(PYTEST_ARGS)

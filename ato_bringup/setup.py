@@ -9,7 +9,6 @@ setup(
     name=PACKAGE_NAME,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={PACKAGE_NAME: ['campaigns/*.yaml']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
         ('share/' + PACKAGE_NAME, ['package.xml']),
@@ -20,18 +19,17 @@ setup(
     maintainer='ATO emulator maintainers',
     maintainer_email='ato-emulator@example.org',
     description=(
-        'Bring-up of the ATO emulator: launch file, the scenario runner that starts the stack, '
-        'drives it to the end of a scenario and prints the run summary, the offline closed loop '
-        'and the comparison of the laws.'
+        'Bring-up of the ATO emulator: the launch file, the scenario runner that starts the '
+        'stack, drives it to the end of a scenario and prints the run summary, and the composed '
+        'stack (the three loop nodes in one process).'
     ),
     license='Apache-2.0',
-    tests_require=['pytest', 'numpy', 'PyYAML', 'grimp', 'ruff', 'mkdocs', 'mkdocs-gen-files',
-                   'pandas', 'distributed'],
+    tests_require=['pytest'],
     entry_points={
         'console_scripts': [
             'run_scenario = ato_bringup.run_scenario:main',
-            'run_offline = ato_bringup.run_offline:main',
-            'campaign = ato_bringup.campaign:main',
+            'run_offline = ato_simulation.run_offline:main',
+            'campaign = ato_campaigns.campaign:main',
             'ato_stack = ato_bringup.composed:main',
         ],
     },

@@ -6,7 +6,7 @@ setup(
     name=PACKAGE_NAME,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={'ato_common': ['scenarios/*.yaml', 'fastdds_profile.xml']},
+    package_data={'ato_common': ['scenarios/*.yaml']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
         ('share/' + PACKAGE_NAME, ['package.xml']),
@@ -16,8 +16,10 @@ setup(
     maintainer='ATO emulator maintainers',
     maintainer_email='ato-emulator@example.org',
     description=(
-        'Shared conventions of the ATO emulator: topic names, QoS, SI units and paper-unit '
-        'conversions, message conversion, train presets, line descriptions and scenarios.'
+        'The domain model of the ATO emulator, without ROS: SI units and paper-unit '
+        'conversions, train presets, lines, scenarios and TTOBench files, braking curves and '
+        "supervision tables, uncertainty, the controller's knowledge of its train, tracking "
+        'metrics, and the interface conventions (topic names, QoS as data).'
     ),
     license='Apache-2.0',
     tests_require=['pytest', 'hypothesis', 'numpy', 'PyYAML'],

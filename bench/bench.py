@@ -12,11 +12,11 @@
 2. Controller step time (p50, p99, max) of every law on the same scenario, offline.
 3. Plant simulation speed standalone (simulated seconds per CPU second, one core), driven period
    by period and given all its commands at once (``TrainSimulation.run_commands``).
-4. The offline closed loop (ato_bringup.offline, what campaigns run thousands of times): the
+4. The offline closed loop (ato_simulation.loop, what campaigns run thousands of times): the
    real-time factor of every law that applies to short_line (the PID and the adaptive laws) on
    one core, with the plan cached and with the planning included, and the planning time of
    every built-in scenario.
-5. Campaign throughput (ato_bringup.campaign): runs per minute of a small campaign with 1 and 2
+5. Campaign throughput (ato_campaigns.campaign): runs per minute of a small campaign with 1 and 2
    Dask workers and their ratio, and the engine's overhead per run (Dask, the time limit, the
    Parquet row) against the bare offline loop of the same runs.
 6. Planning: CPU time to plan each built-in scenario's target curve, ``fastest`` and
@@ -43,17 +43,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ato_bringup.compare import plan_jobs
-from ato_bringup.offline import clear_plan_cache, run_offline
-from ato_bringup.provenance import results_page_provenance, write_results_page
 from ato_bringup.runner import STEADY_WINDOW, prepare, process_cpu_s, run_lockstep
 from ato_bringup.stack import RUN_DIAGNOSTICS_PERIOD_S, StackConfig, executable_path
+from ato_campaigns.compare import plan_jobs
+from ato_campaigns.provenance import results_page_provenance, write_results_page
 from ato_common.domains import free_domain
-from ato_common.middleware import with_middleware_defaults
 from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
 from ato_common.trains import train_preset
 from ato_common.types import NS_PER_S, nanoseconds
 from ato_controller_node.laws import LAWS
+from ato_ros.middleware import with_middleware_defaults
+from ato_simulation.loop import run_offline
+from ato_simulation.plans import clear_plan_cache
 from recorder.bag import bag_info
 from train_plant_node.accuracy import accuracy_scenario, worst_speed_error
 from train_plant_node.simulation import TrainSimulation
@@ -290,7 +291,7 @@ LAW_BENCH_STEPS = 20_000
 def law_step_times(preferred_scenario: str) -> list[str]:
     """Step time (law plus host) of every registered law, offline, on the preferred scenario
     if the law applies to it, else on the first built-in scenario it applies to
-    (ato_bringup.compare decides applicability and the plant model): markdown table rows."""
+    (ato_campaigns.compare decides applicability and the plant model): markdown table rows."""
     jobs, _ = plan_jobs([preferred_scenario] + [s for s in builtin_scenarios()
                                                  if s != preferred_scenario])
     rows = ['| law | scenario, plant, rate | steps | p50 (us) | p99 (us) | max (us) |',
@@ -435,20 +436,20 @@ CAMPAIGN_ROUNDS = 3
 
 def _warm_up() -> None:
     """On each worker before the clock starts: imports and the plant kernels' compilation."""
-    from ato_bringup.offline import run_offline
+    from ato_simulation.loop import run_offline
     run_offline(load_scenario(DEFAULT_SCENARIO), 'pid', end_time_s=5.0)
 
 
 def _warm_up_run_process() -> None:
-    """On a worker: its run process (ato_bringup.run_process) started and warmed up."""
-    from ato_bringup.run_process import worker_run_process
+    """On a worker: its run process (ato_campaigns.run_process) started and warmed up."""
+    from ato_campaigns.run_process import worker_run_process
     worker_run_process().call(_warm_up, None)
 
 
 def _bare_loop(tasks) -> tuple[float, float]:
     """(wall s, CPU s) of the offline runs of ``tasks`` one after the other in this process,
     its heap frozen first (what the engine's workers do after their first run)."""
-    from ato_bringup.campaign_engine import offline_metrics
+    from ato_campaigns.engine import offline_metrics
     gc.collect()
     gc.freeze()
     started, cpu = time.perf_counter(), _cpu_s()
@@ -536,7 +537,7 @@ def campaign_throughput(scenario: str) -> list[str]:
     from one minute to the next by more than the overhead sought (the same runs measured twice
     in a row): the three are measured in ``CAMPAIGN_ROUNDS`` rounds, one after the other in a
     rotating order, and each figure is the median over the rounds."""
-    from ato_bringup.campaign_engine import parse_campaign
+    from ato_campaigns.engine import parse_campaign
     data = {'name': 'bench', 'seed': 1, 'draws': BENCH_CAMPAIGN_DRAWS, 'scenarios': [scenario],
             'laws': list(BENCH_CAMPAIGN_LAWS), 'uncertainty': 'default'}
     campaign = parse_campaign(data, 'bench', Path.cwd())
@@ -598,7 +599,7 @@ def _campaign_on(campaign, workers: int) -> tuple[float, float]:
     with ``workers`` workers, started and their run processes warmed up (a task on each worker,
     so in the thread that runs its runs) before the clock starts; CPU: this process (the client
     and the scheduler) and every worker with its run process."""
-    from ato_bringup.campaign_engine import open_client, run_campaign
+    from ato_campaigns.engine import open_client, run_campaign
     client, cluster = open_client(workers=workers)
     with tempfile.TemporaryDirectory() as out, cluster, client:
         client.gather([client.submit(_warm_up_run_process, workers=[address], pure=False,
@@ -662,7 +663,7 @@ def measure(args: argparse.Namespace) -> int:
         'overhead, CPU |', '|---|---|---|---|---|---|---|']
     offline_section = [
         '## Offline closed loop', '',
-        f'`ato_bringup.offline.run_offline` (what `make compare` and the campaigns run) of every '
+        f'`ato_simulation.loop.run_offline` (what `make compare` and the campaigns run) of every '
         f'law that applies to `{OFFLINE_SCENARIO}`, the whole run, at the rate `make compare` '
         'gives it, the scenario parsed once (as a campaign\'s worker parses it); real-time '
         'factor = simulated time / CPU time of one core, median of 3. Plan '

@@ -18,6 +18,12 @@ fi
 if [ -f "$_ato_root/ros_ws/install/setup.bash" ]; then
   set +u; . "$_ato_root/ros_ws/install/setup.bash"; set -u 2>/dev/null || true
 fi
+# The repository's tooling (tools/ato_tools: the docs' reference pages, the reproduction page):
+# not a package of the suite, importable from the repository.
+case ":${PYTHONPATH:-}:" in
+  *":$_ato_root/tools:"*) ;;
+  *) export PYTHONPATH="$_ato_root/tools${PYTHONPATH:+:$PYTHONPATH}" ;;
+esac
 # Keep DDS traffic on this machine unless the user asked otherwise.
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
 unset _ato_root _ato_venv

@@ -2,7 +2,7 @@
 
 import mkdocs_gen_files
 
-from ato_bringup.reference_pages import PAGES
+from ato_tools.reference_pages import PAGES
 
 for path, page in PAGES.items():
     with mkdocs_gen_files.open(path, 'w') as handle:

@@ -56,7 +56,8 @@ fi
 # what runs next (`make demo`, `python -m pytest`, `ros2 run`) without a rebuild. Only what
 # colcon itself installs needs one: package metadata, entry points, data files, and new files
 # among them, so the stamp covers exactly those (and the list of every file's name).
-packages=(ato_common train_plant_node profile_node ato_controller_node ato_bringup recorder)
+# The suite's packages: the links in ros_ws/src (one list, which the house tests read too).
+mapfile -t packages < <(find ros_ws/src -mindepth 1 -maxdepth 1 -type l -printf '%f\n' | sort)
 build_inputs() {
   find "${packages[@]}" -type f -not -path '*/__pycache__/*' -not -path '*/test/*' -print | sort
   find "${packages[@]}" -maxdepth 1 -type f \( -name setup.py -o -name setup.cfg -o -name package.xml \) \

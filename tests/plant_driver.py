@@ -2,7 +2,7 @@
 
 from sensor_msgs.msg import JointState
 
-from ato_common.ros import qos_profile, to_time, topic
+from ato_ros.messages import qos_profile, to_time, topic
 
 
 def plant_status(monitor):

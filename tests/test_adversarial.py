@@ -163,7 +163,7 @@ def test_wrongly_stamped_commands_are_counted_and_the_watchdog_stops_the_train(
         # then every command stamped 1000 s ahead of its step
         from sensor_msgs.msg import JointState
 
-        from ato_common.ros import to_time
+        from ato_ros.messages import to_time
         moving = monitor.samples[300 * PERIOD_NS].speeds[0]
         assert moving > 1.0
         for k in range(300, 1500):
@@ -218,7 +218,7 @@ def test_wrongly_stamped_commands_in_real_time_are_dropped_and_counted(offset_s,
     now or at 0. Nothing is applied, every one is counted, the watchdog brakes."""
     from sensor_msgs.msg import JointState
 
-    from ato_common.ros import to_time
+    from ato_ros.messages import to_time
 
     config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path / 'logs',
                          lockstep=False)

@@ -8,7 +8,7 @@ import pytest
 from plant_driver import ControllerStandIn, plant_status
 
 from ato_bringup.stack import Stack, StackConfig
-from ato_common.ros import qos_profile, to_time, topic
+from ato_ros.messages import qos_profile, to_time, topic
 
 
 def test_lockstep_watchdog_brakes_on_invalid_commands_and_recovers(tmp_path, domain_id):
@@ -119,8 +119,8 @@ def test_controller_never_commands_nan_on_a_failed_sensor(tmp_path, domain_id):
     from rosgraph_msgs.msg import Clock
     from trajectory_msgs.msg import JointTrajectory
 
-    from ato_common.ros import state_to_msg
     from ato_common.types import TrainState
+    from ato_ros.messages import state_to_msg
 
     config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path)
     with Stack(config) as stack:

@@ -13,7 +13,8 @@ from sensor_msgs.msg import JointState
 
 from ato_bringup.runner import RunFailed, run_lockstep
 from ato_bringup.stack import EXECUTABLES, Stack, StackConfig, executable_path
-from ato_common.ros import status_in_namespace, to_time
+from ato_common.conventions import status_in_namespace
+from ato_ros.messages import to_time
 
 PERIOD_NS = 100_000_000
 

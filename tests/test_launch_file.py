@@ -144,7 +144,7 @@ def test_composed_starts_one_process_with_a_section_per_node(launch_file):
 
 def test_the_nodes_get_the_middleware_defaults_unless_the_user_set_them(launch_file,
                                                                           monkeypatch):
-    from ato_common.middleware import DEFAULTS, FASTDDS_PROFILE
+    from ato_ros.middleware import DEFAULTS, FASTDDS_PROFILE
 
     def environment():
         return {e.kwargs['name']: e.kwargs['value']

@@ -15,8 +15,8 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from ato_bringup.runner import run_lockstep
 from ato_bringup.stack import Stack, StackConfig, executable_path
 from ato_common.conventions import TOPICS
-from ato_common.middleware import with_middleware_defaults
-from ato_common.ros import qos_profile
+from ato_ros.messages import qos_profile
+from ato_ros.middleware import with_middleware_defaults
 from recorder.foxglove_client import FoxgloveClient, message_data
 from recorder.live import served_url
 
@@ -167,7 +167,7 @@ def test_an_observation_topic_is_sampled_for_a_sampling_subscriber_only(domain_i
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
     from std_msgs.msg import Float64
 
-    from ato_common.ros import SAMPLED_PERIOD_S, SUBSCRIBERS_REFRESH_S, Observation
+    from ato_ros.publishing import SAMPLED_PERIOD_S, SUBSCRIBERS_REFRESH_S, Observation
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id)
     try:

@@ -16,12 +16,12 @@ import pytest
 from plant_driver import ControllerStandIn, plant_status
 from sensor_msgs.msg import JointState
 
-from ato_bringup.offline import run_offline
 from ato_bringup.runner import run_lockstep
 from ato_bringup.stack import Stack, StackConfig
 from ato_common.braking_curves import RunSupervision
-from ato_common.ros import diagnostic_status, to_time
 from ato_common.scenario import load_scenario
+from ato_ros.messages import diagnostic_status, to_time
+from ato_simulation.loop import run_offline
 from profile_node.replan import CHECK_PERIOD_S
 from profile_node.timetable import plan_summary
 

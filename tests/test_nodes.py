@@ -169,7 +169,7 @@ def test_multi_car_plant_publishes_cars_actuators_failures_and_takes_injections(
     from sensor_msgs.msg import JointState
     from trajectory_msgs.msg import JointTrajectory
 
-    from ato_common.ros import from_time, qos_profile, topic
+    from ato_ros.messages import from_time, qos_profile, topic
     scenario = tmp_path / 'multi.yaml'
     scenario.write_text(MULTI_CAR_SCENARIO)
     config = StackConfig(scenario=str(scenario), domain_id=domain_id, log_dir=tmp_path)

@@ -12,8 +12,8 @@ from std_msgs.msg import Float64
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_bringup.stack import EXECUTABLES, Stack, StackConfig, executable_path
-from ato_common.ros import from_time, qos_profile, reference_from_msg, to_time, topic
 from ato_common.scenario import load_scenario
+from ato_ros.messages import from_time, qos_profile, reference_from_msg, to_time, topic
 from profile_node.planner import plan_reference
 
 PERIOD_NS = 100_000_000

@@ -14,7 +14,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from ato_bringup.runner import run_lockstep
 from ato_bringup.stack import Stack, StackConfig, executable_path
-from ato_common.ros import from_time
+from ato_ros.messages import from_time
 from recorder.bag import bag_file, bag_info, read_messages, recover
 from recorder.report import load_run, run_metrics
 
@@ -238,8 +238,8 @@ def test_a_malformed_step_record_is_reported_and_the_recording_goes_on(tmp_path,
     from rclpy.serialization import serialize_message
     from std_msgs.msg import UInt8MultiArray
 
-    from ato_common.ros import qos_profile, topic
-    from ato_common.step_records import Bundle
+    from ato_ros.messages import qos_profile, topic
+    from ato_ros.step_records import Bundle
 
     state = JointTrajectory()
     state.header.stamp.sec = 7
@@ -293,8 +293,8 @@ def test_the_recorder_acknowledges_step_records_once_they_are_in_its_file(tmp_pa
     from rclpy.serialization import serialize_message
     from std_msgs.msg import Header, UInt8MultiArray
 
-    from ato_common.ros import qos_profile, topic
-    from ato_common.step_records import ACK_PERIOD_S, Bundle
+    from ato_ros.messages import qos_profile, topic
+    from ato_ros.step_records import ACK_PERIOD_S, Bundle
 
     state = JointTrajectory()
     with Stack(StackConfig(scenario='short_line', domain_id=domain_id,
@@ -335,7 +335,7 @@ def test_a_recorder_that_falls_behind_holds_the_lockstep_and_loses_nothing(tmp_p
     as a SIGKILL would leave it) is within the lead of the last step published."""
     import shutil
 
-    from ato_common.step_records import LEAD_S
+    from ato_ros.step_records import LEAD_S
 
     # long enough that the loop (a few seconds of wall time) is under way at the SIGSTOP
     config = StackConfig(scenario='short_line', domain_id=domain_id, end_time_s=900.0,

@@ -17,7 +17,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from ato_bringup.runner import run_lockstep
 from ato_bringup.stack import Stack, StackConfig, executable_path
-from ato_common.ros import from_time
+from ato_ros.messages import from_time
 from recorder.bag import bag_info, read_messages, recover
 from recorder.rosbag2_format import cdr_stamp_ns, type_hash
 

@@ -11,7 +11,7 @@ from ato_bringup.stack import Stack, StackConfig
 HANGING_TEARDOWN = textwrap.dedent('''
     import sys, time
     from rclpy.node import Node
-    from ato_common import ros
+    from ato_ros import lifecycle as ros
 
     ros.TEARDOWN_LIMIT_S = 0.5
 

@@ -1,4 +1,4 @@
-"""The per-step topics go out as bytes packed by ato_common.wire and are taken raw by the loop;
+"""The per-step topics go out as bytes packed by ato_ros.wire and are taken raw by the loop;
 an ordinary subscriber (``ros2 topic echo``, a node of the user's) must still see ordinary,
 standard messages with the suite's content."""
 
@@ -11,7 +11,7 @@ from std_msgs.msg import Float64
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_bringup.stack import Stack, StackConfig
-from ato_common.ros import (
+from ato_ros.messages import (
     command_from_msg,
     from_time,
     qos_profile,

@@ -7,7 +7,7 @@ This is what ROS 2 composition does for C++ components, done for the suite's Pyt
 rclcpp component containers load only C++ components (shared libraries with a registered
 ``rclcpp_components`` factory), so rclpy nodes cannot go into one. The three nodes are the same
 classes the separate executables run, built in one rclpy context and spun by one executor
-(``ato_common.ros.run_nodes``); their messages still go through the middleware (rclpy has no
+(``ato_ros.lifecycle.run_nodes``); their messages still go through the middleware (rclpy has no
 intra-process transport), as standard messages on the same topics, but a step's messages no
 longer wake three processes. Each node keeps its own name, parameters, services and
 diagnostics: per-node parameters come from a parameters file with a section per node
@@ -22,7 +22,7 @@ gives the same state sequence, bit for bit, as the same run in three processes
 
 from __future__ import annotations
 
-from ato_common.ros import node_usage, run_nodes
+from ato_ros.lifecycle import node_usage, run_nodes
 
 NODES = ('train_plant_node', 'profile_node', 'ato_controller_node')
 

@@ -10,9 +10,8 @@ for bit in lockstep), faster. The run's monitor takes the true state and the ref
 profile streamed in batches, not per message, and the diagnostics (ato_bringup.stack.LEAN), so
 the summary measures the tracking against the curve the train was given, replanned or not.
 
-Without --controller the law is the one that ``make compare`` ranked best on jinan_xuzhou
-(runs/compare/compare.json, see ato_bringup.compare), else pid; a ranked law that cannot drive
-the scenario's train falls back to pid, with the reason printed.
+Without --controller the law is the PID baseline (``DEFAULT_CONTROLLER``): a run does not depend
+on what an earlier comparison left on this machine.
 
 The summary ends with what went wrong (ato_common.run_events): ATP interventions, watchdog
 brakes, missed journey windows and stopping errors beyond the platform tolerance, each with its
@@ -35,14 +34,12 @@ import sys
 from datetime import datetime
 from pathlib import Path
 
-from ato_bringup.compare import DEFAULT_DEMO_LAW, DEFAULT_OUT, ranked_demo_law
 from ato_bringup.runner import RunFailed, run_lockstep
 from ato_bringup.stack import RUN_DIAGNOSTICS_PERIOD_S, StackConfig
 from ato_common.domains import NoFreeDomain, free_domain
-from ato_common.knowledge import knowledge_of
 from ato_common.metrics import format_summary
 from ato_common.run_events import PLATFORM_TOLERANCE_M, final_exit_code
-from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
+from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios
 from ato_common.validation import ConfigError
 from ato_controller_node.laws import LAWS
 from recorder.bag import BagError
@@ -60,17 +57,17 @@ def positive_seconds(text: str) -> float:
     return value
 
 
+#: the law of a run that names none: the PID baseline
+DEFAULT_CONTROLLER = 'pid'
+
+
 def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--scenario', default=DEFAULT_SCENARIO,
                         help=f"built-in ({', '.join(builtin_scenarios())}) or a YAML file")
-    parser.add_argument('--controller', default=None, choices=sorted(LAWS),
-                        help='the law (default: the best on jinan_xuzhou in '
-                             f'{DEFAULT_OUT / "compare.json"} if present, else '
-                             f'{DEFAULT_DEMO_LAW})')
-    parser.add_argument('--ranking', type=Path, default=DEFAULT_OUT / 'compare.json',
-                        help='the comparison whose best law runs when --controller is not given')
+    parser.add_argument('--controller', default=DEFAULT_CONTROLLER, choices=sorted(LAWS),
+                        help='the law (default: %(default)s, the baseline)')
     parser.add_argument('--domain-id', type=int, default=None,
                         help='ROS_DOMAIN_ID of the run (default: a free one, that no other run '
                              'or test session on this machine holds; printed at the start)')
@@ -105,22 +102,6 @@ def parse_args(argv=None) -> argparse.Namespace:
     return args
 
 
-def default_controller(scenario_name: str, ranking: Path) -> tuple[str, str]:
-    """(law, why): the ranked law if it can drive the scenario's train, else the default."""
-    law, why = ranked_demo_law(ranking)
-    if law == DEFAULT_DEMO_LAW:
-        return law, why
-    try:
-        scenario = load_scenario(scenario_name)
-    except ConfigError:
-        return law, why  # the run reports the scenario's error
-    knowledge = knowledge_of(scenario)
-    reason = LAWS[law](knowledge, 1.0 / scenario.run.controller_rate_hz).fits(knowledge)
-    if reason:
-        return DEFAULT_DEMO_LAW, f'default ({law}, {why}, cannot run here: {reason})'
-    return law, why
-
-
 def unique_run_dir(parent: Path, name: str) -> Path:
     """``parent/name``, or ``parent/name-2``, ``-3``... : a folder this call created, so two runs
     started in the same second never share one (mkdir is atomic)."""
@@ -148,9 +129,6 @@ def main(argv=None) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.controller is None:
-        args.controller, why = default_controller(args.scenario, args.ranking)
-        print(f'controller {args.controller}: {why}', file=sys.stderr)
     stamp = datetime.now().strftime('%Y%m%d-%H%M%S')
     scenario_label = Path(args.scenario).stem
     log_dir = args.log_dir or unique_run_dir(Path('runs'),

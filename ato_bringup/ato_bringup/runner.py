@@ -10,12 +10,12 @@ from typing import Callable
 
 import numpy as np
 
-from ato_bringup.offline import cached_plan, run_end_time_s, stop_samples
 from ato_bringup.stack import Sample, Stack, StackConfig
 from ato_common.metrics import RunMetrics, compute_metrics
 from ato_common.run_events import PLATFORM_TOLERANCE_M, RunEvents, run_events, stations_of
 from ato_common.scenario import Scenario, load_scenario
 from ato_common.types import NS_PER_S
+from ato_simulation.plans import cached_plan, run_end_time_s, stop_samples
 
 
 class RunFailed(RuntimeError):

@@ -35,20 +35,19 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from ato_common import wire
-from ato_common.conventions import normalised_namespace, stack_remaps
-from ato_common.middleware import with_middleware_defaults
-from ato_common.ros import (
+from ato_common.conventions import normalised_namespace, stack_remaps, status_in_namespace
+from ato_ros import wire
+from ato_ros.lifecycle import make_executor
+from ato_ros.messages import (
     MessageError,
     decoded,
     from_time,
-    make_executor,
     qos_profile,
     reference_from_msg,
     state_from_msg,
-    status_in_namespace,
     topic,
 )
+from ato_ros.middleware import with_middleware_defaults
 
 EXECUTABLES = {
     'plant': ('train_plant_node', 'train_plant_node'),
@@ -144,7 +143,7 @@ class Monitor:
                              f'and only topics of {FULL}, the per-step ones of them in batches')
         self.counts = dict.fromkeys(self.watch, 0)
         n = self.node
-        # The per-step topics are taken as bytes and read by ato_common.wire (the monitor must
+        # The per-step topics are taken as bytes and read by ato_ros.wire (the monitor must
         # cost the loop little: no rclpy message objects); the diagnostics as messages.
         callbacks = {'state': (JointTrajectory, self.on_state, True),
                      'reference': (JointTrajectory, self.on_reference, True),
@@ -274,7 +273,7 @@ class Stack:
         self.context = rclpy.Context()
         self.env = dict(os.environ, ROS_DOMAIN_ID=str(config.domain_id), PYTHONUNBUFFERED='1')
         self.env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-        # The stack runs on one host: shared memory only, short heartbeats (ato_common.middleware)
+        # The stack runs on one host: shared memory only, short heartbeats (ato_ros.middleware)
         self.env = with_middleware_defaults(self.env)
         self.namespace = normalised_namespace(config.namespace)
         rclpy.init(context=self.context, domain_id=config.domain_id)
@@ -295,7 +294,7 @@ class Stack:
         # Nobody publishes into the loop before the observers (the monitor, the recorder) are
         # matched: they must see every step. The monitor subscribes to the topics it watches,
         # the recorder to the step records and /diagnostics (it takes the per-step topics from
-        # the step records: ato_common.step_records). The profile and the controller are driven
+        # the step records: ato_ros.step_records). The profile and the controller are driven
         # by the stamps of /clock and of the messages in lockstep: they need no use_sim_time
         # (which would cost each a /clock subscription taking every step).
         recorder = int(c.record_to is not None)

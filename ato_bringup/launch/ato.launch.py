@@ -19,7 +19,7 @@ the node and its exit code, and ``ros2 launch`` then exits with 1 (the handler r
 :class:`NodeFailed`: launch logs an exception in a handler as an error, shuts everything down
 and returns 1, the only way a launch file sets its exit code).
 
-The nodes get the suite's middleware settings (``ato_common.middleware``: Fast DDS over shared
+The nodes get the suite's middleware settings (``ato_ros.middleware``: Fast DDS over shared
 memory only, a reliable writer's heartbeat every 0.1 s) unless the environment sets its own.
 """
 
@@ -42,8 +42,8 @@ from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
 from ato_common.conventions import normalised_namespace, stack_remaps
-from ato_common.middleware import middleware_defaults
 from ato_controller_node.laws import LAWS
+from ato_ros.middleware import middleware_defaults
 
 NODES = ('ato_controller_node', 'profile_node', 'train_plant_node')
 
@@ -127,7 +127,7 @@ def stack(context):
 
 def generate_launch_description():
     # The suite's middleware settings for the nodes on one host, unless the user set their own
-    # (ato_common.middleware: shared memory only, heartbeats every 0.1 s).
+    # (ato_ros.middleware: shared memory only, heartbeats every 0.1 s).
     environment = [SetEnvironmentVariable(name, value)
                    for name, value in middleware_defaults(os.environ).items()]
     return LaunchDescription([

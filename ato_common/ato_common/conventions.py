@@ -5,7 +5,7 @@ Names of the suite's own topics are relative, so a whole stack can be pushed int
 A stack pushed into a namespace beside others also remaps ``/clock`` into it
 (:func:`stack_remaps`), since every ``use_sim_time`` node follows whatever ``/clock`` it hears.
 The QoS is described here as plain data (no rclpy import) and turned into rclpy profiles by
-:func:`ato_common.ros.qos_profile`.
+:func:`ato_ros.messages.qos_profile`.
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ ACKNOWLEDGEMENTS = QosSpec(reliable=True, transient_local=False, depth=10)
 # How often each topic is published. Per lockstep step the loop needs only the measured state,
 # the reference, the command and /clock; on a 2-core machine every other per-step message costs
 # CPU in rclpy (about 0.1 ms per publish and per take), so the observation topics are published
-# only while someone subscribes (``ato_common.ros.Observation``): a recorder or any subscriber
+# only while someone subscribes (``ato_ros.publishing.Observation``): a recorder or any subscriber
 # that keeps its messages (reliable) gets every step, one that only samples (best effort: the
 # live view) gets the latest at most every 0.02 s of wall time, and a run nobody
 # watches does not pay for them.
@@ -134,7 +134,7 @@ TOPICS = {
                           'train_plant_node, profile_node, ato_controller_node', 'recorder',
                           'per-step messages of a node bundled for the recorders (the bytes of '
                           'each message of STEP_RECORDED it published, with its topic, log and '
-                          'publish times; layout in ato_common.step_records)',
+                          'publish times; layout in ato_ros.step_records)',
                           rate='every 0.4 s of simulated time (at most 0.05 s of wall time) '
                           'while a recorder subscribes'),
     'recorded': Topic('ato/recorded', 'std_msgs/msg/Header', ACKNOWLEDGEMENTS, 's',
@@ -142,13 +142,13 @@ TOPICS = {
                       "a recorder's acknowledgement of the namespace's step records: stamp = "
                       'every step record stamped up to it is in its file, frame_id = the '
                       "recorder's node name; in lockstep the plant runs at most "
-                      'recorder_lead_s past the oldest acknowledgement (ato_common.ros.'
+                      'recorder_lead_s past the oldest acknowledgement (ato_ros.'
                       'RecorderLead)',
                       rate='every 0.2 s of simulated time of step records written'),
 }
 
 #: The per-step topics the loop nodes put in their step records (``step_records``): the recorder
-#: takes them from there instead of subscribing to each (ato_common.step_records).
+#: takes them from there instead of subscribing to each (ato_ros.step_records).
 STEP_RECORDED = ('clock', 'state', 'state_measured', 'reference', 'distance_to_go',
                  'permitted_speed', 'command', 'actuators_commanded', 'actuators_applied')
 
@@ -175,3 +175,16 @@ def normalised_namespace(namespace: str) -> str:
             raise ValueError(f'namespace {namespace!r}: each part must start with a letter or _ '
                              'and hold only letters, digits and _')
     return ns
+
+
+def status_in_namespace(name: str, namespace: str) -> str | None:
+    """A status ``name`` as its node's own (``train_plant_node: simulation``) if it comes from a
+    node of ``namespace`` (``/train1``, ``/`` the root), else None."""
+    prefix = namespace.strip('/')
+    node_part = name.split(':', 1)[0]
+    if not prefix:
+        return name if '/' not in node_part else None
+    if not name.startswith(prefix + '/'):
+        return None
+    relative = name[len(prefix) + 1:]
+    return relative if '/' not in relative.split(':', 1)[0] else None

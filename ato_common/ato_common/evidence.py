@@ -1,7 +1,7 @@
 """Evidence for a paper's claim, as a reproduction test measured it.
 
 A reproduction test calls :func:`record` with the paper's figure and the suite's, once its
-assertions have passed; ``make reproduce`` (``ato_bringup.reproduction``) runs those tests with
+assertions have passed; ``make reproduce`` (``ato_tools.reproduction``) runs those tests with
 :data:`LOG_VARIABLE` naming a file and writes the "paper versus suite" page of the docs
 (``docs/results/reproduction.md``) from what they recorded. So every figure on that page is one
 a test measured in that run, never a typed one. Without the variable, :func:`record` writes

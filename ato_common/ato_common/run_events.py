@@ -16,7 +16,7 @@ from ato_common.metrics import RunMetrics
 from ato_common.scenario import Scenario
 
 #: the platform-stop tolerance, m: the usual ATO accuracy requirement (the comparison's ranking
-#: constraint, ``ato_bringup.compare.STOP_ERROR_LIMIT_M``, is the same figure)
+#: constraint, ``ato_campaigns.compare.STOP_ERROR_LIMIT_M``, is the same figure)
 PLATFORM_TOLERANCE_M = 0.5
 #: the plant's diagnostic status (train_plant_node.node)
 PLANT_STATUS = 'train_plant_node: simulation'

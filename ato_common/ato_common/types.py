@@ -1,5 +1,5 @@
 """Small typed records exchanged between the cores; the ROS messages are converted to and from
-these in :mod:`ato_common.ros`. All quantities in SI; time stamps in integer nanoseconds so that
+these in :mod:`ato_ros`. All quantities in SI; time stamps in integer nanoseconds so that
 lockstep time is exact."""
 
 from __future__ import annotations

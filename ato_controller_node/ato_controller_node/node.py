@@ -31,35 +31,29 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
-from ato_common import wire
 from ato_common.identity import scenario_identity
 from ato_common.knowledge import knowledge_of
-from ato_common.params import WAIT_FOR_DIAGNOSTICS_READERS, Param, ParameterTable
-from ato_common.ros import (
-    MessageError,
-    Publishing,
-    RunNodeHooks,
-    decoded,
-    diagnostic_status,
-    first_unmatched,
-    freeze_startup_objects,
-    node_usage,
-    qos_profile,
-    reference_from_msg,
-    run_node,
-    state_from_msg,
-    status_name,
-    step_recorder,
-    to_time,
-    topic,
-    watch_plant_identity,
-)
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import Command, Reference, ReferencePoint, seconds
 from ato_common.validation import ConfigError
 from ato_controller_node.host import ControllerHost, LawRejected
 from ato_controller_node.laws import LAWS
 from ato_controller_node.laws.base import setting_fields, validated_settings
+from ato_ros import wire
+from ato_ros.lifecycle import RunNodeHooks, freeze_startup_objects, node_usage, run_node
+from ato_ros.messages import (
+    MessageError,
+    decoded,
+    diagnostic_status,
+    qos_profile,
+    reference_from_msg,
+    state_from_msg,
+    status_name,
+    to_time,
+    topic,
+)
+from ato_ros.params import WAIT_FOR_DIAGNOSTICS_READERS, Param, ParameterTable
+from ato_ros.publishing import Publishing, first_unmatched, step_recorder, watch_plant_identity
 
 NODE_PARAMS = (
     Param('scenario', DEFAULT_SCENARIO, 'built-in scenario name or path to a scenario YAML file '
@@ -158,11 +152,11 @@ class AtoControllerNode(RunNodeHooks, Node):
 
         self.command_pub = self.create_publisher(JointState, topic('command').name,
                                                  qos_profile(topic('command').qos))
-        # The commands for the recorders, bundled (ato_common.step_records).
+        # The commands for the recorders, bundled (ato_ros.step_records).
         self.records = step_recorder(self, self.publishing)
         self.diag_pub = self.create_publisher(DiagnosticArray, topic('diagnostics').name,
                                               qos_profile(topic('diagnostics').qos))
-        # The per-step inputs are taken as bytes and read by ato_common.wire (no rclpy message
+        # The per-step inputs are taken as bytes and read by ato_ros.wire (no rclpy message
         # objects); the command goes out the same way.
         self.create_subscription(JointTrajectory, topic('state_measured').name, self.on_state,
                                  qos_profile(topic('state_measured').qos), raw=True)

@@ -1,7 +1,7 @@
 """Luo & Xu: Theorem 1 on its scenario, and Theorem 2, the projection law (24) onto the prior
 set S of eq (20) with the Table 2 prior: unit tests of the projection. The closed loops on
 luo_xu_crh3 under the time-varying resistance of eq (34) are in
-ato_bringup/test/test_luo_xu_theorems_closed_loop.py."""
+ato_simulation/test/test_luo_xu_theorems_closed_loop.py."""
 
 import pytest
 

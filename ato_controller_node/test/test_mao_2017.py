@@ -4,7 +4,7 @@ switch, saturation and projection, and the paper's result on the paper's own mod
 Two reproductions: one on the paper's plant (eq 8: piecewise-constant modes, four motors, the
 failure pattern of Section 4) integrated here, exactly what the paper simulates; one on the
 suite's plant with the built-in scenario mao_2017_modes (the same modes and failure, the
-preset's traction limits), in ato_bringup/test/test_mao_2017_suite_plant.py."""
+preset's traction limits), in ato_simulation/test/test_mao_2017_suite_plant.py."""
 
 from __future__ import annotations
 

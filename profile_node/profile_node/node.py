@@ -56,34 +56,33 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64, Header
 from trajectory_msgs.msg import JointTrajectory
 
-from ato_common import wire
 from ato_common.identity import scenario_identity
-from ato_common.params import WAIT_FOR_DIAGNOSTICS_READERS, Param, ParameterTable
-from ato_common.ros import (
-    MessageError,
-    Observation,
-    Publishing,
-    RunNodeHooks,
-    decoded,
-    diagnostic_status,
-    first_unmatched,
-    freeze_startup_objects,
-    from_duration,
-    from_time,
-    node_usage,
-    qos_profile,
-    reference_to_msg,
-    run_node,
-    state_from_msg,
-    status_name,
-    step_recorder,
-    to_time,
-    topic,
-    watch_plant_identity,
-)
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import Reference, nanoseconds, seconds
 from ato_common.validation import ConfigError
+from ato_ros import wire
+from ato_ros.lifecycle import RunNodeHooks, freeze_startup_objects, node_usage, run_node
+from ato_ros.messages import (
+    MessageError,
+    decoded,
+    diagnostic_status,
+    from_duration,
+    from_time,
+    qos_profile,
+    reference_to_msg,
+    state_from_msg,
+    status_name,
+    to_time,
+    topic,
+)
+from ato_ros.params import WAIT_FOR_DIAGNOSTICS_READERS, Param, ParameterTable
+from ato_ros.publishing import (
+    Observation,
+    Publishing,
+    first_unmatched,
+    step_recorder,
+    watch_plant_identity,
+)
 from profile_node.planner import RESUME_GAP_M, Plan, plan_reference
 from profile_node.replan import CHECK_PERIOD_S, LockstepPlans, Replanner
 from profile_node.timetable import plan_summary
@@ -173,7 +172,7 @@ class ProfileNode(RunNodeHooks, Node):
                                              qos_profile(topic('distance_to_go').qos))
         self.permitted_pub = self.create_publisher(Float64, topic('permitted_speed').name,
                                                    qos_profile(topic('permitted_speed').qos))
-        # The per-step messages for the recorders, bundled (ato_common.step_records).
+        # The per-step messages for the recorders, bundled (ato_ros.step_records).
         self.records = step_recorder(self, self.publishing)
         self.dtg_observation = Observation(self, self.dtg_pub)
         self.permitted_observation = Observation(self, self.permitted_pub)
@@ -255,7 +254,7 @@ class ProfileNode(RunNodeHooks, Node):
         return Reference(stamp_ns, tuple(at(t + i * step) for i in range(count + 1)))
 
     def publish(self, stamp_ns: int) -> None:
-        # as CDR bytes packed from a template (ato_common.wire): a standard JointTrajectory
+        # as CDR bytes packed from a template (ato_ros.wire): a standard JointTrajectory
         data = wire.encode_reference(self.reference_at(stamp_ns))
         self.publishing(self.reference_pub, data)
         self.records.add(self.reference_pub, stamp_ns, data)

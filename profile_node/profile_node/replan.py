@@ -21,7 +21,7 @@ control instant at or after each multiple of the check period, and a decision ma
 state of check instant t_c applies to the references from t_c + ``LAG_PERIODS`` control periods
 on; the new plan starts there, from the measured position carried on at the measured speed. The
 decisions are a function of the measured states at the check instants only, so a lockstep run
-is reproducible bit for bit, and the offline loop (``ato_bringup.offline``, given a check
+is reproducible bit for bit, and the offline loop (``ato_simulation.loop``, given a check
 period) makes the same decisions as the node.
 """
 

@@ -35,8 +35,8 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 
-from ato_common.ros import RunNodeHooks, freeze_startup_objects, run_node
 from ato_common.validation import ConfigError
+from ato_ros.lifecycle import RunNodeHooks, freeze_startup_objects, run_node
 from recorder.definitions import DefinitionNotFound, full_definition
 from recorder.node import logs_at_stamp
 from recorder.ros_io import message_class, subscription_qos

@@ -24,11 +24,11 @@ once per message and, for the message info, would have to be rclpy's single-thre
 in batches costs a fraction of that, which matters because the recorder shares the machine with
 the loop it records. A message is on disk at most a take period plus a flush period after it was
 received; SIGINT and SIGTERM take what is left before closing. The loop nodes' step records
-(``ato_common.step_records``) are taken by the executor as they come: once what is written of a
+(``ato_ros.step_records``) are taken by the executor as they come: once what is written of a
 namespace's records has moved on by ``ACK_PERIOD_S`` of their stamps, the file is flushed and
 the stamp acknowledged on ``recorded`` in that namespace, and in lockstep the plant waits for
 that acknowledgement when it is more than its ``recorder_lead_s`` ahead (back-pressure:
-``ato_common.ros.RecorderLead``). ``--background`` runs the recorder at the lowest CPU priority,
+``ato_ros.publishing.RecorderLead``). ``--background`` runs the recorder at the lowest CPU priority,
 on the CPU the loop leaves (what ``run_scenario`` does in lockstep).
 
 SIGINT and SIGTERM close the file properly; a SIGKILL loses at most the last take and flush
@@ -54,10 +54,11 @@ from std_msgs.msg import Header
 from std_msgs.msg import UInt8MultiArray as STEP_RECORDS_MSG
 
 from ato_common.conventions import TOPICS
-from ato_common.ros import RunNodeHooks, freeze_startup_objects, qos_profile, run_node
-from ato_common.step_records import Written, decode_bundle, namespace_of, step_recorded
 from ato_common.validation import ConfigError
-from ato_common.wire import MessageError, encode_header
+from ato_ros.lifecycle import RunNodeHooks, freeze_startup_objects, run_node
+from ato_ros.messages import qos_profile
+from ato_ros.step_records import Written, decode_bundle, namespace_of, step_recorded
+from ato_ros.wire import MessageError, encode_header
 from recorder.bag import (
     DEFAULT_FLUSH_PERIOD_LOG_S,
     DEFAULT_FLUSH_PERIOD_S,
@@ -118,7 +119,7 @@ class RecorderNode(RunNodeHooks, Node):
         self.publish_time = publish_time
         self.wanted = set(topics) if topics else None
         self.subscribed: dict[str, object] = {}
-        # ato_common.step_records: the per-step topics of a namespace whose loop nodes publish
+        # ato_ros.step_records: the per-step topics of a namespace whose loop nodes publish
         # step records are taken from those, not subscribed to one by one
         self.step_records = step_records
         self.bundled: set[str] = set()  # namespaces whose step records are subscribed to
@@ -220,7 +221,7 @@ class RecorderNode(RunNodeHooks, Node):
                 self.taker.destroy_subscription(subscription)
                 del self.subscribed[other]
         # Taken as they come (an executor's subscription, not the take period's): in lockstep
-        # the plant waits for their acknowledgement (ato_common.ros.RecorderLead).
+        # the plant waits for their acknowledgement (ato_ros.publishing.RecorderLead).
         written = self.written[namespace] = Written()
         acknowledgements = self.create_publisher(
             Header, namespace.rstrip('/') + '/' + RECORDED.name, qos_profile(RECORDED.qos))

@@ -25,7 +25,8 @@ from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 
-from ato_common.ros import RunNodeHooks, make_executor, tear_down, to_time
+from ato_ros.lifecycle import RunNodeHooks, make_executor, tear_down
+from ato_ros.messages import to_time
 from recorder.bag import BagError, bag_info, read_messages
 from recorder.ros_io import message_class, replay_qos
 from recorder.rosbag2_format import FormatError
@@ -57,7 +58,7 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
 
 class ReplayNode(RunNodeHooks, Node):
     """The replay's node. It plays in :func:`main`'s own loop rather than under run_node, but
-    ends like every node of the suite (:func:`ato_common.ros.tear_down`) and declares the same
+    ends like every node of the suite (:func:`ato_ros.lifecycle.tear_down`) and declares the same
     hooks: ``finished`` once the recording has been played, ``exit_code`` 2 when it cannot be
     read; it writes nothing, so ``close_outputs`` is the default."""
 

@@ -35,10 +35,9 @@ import numpy as np
 from mcap_ros2.decoder import DecoderFactory
 
 from ato_common import units
-from ato_common.conventions import TOPICS
+from ato_common.conventions import TOPICS, status_in_namespace
 from ato_common.identity import identity_mismatch, parse_identity, scenario_identity
 from ato_common.metrics import RunMetrics, StopSample, compute_metrics, format_summary
-from ato_common.ros import status_in_namespace
 from ato_common.run_events import PLATFORM_TOLERANCE_M, journey_events
 from ato_common.scenario import builtin_scenarios, load_scenario
 from ato_common.validation import ConfigError

@@ -12,8 +12,8 @@ from rclpy.serialization import serialize_message
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
-from ato_common.ros import state_to_msg
 from ato_common.types import TrainState
+from ato_ros.messages import state_to_msg
 from recorder.bag import BagError, BagWriter, bag_file, bag_info, read_messages, recover
 from recorder.cli import info_main, recover_main
 from recorder.definitions import full_definition

@@ -68,8 +68,8 @@ def same_shape(expected, actual, where='') -> list[str]:
 def state(k: int) -> bytes:
     from rclpy.serialization import serialize_message
 
-    from ato_common.ros import state_to_msg
     from ato_common.types import TrainState
+    from ato_ros.messages import state_to_msg
     return serialize_message(state_to_msg(TrainState(k * 100_000_000, ('car_1',), (k * 1.0,),
                                                      (0.5,), (0.0,), (0.0,))))
 

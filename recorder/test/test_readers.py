@@ -12,8 +12,8 @@ from rcl_interfaces.msg import Log
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 
-from ato_common.ros import state_to_msg, to_time
 from ato_common.types import TrainState
+from ato_ros.messages import state_to_msg, to_time
 from recorder.bag import BagWriter
 from recorder.ros_io import offered_profiles
 from recorder.rosbag2_format import type_hash

@@ -9,8 +9,8 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import Header
 
 from ato_common.conventions import TOPICS
-from ato_common.ros import command_to_msg, reference_to_msg, state_to_msg
 from ato_common.types import Command, Reference, ReferencePoint, TrainState
+from ato_ros.messages import command_to_msg, reference_to_msg, state_to_msg
 from recorder.bag import BagError, BagWriter
 from recorder.report import load_run, main, namespaces_of, resolve_topics
 
@@ -110,7 +110,7 @@ def test_the_report_marks_atp_and_watchdog_events_and_plots_every_actuator(tmp_p
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
     from std_msgs.msg import Float64
 
-    from ato_common.ros import actuator_forces_to_msg, diagnostic_status, to_time
+    from ato_ros.messages import actuator_forces_to_msg, diagnostic_status, to_time
     writer = BagWriter(tmp_path / 'run')
     write_run(writer, '', 0.0)
     for key in ('permitted_speed', 'distance_to_go', 'actuators_commanded',
@@ -229,7 +229,7 @@ def test_each_stack_of_a_recording_has_its_own_events(tmp_path):
     statuses of its own nodes (named after their fully qualified names)."""
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
-    from ato_common.ros import diagnostic_status, to_time
+    from ato_ros.messages import diagnostic_status, to_time
     writer = BagWriter(tmp_path / 'run')
     for namespace in ('/train1', '/train2'):
         write_run(writer, namespace, 0.0)

@@ -28,34 +28,34 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header, String
 from trajectory_msgs.msg import JointTrajectory
 
-from ato_common import units, wire
+from ato_common import units
 from ato_common.identity import scenario_identity
-from ato_common.params import WAIT_FOR_DIAGNOSTICS_READERS, Param, ParameterTable
 from ato_common.plant_setup import parse_failure_injection
-from ato_common.ros import (
+from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
+from ato_common.types import TrainState, nanoseconds, seconds
+from ato_common.validation import ConfigError
+from ato_ros import wire
+from ato_ros.lifecycle import RunNodeHooks, freeze_startup_objects, node_usage, run_node
+from ato_ros.messages import (
     MessageError,
-    Observation,
-    Publishing,
-    RecorderLead,
-    RunNodeHooks,
     command_from_msg,
     decoded,
     diagnostic_status,
-    first_unmatched,
-    freeze_startup_objects,
-    node_usage,
     qos_profile,
-    run_node,
     status_name,
-    step_recorder,
     to_time,
     topic,
+)
+from ato_ros.params import WAIT_FOR_DIAGNOSTICS_READERS, Param, ParameterTable
+from ato_ros.publishing import (
+    Observation,
+    Publishing,
+    RecorderLead,
+    first_unmatched,
+    step_recorder,
     wait_until_delivered,
 )
-from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
-from ato_common.step_records import LEAD_S, least_lead_s
-from ato_common.types import TrainState, nanoseconds, seconds
-from ato_common.validation import ConfigError
+from ato_ros.step_records import LEAD_S, least_lead_s
 from train_plant_node.models import MODELS
 from train_plant_node.simulation import (
     NORMAL,
@@ -93,7 +93,7 @@ PARAMS = (
           "recorder that acknowledges (the suite's recorder) has written to its file, s of "
           'simulated time: the most a SIGKILLed recorder loses; at least the step records\' '
           'bundle and acknowledgement periods plus two control periods '
-          '(ato_common.step_records.least_lead_s); 0: do not wait for recorders',
+          '(ato_ros.step_records.least_lead_s); 0: do not wait for recorders',
           minimum=0.0, maximum=3600.0),
     Param('resend_period_s', 0.2, 'lockstep: re-publish the current step after this much wall '
           'time without its command', minimum=0.01, maximum=10.0),
@@ -201,7 +201,7 @@ class TrainPlantNode(RunNodeHooks, Node):
             qos_profile(topic('actuators_applied').qos))
         self.observations = tuple(Observation(self, p) for p in (
             self.truth_pub, self.commanded_pub, self.applied_pub))
-        # The per-step messages for the recorders, bundled (ato_common.step_records).
+        # The per-step messages for the recorders, bundled (ato_ros.step_records).
         self.records = step_recorder(self, self.publishing)
         # Lockstep: a step waits while a recorder has not written the steps more than the lead
         # before it (back-pressure: what a SIGKILLed recorder loses is bounded).
@@ -258,7 +258,7 @@ class TrainPlantNode(RunNodeHooks, Node):
             # Once per step: a re-sent step must repeat the same measurement (sensor noise is
             # drawn here), or lockstep runs would depend on how often a step was re-sent.
             truth = self.sim.truth()
-            # The per-step messages go out as CDR bytes packed from templates (ato_common.wire):
+            # The per-step messages go out as CDR bytes packed from templates (ato_ros.wire):
             # standard messages on the wire, without rclpy's message objects.
             self.step_messages = [stamp, wire.encode_clock(stamp), truth,
                                   self._msg(self.sim.measured(truth), stamp), None, None, None]

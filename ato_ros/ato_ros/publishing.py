@@ -1,0 +1,350 @@
+"""What the loop nodes publish and whom they wait for: publishes that must not kill a node,
+observation topics published only while someone listens, the step records for the recorders and
+the recorders' back-pressure, the plant's identity and the wait for late subscribers.
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+from typing import Callable
+
+from rclpy.duration import Duration as RclpyDuration
+from rclpy.impl.implementation_singleton import rclpy_implementation
+from rclpy.qos import ReliabilityPolicy
+from std_msgs.msg import Header, UInt8MultiArray
+
+from ato_common.conventions import TOPICS
+from ato_common.types import nanoseconds, seconds
+from ato_ros.messages import qos_profile, topic
+from ato_ros.step_records import Acknowledgements, Bundle
+from ato_ros.wire import (
+    MessageError,
+    decode_header,
+)
+
+
+class Publishing:
+    """A node's publishes that must not kill it. rclpy raises ``RCLError`` ('Failed to publish:
+    cannot publish data') when the middleware refuses a sample, e.g. a reliable keep-all writer
+    whose history is full of samples a reader that died (a SIGKILLed recorder) never
+    acknowledged, until discovery drops that reader. Such a failure is counted, logged at most
+    once a second and kept for the diagnostics; the node goes on (in lockstep the plant re-sends
+    the step, so the loop resumes once the middleware accepts samples again)."""
+
+    def __init__(self, node):
+        self.node = node
+        self.failures = 0
+        self.last_failure = ''
+
+    def __call__(self, publisher, msg) -> bool:
+        """Publish ``msg``; False if the middleware refused it."""
+        try:
+            publisher.publish(msg)
+            return True
+        except rclpy_implementation.RCLError as error:
+            self.failures += 1
+            self.last_failure = f'{publisher.topic_name}: {str(error).splitlines()[0]}'
+            self.node.get_logger().warning(
+                f'publish failed on {self.last_failure} ({self.failures} so far); going on',
+                throttle_duration_sec=1.0)
+            return False
+
+    def values(self) -> dict[str, object]:
+        """The diagnostics' keys of the failures."""
+        return {'failed_publishes': self.failures,
+                'last_failed_publish': self.last_failure or 'none'}
+
+
+#: how often an observation topic is published to subscribers that only sample it, s of wall
+#: time (above the live view's default 20 Hz)
+SAMPLED_PERIOD_S = 0.02
+
+
+def samples_only(profile) -> bool:
+    """A subscription that only samples its topic: best effort, which accepts to lose messages
+    (the live view's, ``recorder.live.sampling_qos``; rmw reports no history or depth of a
+    remote subscriber, so the reliability is what tells). Every reliable subscriber (a
+    recorder, ``ros2 topic echo``, a monitor) is given every message."""
+    return profile.reliability == ReliabilityPolicy.BEST_EFFORT
+
+
+#: how often a per-step check of a publisher's subscribers asks the middleware again, s of wall
+#: time: the loop asks before every step (several times), a subscriber comes or goes rarely
+SUBSCRIBERS_REFRESH_S = 0.01
+
+
+class SubscriberCount:
+    """``publisher.get_subscription_count()``, asked again at most every ``refresh_s`` of
+    wall time (``SUBSCRIBERS_REFRESH_S``): a per-step check of who listens need not cross into
+    the middleware at every step of a loop that takes a fraction of a millisecond. A subscriber
+    that has just matched is seen within ``refresh_s``; the start of a lockstep run waits for
+    its observers with the count itself (``first_unmatched``)."""
+
+    def __init__(self, publisher, refresh_s: float = SUBSCRIBERS_REFRESH_S):
+        self.publisher, self.refresh_s = publisher, refresh_s
+        self.count, self.asked = 0, -math.inf
+
+    def __call__(self) -> int:
+        now = time.monotonic()
+        if now - self.asked >= self.refresh_s:
+            self.count, self.asked = self.publisher.get_subscription_count(), now
+        return self.count
+
+
+class Observation:
+    """When to publish an observation topic (``conventions.OBSERVED_STEP``: the truth, the
+    actuator forces, the distance to go and the permitted speed), which the loop does not read:
+    on a 2-core machine each per-step publish costs about 0.1 ms of CPU in rclpy. ``due()`` is
+    False without a subscriber; True at every step while any subscriber wants every message; and
+    at most every ``SAMPLED_PERIOD_S`` of wall time while every subscriber only samples
+    (:func:`samples_only`: best effort, e.g. a live view). The subscribers' profiles are read
+    again only when their number changes."""
+
+    def __init__(self, node, publisher, period_s: float = SAMPLED_PERIOD_S):
+        self.node, self.publisher, self.period_s = node, publisher, period_s
+        self.subscribers = SubscriberCount(publisher)
+        self.count = 0
+        self.every_step = True
+        self.last_s = -math.inf
+
+    def due(self) -> bool:
+        count = self.subscribers()
+        if count == 0:
+            self.count = 0
+            return False
+        if count != self.count:
+            infos = self.node.get_subscriptions_info_by_topic(self.publisher.topic_name)
+            # a subscriber not yet in the graph's view counts as one that wants every message
+            self.every_step = len(infos) < count or not all(
+                samples_only(i.qos_profile) for i in infos)
+            self.count = count
+        if self.every_step:
+            return True
+        now = time.monotonic()
+        if now - self.last_s >= self.period_s:
+            self.last_s = now
+            return True
+        return False
+
+
+#: a loop node about to exit: how long its last step records may take to reach the recorders, s
+#: of wall time (a recorder that died never acknowledges them)
+RECORDS_DELIVERY_TIMEOUT_S = 2.0
+
+
+class StepRecorder:
+    """A loop node's step records (``ato_ros.step_records``): its per-step messages bundled
+    for the recorders on ``step_records``. Each step the node asks ``begin_step`` (is a recorder
+    subscribed?), ``add``s every per-step message it publishes while one is, and calls
+    ``end_step``, which publishes the bundle once it is due; ``close`` publishes what is left
+    and waits until it is delivered (a node about to exit)."""
+
+    def __init__(self, node, publishing: Publishing):
+        spec = TOPICS['step_records']
+        self.publisher = node.create_publisher(UInt8MultiArray, spec.name, qos_profile(spec.qos))
+        self.publishing = publishing
+        self.bundle = Bundle()
+        self.recorders = SubscriberCount(self.publisher)
+        self.active = False
+        self.names: dict[object, str] = {}  # publisher -> its topic's full name
+
+    def begin_step(self) -> bool:
+        """Whether a recorder subscribes, asked when a bundle begins (a recorder that leaves
+        while one is under way is sent the rest of it all the same); without one, nothing is
+        kept."""
+        if not len(self.bundle):
+            self.active = self.recorders() > 0
+        return self.active
+
+    def add(self, publisher, log_time_ns: int, data: bytes) -> None:
+        """A per-step message of ``publisher`` (its bytes as published), logged at
+        ``log_time_ns``; only while ``active``."""
+        if self.active:
+            name = self.names.get(publisher)
+            if name is None:
+                name = self.names[publisher] = publisher.topic_name
+            self.bundle.add(name, log_time_ns, data)
+
+    def end_step(self, stamp_ns: int) -> None:
+        if self.bundle.due(stamp_ns):
+            self.flush()
+
+    def flush(self) -> None:
+        data = self.bundle.take()
+        if data is not None:
+            self.publishing(self.publisher, data)
+
+    def close(self, timeout_s: float = RECORDS_DELIVERY_TIMEOUT_S) -> bool:
+        """Publish what is left and wait until every recorder has it (False if one did not
+        acknowledge within ``timeout_s``)."""
+        self.flush()
+        return wait_until_delivered([self.publisher], timeout_s)
+
+
+#: while ``run_nodes`` builds several nodes for one process: their step recorders, per namespace
+_shared_step_recorders: dict[str, StepRecorder] | None = None
+
+
+@contextlib.contextmanager
+def shared_step_recorders(shared: bool):
+    """While the nodes of one process are built (``ato_ros.lifecycle.run_nodes``): with
+    ``shared``, every node's :func:`step_recorder` of a namespace is the same one."""
+    global _shared_step_recorders
+    _shared_step_recorders = {} if shared else None
+    try:
+        yield
+    finally:
+        _shared_step_recorders = None
+
+
+def step_recorder(node, publishing: Publishing) -> StepRecorder:
+    """The node's :class:`StepRecorder`. Nodes that ``run_nodes`` builds together in one process
+    (the composed stack, ``ato_bringup.composed``) share one per namespace: one bundle, one
+    publish per period and one take by the recorder instead of one of each per node (the first
+    node's publisher carries it)."""
+    shared = _shared_step_recorders
+    if shared is None:
+        return StepRecorder(node, publishing)
+    recorder = shared.get(node.get_namespace())
+    if recorder is None:
+        recorder = shared[node.get_namespace()] = StepRecorder(node, publishing)
+    return recorder
+
+
+def node_full_name(namespace: str, name: str) -> str:
+    """A node's fully qualified name, as ``Node.get_fully_qualified_name`` gives it, from the
+    namespace and name the graph reports."""
+    return namespace.rstrip('/') + '/' + name
+
+
+class RecorderLead:
+    """Back-pressure of the recorders in lockstep (the plant's side). A lockstep loop runs as
+    fast as its nodes answer; without this, a recorder starved of CPU falls behind it, and
+    what it has not yet written is lost with it on a SIGKILL while what the publishers keep
+    for it (reliable, keep all) grows. The suite's recorder acknowledges each namespace's step
+    records on ``recorded`` (the stamp up to which they are in its file, its node name:
+    ``ato_ros.step_records.Written``); ``holds(stamp_ns)`` says whether the step at
+    ``stamp_ns`` must wait: it is more than ``lead_s`` past the oldest acknowledgement of the
+    recorders in the graph (the publishers of ``recorded``; one not yet heard from counts as
+    having acknowledged the step at which it was first seen). A recorder that acknowledges
+    nothing (any other subscriber of the step records, ``ros2 bag record``) holds nothing back;
+    one that leaves lets go. The publishers of ``recorded`` are counted at most every
+    ``SUBSCRIBERS_REFRESH_S`` of wall time and named again when their number changes.
+    ``on_release`` is called when an acknowledgement, or a recorder's leaving, lets a held step
+    go; ``check`` (the node's timer, while holding) names the recorders in the graph again."""
+
+    def __init__(self, node, lead_s: float, on_release: Callable[[], None],
+                 refresh_s: float = SUBSCRIBERS_REFRESH_S):
+        spec = TOPICS['recorded']
+        self.node, self.on_release, self.refresh_s = node, on_release, refresh_s
+        self.acknowledgements = Acknowledgements(nanoseconds(lead_s))
+        self.held: int | None = None  # the stamp of the step that waits
+        self.held_since = 0.0
+        self.steps_held = 0  # steps that waited, and for how long in all (s of wall time)
+        self.held_s = 0.0
+        self.publishers, self.asked = 0, -math.inf
+        self.subscription = node.create_subscription(
+            Header, spec.name, self.on_acknowledgement, qos_profile(spec.qos), raw=True)
+
+    def on_acknowledgement(self, data: bytes) -> None:
+        try:
+            stamp_ns, recorder = decode_header(data)
+        except MessageError as error:
+            self.node.get_logger().warning(
+                f'{self.subscription.topic_name}: an acknowledgement that does not read '
+                f'({error}): ignored', throttle_duration_sec=1.0)
+            return
+        self.acknowledgements.acknowledged(recorder, stamp_ns)
+        self.release_if_free()
+
+    def holds(self, stamp_ns: int) -> bool:
+        now = time.monotonic()
+        if now - self.asked >= self.refresh_s:
+            self.asked = now
+            count = self.subscription.get_publisher_count()
+            if count != self.publishers:
+                self.publishers = count
+                self.name_recorders(stamp_ns)
+        if self.acknowledgements.behind(stamp_ns) is None:
+            self.held = None
+            return False
+        if self.held != stamp_ns:
+            self.held, self.held_since = stamp_ns, now
+            self.steps_held += 1
+        return True
+
+    def name_recorders(self, stamp_ns: int) -> None:
+        """Forget the recorders no longer in the graph; one new to it is taken as having
+        acknowledged ``stamp_ns``."""
+        live = {node_full_name(i.node_namespace, i.node_name)
+                for i in self.node.get_publishers_info_by_topic(self.subscription.topic_name)}
+        acknowledgements = self.acknowledgements
+        acknowledgements.keep(live)
+        for recorder in live:
+            acknowledgements.appeared(recorder, stamp_ns)
+
+    def check(self) -> None:
+        if self.held is not None:
+            self.name_recorders(self.held)
+            self.release_if_free()
+
+    def release_if_free(self) -> None:
+        if self.held is not None and self.acknowledgements.behind(self.held) is None:
+            self.held = None
+            self.held_s += time.monotonic() - self.held_since
+            self.on_release()
+
+    def waiting(self) -> str:
+        """What a held step waits for ('' if none)."""
+        behind = self.acknowledgements.behind(self.held) if self.held is not None else None
+        if behind is None:
+            return ''
+        recorder, stamp_ns = behind
+        return (f'the step at {seconds(self.held):.3f} s has waited '
+                f'{time.monotonic() - self.held_since:.1f} s of wall time for recorder '
+                f'{recorder}, whose file holds the step records up to {seconds(stamp_ns):.3f} s '
+                f'(lead {seconds(self.acknowledgements.lead_ns):g} s)')
+
+
+def watch_plant_identity(node, own_identity: str, refusal: str):
+    """Subscribe ``node`` to the plant's latched identity (``train/identity``): a plant that
+    simulates another scenario than ``own_identity``'s (or an identity that is not one) makes
+    the node log ``refusal`` with both scenarios named and stop with exit code 2."""
+    from std_msgs.msg import String
+
+    from ato_common.identity import identity_mismatch
+
+    def on_identity(msg) -> None:
+        try:
+            mismatch = identity_mismatch(own_identity, msg.data)
+        except ValueError as error:
+            mismatch = str(error)
+        if mismatch:
+            node.get_logger().error(f'{refusal}: {mismatch}')
+            node.exit_code = 2
+            node.finished = True
+    return node.create_subscription(String, topic('identity').name, on_identity,
+                                    qos_profile(topic('identity').qos))
+
+
+def first_unmatched(wanted) -> str:
+    """The topic of the first publisher of ``wanted`` ((publisher or None, subscribers it must
+    have)) that has fewer subscribers, '' if none: a node's first output waits for every
+    observer on each topic it publishes (DDS matches each topic separately)."""
+    for publisher, count in wanted:
+        if publisher is not None and publisher.get_subscription_count() < count:
+            return publisher.topic_name
+    return ''
+
+
+def wait_until_delivered(publishers, timeout_s: float) -> bool:
+    """Wait until every reliable subscriber matched to ``publishers`` has acknowledged all they
+    sent (a node about to exit: its last messages must not be lost with it); False if some were
+    not acknowledged within ``timeout_s`` in all (a subscriber that died)."""
+    deadline = time.monotonic() + timeout_s
+    delivered = True
+    for publisher in publishers:
+        left = max(0.0, deadline - time.monotonic())
+        delivered &= publisher.wait_for_all_acked(RclpyDuration(seconds=left))
+    return delivered

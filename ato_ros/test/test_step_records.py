@@ -1,0 +1,201 @@
+"""A bundle of step records is a standard std_msgs/msg/UInt8MultiArray (checked against rclpy's
+own serialisation both ways), holds every message added, in order, with its topic and times,
+and a damaged one is refused with the reason. A recorder acknowledges what it has written of a
+namespace's records, and the plant's lead is measured from the oldest acknowledgement."""
+
+import random
+import struct
+
+import pytest
+from rclpy.serialization import deserialize_message, serialize_message
+from std_msgs.msg import MultiArrayDimension, UInt8MultiArray
+
+from ato_common.conventions import STEP_RECORDED, TOPICS
+from ato_ros import wire
+from ato_ros.step_records import (
+    ACK_PERIOD_S,
+    ENTRY,
+    LEAD_S,
+    PERIOD_S,
+    Acknowledgements,
+    Bundle,
+    Written,
+    decode_bundle,
+    encode_bundle,
+    least_lead_s,
+    step_recorded,
+)
+from ato_ros.wire import MessageError
+
+rng = random.Random(20261202)
+
+
+def _bundle(entries) -> bytes:
+    bundle = Bundle(period_s=1e9, wall_period_s=1e9)
+    for topic, stamp, data in entries:
+        bundle.add(topic, stamp, data)
+    return bundle.take()
+
+
+def _entries(count: int):
+    topics = ['/clock', '/train/state', '/ns/ato/reference', '/ato/distance_to_go']
+    return [(rng.choice(topics), rng.randrange(0, 10**12),
+             bytes(rng.randrange(256) for _ in range(rng.randrange(0, 40))))
+            for _ in range(count)]
+
+
+@pytest.mark.parametrize('count', [1, 2, 7, 50])
+def test_a_bundle_is_a_standard_uint8_multiarray_naming_its_topics(count):
+    entries = _entries(count)
+    data = _bundle(entries)
+    msg = deserialize_message(data, UInt8MultiArray)
+    names = list(dict.fromkeys(topic for topic, _, _ in entries))
+    assert [d.label for d in msg.layout.dim] == names
+    assert [d.size for d in msg.layout.dim] == [sum(t == n for t, _, _ in entries)
+                                                for n in names]
+    assert msg.layout.data_offset == 0
+    decoded = decode_bundle(data)
+    assert [(t, log, d) for t, log, _, d in decoded] == entries
+    # rclpy's own serialisation of that message (its padding undefined) reads the same
+    assert decode_bundle(serialize_message(msg)) == decoded
+
+
+def test_an_entry_keeps_the_log_time_given_and_the_wall_time_it_was_added():
+    import time
+    before = time.time_ns()
+    data = _bundle([('/clock', 42, wire.encode_clock(42))])
+    ((topic, log_ns, publish_ns, message),) = decode_bundle(data)
+    assert (topic, log_ns, message) == ('/clock', 42, wire.encode_clock(42))
+    assert before <= publish_ns <= time.time_ns()
+
+
+def test_a_bundle_is_due_after_its_period_of_stamps_and_take_starts_a_new_one():
+    bundle = Bundle(period_s=0.2, wall_period_s=1e9)
+    assert not bundle.due(0) and bundle.take() is None and not len(bundle)
+    bundle.add('/clock', 100_000_000, b'\x00\x01\x00\x00')
+    assert not bundle.due(200_000_000)
+    assert bundle.due(300_000_000)
+    assert len(decode_bundle(bundle.take())) == 1
+    assert not len(bundle) and bundle.take() is None
+
+
+def test_a_bundle_is_due_after_its_wall_period():
+    bundle = Bundle(period_s=1e9, wall_period_s=0.0)
+    bundle.add('/clock', 0, b'')
+    assert bundle.due(0)
+
+
+def test_rclpy_s_own_message_decodes_as_long_as_it_follows_the_layout():
+    body = ENTRY.pack(0, 3, 5, 6) + b'abc' + b'\x00' * 5
+    msg = UInt8MultiArray()
+    msg.layout.dim = [MultiArrayDimension(label='/train/state', size=1, stride=0)]
+    msg.data = list(body)
+    assert decode_bundle(serialize_message(msg)) == [('/train/state', 5, 6, b'abc')]
+
+
+@pytest.mark.parametrize('damage, reason', [
+    (lambda d: b'\x00\x00' + d[2:], 'encapsulation'),
+    (lambda d: d[:-5], 'remain'),
+    (lambda d: d[:8], 'does not parse'),
+])
+def test_a_damaged_bundle_is_refused_with_the_reason(damage, reason):
+    data = _bundle(_entries(3))
+    with pytest.raises(MessageError, match=reason):
+        decode_bundle(damage(data))
+
+
+def test_counts_that_disagree_with_the_data_are_refused():
+    body = ENTRY.pack(0, 0, 1, 2)
+    data = encode_bundle(['/clock'], [2], body)
+    with pytest.raises(MessageError, match=r'counts \[2\].*holds \[1\]'):
+        decode_bundle(data)
+
+
+def test_an_entry_pointing_past_the_topics_is_refused():
+    data = encode_bundle(['/clock'], [1], ENTRY.pack(3, 0, 1, 2))
+    with pytest.raises(MessageError, match='topic 3 of 1'):
+        decode_bundle(data)
+
+
+def test_the_per_step_topics_are_found_in_any_namespace():
+    for key in STEP_RECORDED:
+        name = TOPICS[key].name
+        assert step_recorded('/' + name.lstrip('/')) == (key, '/')
+        assert step_recorded('/train1/' + name.lstrip('/')) == (key, '/train1')
+    assert step_recorded('/diagnostics') is None
+    assert step_recorded('/ato/reference/curve') is None
+
+
+def test_the_entry_header_is_24_bytes_little_endian():
+    assert ENTRY.size == 24 and ENTRY.format == '<IIqq'
+    assert struct.calcsize(ENTRY.format) == 24
+
+
+# --- acknowledgements and the plant's lead (back-pressure in lockstep) --------------------------
+
+S = 1_000_000_000
+
+
+def test_a_namespace_is_on_disk_up_to_the_oldest_topic_written():
+    written = Written()
+    assert written.on_disk_ns() is None and written.acknowledgement() is None
+    written.wrote('/clock', 5 * S)
+    written.wrote('/ato/command', 4 * S)
+    assert written.on_disk_ns() == 4 * S
+    written.wrote('/ato/command', 6 * S)
+    assert written.on_disk_ns() == 5 * S
+
+
+def test_an_acknowledgement_comes_once_the_oldest_moved_on_by_its_period():
+    written = Written(period_s=0.2)
+    written.wrote('/clock', 1 * S)
+    assert written.acknowledgement() == 1 * S  # the first
+    written.wrote('/clock', 1 * S + 150_000_000)
+    assert written.acknowledgement() is None  # 0.15 s on: not yet
+    written.wrote('/clock', 1 * S + 200_000_000)
+    assert written.acknowledgement() == 1 * S + 200_000_000
+    assert written.acknowledgement() is None  # said once
+    written.wrote('/clock', 100_000_000)  # a restarted plant begins its time again
+    assert written.acknowledgement() == 100_000_000
+
+
+def test_the_plant_is_held_past_the_lead_of_the_oldest_recorder_only():
+    acks = Acknowledgements(lead_ns=900_000_000)
+    assert acks.behind(100 * S) is None  # nobody acknowledges: nothing held
+    acks.acknowledged('/recorder', 10 * S)
+    acks.acknowledged('/other', 9 * S)
+    assert acks.behind(9 * S + 900_000_000) is None  # exactly the lead: goes
+    assert acks.behind(9 * S + 900_000_001) == ('/other', 9 * S)
+    acks.keep({'/recorder'})  # /other left the graph
+    assert acks.behind(9 * S + 900_000_001) is None
+    assert acks.behind(10 * S + 900_000_001) == ('/recorder', 10 * S)
+    acks.keep(set())
+    assert acks.behind(10**6 * S) is None
+
+
+def test_a_recorder_seen_before_its_first_acknowledgement_holds_from_that_step():
+    acks = Acknowledgements(lead_ns=900_000_000)
+    acks.appeared('/recorder', 3 * S)
+    assert acks.behind(3 * S + 900_000_000) is None
+    assert acks.behind(4 * S) == ('/recorder', 3 * S)  # stopped before it said anything
+    acks.appeared('/recorder', 8 * S)  # seen again: still what it was
+    assert acks.behind(4 * S) == ('/recorder', 3 * S)
+    acks.acknowledged('/recorder', 5 * S)
+    assert acks.behind(5 * S + 900_000_000) is None
+
+
+@pytest.mark.parametrize('rate_hz', [1.0, 10.0, 200.0])
+def test_the_least_lead_covers_a_bundle_an_acknowledgement_and_two_steps(rate_hz):
+    period = 1.0 / rate_hz
+    assert least_lead_s(period) == pytest.approx(PERIOD_S + ACK_PERIOD_S + 2 * period)
+    assert LEAD_S >= least_lead_s(0.1)  # the default fits the suite's 10 Hz scenarios
+
+
+def test_an_acknowledgement_is_a_standard_header():
+    from std_msgs.msg import Header
+    data = wire.encode_header(12 * S + 5, '/ns/recorder')
+    msg = deserialize_message(data, Header)
+    assert (msg.stamp.sec, msg.stamp.nanosec, msg.frame_id) == (12, 5, '/ns/recorder')
+    assert wire.decode_header(serialize_message(msg)) == (12 * S + 5, '/ns/recorder')
+    with pytest.raises(MessageError):
+        wire.decode_header(data[:10])

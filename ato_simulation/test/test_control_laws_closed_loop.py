@@ -1,0 +1,37 @@
+"""The PID and Luo & Xu laws in the offline closed loop on short_line: tracking, bounded
+estimates, switching mid-run. (The laws and the host alone: ato_controller_node/test.)"""
+
+import pytest
+
+from ato_common.scenario import load_scenario
+from ato_simulation.loop import run_offline
+
+
+@pytest.fixture(scope='module')
+def scenario():
+    return load_scenario('short_line')
+
+
+@pytest.mark.parametrize('law', ['pid', 'luo_xu'])
+def test_closed_loop_tracks_the_reference_offline(scenario, law):
+    metrics = run_offline(scenario, law).metrics()
+    assert metrics.rms_speed_error_kmh < 0.2
+    assert metrics.max_speed_error_kmh < 1.0
+    assert metrics.max_position_error_m < 1.0
+    assert all(abs(e) < 0.1 for e in metrics.stop_errors_m.values())
+
+
+def test_luo_xu_estimates_stay_bounded_and_error_converges(scenario):
+    run = run_offline(scenario, 'luo_xu')
+    nominal = scenario.train.mass_kg
+    masses = [e['mass_hat_kg'] for e in run.estimates]
+    assert 0.7 * nominal <= min(masses) and max(masses) <= 1.5 * nominal
+    assert abs(run.estimates[-1]['z1_m']) < 0.05
+
+
+def test_switching_mid_run_keeps_tracking(scenario):
+    run = run_offline(scenario, 'pid', switches={150.0: 'luo_xu', 450.0: 'pid'})
+    assert set(run.laws) == {'pid', 'luo_xu'}
+    metrics = run.metrics()
+    assert metrics.max_position_error_m < 1.0
+    assert metrics.max_speed_error_kmh < 1.0
