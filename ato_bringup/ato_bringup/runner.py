@@ -183,7 +183,9 @@ def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], obj
     metrics = compute_metrics(times, [s.positions[0] for _, s in samples],
                               [s.speeds[0] for _, s in samples], applied[1:] + applied[-1:],
                               [s.ref_position for _, s in samples],
-                              [s.ref_speed for _, s in samples], stop_samples(plan))
+                              [s.ref_speed for _, s in samples], stop_samples(plan),
+                              scenario.train.regenerative_efficiency,
+                              scenario.train.regenerative_power_w)
     laws = sorted({s.law for _, s in samples if s.law} or laws_in(diagnostics))
     events = run_events(scenario, metrics, stations_of(plan), times,
                         [s.positions[0] for _, s in samples], diagnostics=diagnostics,

@@ -75,7 +75,9 @@ class OfflineRun:
     def metrics(self) -> RunMetrics:
         return compute_metrics(self.times_s, self.positions, self.speeds, self.forces,
                                self.ref_positions, self.ref_speeds,
-                               stop_samples(self.plan, self.replans))
+                               stop_samples(self.plan, self.replans),
+                               self.scenario.train.regenerative_efficiency,
+                               self.scenario.train.regenerative_power_w)
 
     def estimate(self, key: str) -> np.ndarray:
         """One reported estimate over the run (NaN where the law did not report it)."""
