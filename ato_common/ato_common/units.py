@@ -130,9 +130,9 @@ def adaptation_gain_to_si(gamma: float, theta: tuple[int, int, int],
     """One diagonal entry gamma of a gradient adaptive law theta' = -gamma w e, given in a
     coherent unit system (mass, length and time units in kg, m and s) -> the same law in SI.
 
-    Derivation. The law fixes the gain's unit: [gamma] = [theta] / ([w] [e] [t]). A quantity of
-    dimension M^a L^b T^c is ``mass_unit_kg^a length_unit_m^b time_unit_s^c`` times its number
-    in SI, so with f(q) that factor, theta_SI = f(theta) theta_u, w_SI = f(w) w_u,
+    Derivation. The law fixes the gain's unit: ``[gamma] = [theta] / ([w] [e] [t])``. A
+    quantity of dimension M^a L^b T^c is ``mass_unit_kg^a length_unit_m^b time_unit_s^c`` times
+    its number in SI, so with f(q) that factor, theta_SI = f(theta) theta_u, w_SI = f(w) w_u,
     e_SI = f(e) e_u and t_SI = f(T) t_u give
 
         theta_SI' = f(theta)/f(T) theta_u' = -f(theta)/f(T) gamma_u w_u e_u

@@ -33,7 +33,8 @@ GENERATED = ('*Generated from the code by `ato_tools.reference_pages` when the s
 
 
 def _cell(text) -> str:
-    return str(text).replace('|', '\\|').replace('\n', ' ')
+    """A table cell: pipes and square brackets escaped (``[FIX] [-]`` is no reference link)."""
+    return str(text).replace('|', '\\|').replace('[', '\\[').replace('\n', ' ')
 
 
 def law_names() -> list[str]:

@@ -74,8 +74,9 @@ E_HALF, PHI1_HALF, E_FULL, F1, F2, F3 = range(6)
 
 
 def phi_functions(matrix: np.ndarray, order: int = 3) -> list[np.ndarray]:
-    """[phi_0 .. phi_order](matrix), phi_0 = exp, phi_k(Z) = int_0^1 e^{(1-s)Z} s^(k-1)/(k-1)! ds,
-    from the exponential of one block-companion matrix (Higham & Al-Mohy, Sidje 1998)."""
+    """``[phi_0 .. phi_order](matrix)``, phi_0 = exp,
+    phi_k(Z) = int_0^1 e^{(1-s)Z} s^(k-1)/(k-1)! ds, from the exponential of one
+    block-companion matrix (Higham & Al-Mohy, Sidje 1998)."""
     m = matrix.shape[0]
     size = m * (order + 1)
     augmented = np.zeros((size, size))
