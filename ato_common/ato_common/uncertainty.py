@@ -184,7 +184,8 @@ PARAMETERS: dict[str, Parameter] = {p.name: p for p in (
     Parameter('adhesion', '1', 0.3, 0.02, 0.5,
               Distribution('choice', values=(0.30, 0.15), weights=(0.8, 0.2)),
               'wheel-rail adhesion coefficient mu: caps the true traction and brake force at '
-              'mu M g (dry rail 0.3, wet 0.15)',
+              'mu M g (dry rail 0.3, wet 0.15); the truth of the run, not the braking '
+              "model's design bound (trains.ADHESION_COEFFICIENT, dry 0.15 / wet 0.10)",
               'EN 15595:2018 (wheel slide protection): dry rail 0.25-0.35, wet 0.1-0.2, low '
               'adhesion below 0.05; the default is dry with a 20 % chance of wet rail'),
     Parameter('speed_noise_mps', 'm/s', 0.0, 0.0, 2.0,
