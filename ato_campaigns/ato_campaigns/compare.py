@@ -58,7 +58,7 @@ from typing import Callable
 
 import numpy as np
 
-from ato_campaigns.engine import events_of, execute, unfinished
+from ato_campaigns.engine import execute, finite, judged
 from ato_campaigns.provenance import results_page_provenance, write_results_page
 from ato_campaigns.run_process import RunDied, RunFailed, RunTimeout, limited
 from ato_common import uncertainty
@@ -158,36 +158,7 @@ def run_job(job: Job) -> dict:
                       detail=traceback.format_exc(limit=3), wall_s=time.perf_counter() - started)
         return result
     result['wall_s'] = time.perf_counter() - started
-    dt = 1.0 / job.rate_hz
-    finite = all(np.all(np.isfinite(a)) for a in (run.positions, run.speeds, run.forces))
-    held = [f for f in run.faults if f]
-    status, reason = 'ok', ''
-    if not finite:
-        status, reason = 'diverged', 'non-finite state or force'
-    else:
-        metrics = run.metrics()
-        stop_error = max((abs(e) for e in metrics.stop_errors_m.values()), default=math.nan)
-        jerk = float(np.max(np.abs(np.diff(run.forces)))) / (scenario.train.mass_kg * dt) \
-            if run.forces.size > 1 else 0.0
-        result.update(
-            rms_speed_error_kmh=metrics.rms_speed_error_kmh,
-            max_speed_error_kmh=metrics.max_speed_error_kmh,
-            rms_position_error_m=metrics.rms_position_error_m,
-            stop_error_m=stop_error, stop_errors_m=metrics.stop_errors_m,
-            traction_energy_kwh=metrics.traction_energy_kwh, max_jerk_mps3=jerk,
-            step_p50_us=float(np.percentile(run.step_times_s, 50) * 1e6),
-            step_p99_us=float(np.percentile(run.step_times_s, 99) * 1e6),
-            events=events_of(run, metrics))
-        # diverged as in a campaign: the train did not finish its journey (a large error alone
-        # is the law's behaviour, shown by the metrics)
-        why = unfinished(run)
-        if why:
-            status, reason = 'diverged', f'did not finish: {why}'
-    if held:
-        if status == 'ok':
-            status = 'faults'
-        reason = '; '.join(filter(None, [reason, f'{len(held)} steps held: {held[0]}']))
-    result.update(status=status, reason=reason)
+    result.update(figures(run, scenario.train.mass_kg, 1.0 / job.rate_hz))
     step = max(1, run.times_s.size // PLOT_POINTS)
     keys = sorted({k for e in run.estimates for k in e if 'hat' in k})
     result['curves'] = {
@@ -196,6 +167,26 @@ def run_job(job: Job) -> dict:
         'ref_position_m': _thin(run.ref_positions, step), 'force_n': _thin(run.forces, step),
         'estimates': {k: _thin(run.estimate(k), step) for k in keys}}
     return result
+
+
+def figures(run, mass_kg: float, dt: float) -> dict:
+    """A run's figures in the comparison and its status and reason, judged as a campaign's
+    (``ato_campaigns.engine.judged``: ``ok`` only for a clean run that finished on time)."""
+    if not finite(run):
+        return {'status': 'diverged', 'reason': 'non-finite state or force'}
+    metrics = run.metrics()
+    stop_error = max((abs(e) for e in metrics.stop_errors_m.values()), default=math.nan)
+    jerk = float(np.max(np.abs(np.diff(run.forces)))) / (mass_kg * dt) \
+        if run.forces.size > 1 else 0.0
+    return dict(
+        judged(run, metrics),
+        rms_speed_error_kmh=metrics.rms_speed_error_kmh,
+        max_speed_error_kmh=metrics.max_speed_error_kmh,
+        rms_position_error_m=metrics.rms_position_error_m,
+        stop_error_m=stop_error, stop_errors_m=metrics.stop_errors_m,
+        traction_energy_kwh=metrics.traction_energy_kwh, max_jerk_mps3=jerk,
+        step_p50_us=float(np.percentile(run.step_times_s, 50) * 1e6),
+        step_p99_us=float(np.percentile(run.step_times_s, 99) * 1e6))
 
 
 def _limited(job: Job, run: Callable[[Job], dict], timeout_s: float | None) -> dict:

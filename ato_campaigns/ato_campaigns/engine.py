@@ -24,10 +24,16 @@ workers run this project's environment; nothing else changes. ``--serial`` runs 
 process, in order. Each finished run is written at once as a row of the Parquet dataset
 ``<out>/<name>/rows/``; a campaign started again with the same file runs only the rows that are
 missing (a row of an earlier version of the file, with another fingerprint, does not count).
-A run that raises is a row with status ``error`` and its reason; one that does not finish its
-journey (``unfinished``: its state turns non-finite, or its train is not standing at a stop that
-the reference stood at) ``diverged``; one that exceeds ``timeout_s`` ``timeout``: the campaign
-goes on. A large speed or stop error alone is not a status: the metrics show it.
+
+A row's status (``ato_common.run_events.STATUSES``) is ``ok`` only for a clean run whose train
+finished its journey on time (no ATP intervention, every stop within the platform tolerance, no
+missed time window, no held command, no late arrival); otherwise it names the most serious of
+what went wrong and its reason lists each: ``error`` (the run raised), ``timeout`` (past
+``timeout_s``), ``diverged`` (its state turned non-finite), ``did not finish`` (its train did not
+stand at a stop the reference stood at, or at its last stop by the run's limit past the
+timetable: ``ato_simulation.plans.JourneyEnd``), ``ATP intervention``, ``watchdog brake``,
+``faults``, ``stop error``, ``late`` (an arrival ``LATE_AFTER_S`` or more after the timetable's),
+``missed time window``. The campaign goes on whatever a run does.
 """
 
 from __future__ import annotations
@@ -49,7 +55,16 @@ import yaml
 
 from ato_campaigns.run_process import RunDied, RunFailed, RunTimeout, limited
 from ato_common import uncertainty
-from ato_common.run_events import run_events, stations_of
+from ato_common.run_events import (
+    JOURNEY,
+    LATE_AFTER_S,
+    STATUSES,
+    RunEvents,
+    late_arrivals,
+    run_events,
+    run_status,
+    stations_of,
+)
 from ato_common.scenario import Scenario, load_scenario
 from ato_common.validation import ConfigError, Fields
 from ato_controller_node.laws import LAWS
@@ -65,11 +80,14 @@ STOP_ERROR_LIMIT_M = 0.5
 STANDSTILL_MPS = 0.01
 #: the key of a row: which run it is
 KEY = ('scenario', 'law', 'draw')
-STATUSES = ('ok', 'diverged', 'error', 'timeout')
-#: the per-run metrics every row has (NaN when the run did not produce them)
+#: the per-run metrics every row has (NaN when the run did not produce them); the stop errors
+#: signed as position minus stop: ``overshoot_m`` the largest beyond a stop, ``undershoot_m``
+#: the largest short of one (0 when none), ``arrival_delay_s`` the latest arrival against the
+#: timetable (negative: every stop early)
 METRICS = ('rms_speed_error_kmh', 'max_speed_error_kmh', 'rms_position_error_m',
-           'max_position_error_m', 'stop_error_m', 'arrival_error_s', 'traction_energy_kwh',
-           'max_jerk_mps3', 'max_acceleration_mps2', 'saturated_fraction', 'atp_interventions',
+           'max_position_error_m', 'stop_error_m', 'overshoot_m', 'undershoot_m',
+           'arrival_error_s', 'arrival_delay_s', 'traction_energy_kwh', 'max_jerk_mps3',
+           'max_acceleration_mps2', 'saturated_fraction', 'atp_interventions',
            'watchdog_events')
 
 
@@ -252,20 +270,22 @@ def base_row(task: Mapping) -> dict:
     row['settings'] = json.dumps(task['settings'], sort_keys=True)
     row.update({f'p_{k}': v for k, v in task['values'].items()})
     row.update({m: math.nan for m in METRICS})
-    row.update(status='ok', reason='', stop_errors_m='{}', events='', wall_s=math.nan)
+    row.update(status='', reason='', stop_errors_m='{}', events='', wall_s=math.nan)
     return row
 
 
 def run_task(task: Mapping, runner: Callable[[Mapping], dict] | None = None) -> dict:
     """One run of a campaign as a row; never raises (a failure is the row's status). On a Dask
-    worker the run goes to the worker's run process (ato_campaigns.run_process)."""
+    worker the run goes to the worker's run process (ato_campaigns.run_process). ``runner``
+    (default :func:`offline_metrics`) gives the row's metrics and its status."""
     row = base_row(task)
     started = time.perf_counter()
     try:
-        row.update(limited(partial(runner or offline_metrics, task), task['timeout_s']))
-        why = row.pop('unfinished', '')
-        if why:
-            row.update(status='diverged', reason=f'did not finish: {why}')
+        result = limited(partial(runner or offline_metrics, task), task['timeout_s'])
+        if result.get('status') not in STATUSES:
+            result = dict(result, status='error',
+                          reason=f'the run gave no valid status: {result.get("status")!r}')
+        row.update(result)
     except RunTimeout:
         row.update(status='timeout', reason=f'exceeded the wall-time limit of '
                                             f'{task["timeout_s"]:g} s (timeout_s)')
@@ -294,20 +314,29 @@ def task_scenario(name_or_path: str) -> Scenario:
     return scenario
 
 
-def offline_metrics(task: Mapping) -> dict:
-    """The offline closed loop of one task and its metrics (ato_simulation.loop)."""
+def offline_run(task: Mapping):
+    """The offline closed loop of one task (ato_simulation.loop): an OfflineRun."""
     from ato_simulation.loop import run_offline
     scenario = task_scenario(task['scenario'])
     settings = {task['law_name']: task['settings']} if task['settings'] else None
-    run = run_offline(scenario, task['law_name'], settings, model=task['model'],
-                      controller_rate_hz=task['rate_hz'], end_time_s=task['end_time_s'],
-                      uncertainty=task['values'])
-    return run_metrics(run, 1.0 / task['rate_hz'])
+    return run_offline(scenario, task['law_name'], settings, model=task['model'],
+                       controller_rate_hz=task['rate_hz'], end_time_s=task['end_time_s'],
+                       uncertainty=task['values'])
+
+
+def offline_metrics(task: Mapping) -> dict:
+    """The offline closed loop of one task, its metrics and its status."""
+    return run_metrics(offline_run(task), 1.0 / task['rate_hz'])
+
+
+def finite(run) -> bool:
+    return all(np.all(np.isfinite(a)) for a in (run.positions, run.speeds, run.forces))
 
 
 def run_metrics(run, dt: float) -> dict:
-    """The per-run metrics of an OfflineRun (METRICS); status diverged if it is not finite."""
-    if not all(np.all(np.isfinite(a)) for a in (run.positions, run.speeds, run.forces)):
+    """The per-run metrics of an OfflineRun (METRICS) and its status and reason (``judged``);
+    status diverged if it is not finite."""
+    if not finite(run):
         return {'status': 'diverged', 'reason': 'non-finite state or force'}
     m = run.metrics()
     v = run.speeds
@@ -325,12 +354,14 @@ def run_metrics(run, dt: float) -> dict:
                            else math.nan)  # not reached within the run: the stop error says it
     stop_errors = m.stop_errors_m
     return {
-        'unfinished': unfinished(run),
+        **judged(run, m),
         'rms_speed_error_kmh': m.rms_speed_error_kmh,
         'max_speed_error_kmh': m.max_speed_error_kmh,
         'rms_position_error_m': m.rms_position_error_m,
         'max_position_error_m': m.max_position_error_m,
         'stop_error_m': max((abs(e) for e in stop_errors.values()), default=math.nan),
+        'overshoot_m': max((max(e, 0.0) for e in stop_errors.values()), default=math.nan),
+        'undershoot_m': max((max(-e, 0.0) for e in stop_errors.values()), default=math.nan),
         'stop_errors_m': json.dumps(stop_errors),
         'arrival_error_s': (math.nan if not arrival or any(map(math.isnan, arrival))
                             else max(arrival, key=abs)),
@@ -340,17 +371,34 @@ def run_metrics(run, dt: float) -> dict:
         'saturated_fraction': float(np.mean(run.saturated)) if run.saturated.size else 0.0,
         'atp_interventions': float(run.atp_interventions),
         'watchdog_events': float(run.watchdog_events),
-        # what went wrong, with the first occurrence of each kind (ato_common.run_events)
-        'events': events_of(run, m),
     }
 
 
-def events_of(run, metrics) -> str:
-    """What went wrong in an OfflineRun, each kind with its first occurrence (ATP
-    interventions, missed windows, stopping errors beyond the platform tolerance;
-    ``ato_common.run_events``), in brief."""
-    return run_events(run.scenario, metrics, stations_of(run.plan), run.times_s, run.positions,
-                      atp_times_s=run.atp_times_s).brief()
+def judged(run, metrics) -> dict:
+    """What went wrong in a finite OfflineRun (``ato_common.run_events``): its ``status`` and
+    ``reason`` (``run_status``: did not finish, each kind of event with its first occurrence,
+    held commands, late arrivals), its ``events`` in brief, and ``arrival_delay_s``, its
+    latest arrival against the timetable (the run's first plan; NaN if it stood at no stop).
+    A run over a window of its scenario (a stated end before its plan's) is judged on what
+    the window holds: the stops departed within it, the timing points reached in it."""
+    end = run.times_s[-1]
+    window = run.journey is None and end < run.final_plan.trajectory.end_time
+    stations = [s for s in stations_of(run.plan) if not (window and s[2] > end)]
+    events = run_events(run.scenario, metrics, stations, run.times_s, run.positions,
+                        atp_times_s=run.atp_times_s)
+    if window:
+        kept = tuple(e for e in events.events if not (e.kind == JOURNEY and math.isnan(e.time_s)))
+        events = RunEvents(kept, dict(events.counts, **{JOURNEY: sum(
+            e.kind == JOURNEY for e in kept)}), events.tolerance_m)
+    why = unfinished(run)
+    timetable = [(s.station.name, s.station.position_m, s.arrival_s) for s in run.plan.stops
+                 if s.station.position_m > run.positions[0] + 1.0]  # not the start
+    delays = late_arrivals(timetable, run.times_s, run.positions, run.speeds,
+                           run.scenario.train.length_m, late_after_s=-math.inf)
+    late = [] if why else [(name, d) for name, d in delays if d >= LATE_AFTER_S]
+    status, reason = run_status(events, why, late, [f for f in run.faults if f])
+    return {'status': status, 'reason': reason, 'events': events.brief(),
+            'arrival_delay_s': max((d for _, d in delays), default=math.nan)}
 
 
 def unfinished(run) -> str:

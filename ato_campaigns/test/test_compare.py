@@ -7,6 +7,7 @@ import json
 import multiprocessing
 import os
 import time
+from pathlib import Path
 
 import pytest
 
@@ -88,11 +89,13 @@ def test_a_failing_or_diverging_law_is_shown_with_its_reason(monkeypatch, tmp_pa
     assert results['exploding']['status'] == 'error'
     assert 'ZeroDivisionError: estimate reached zero' in results['exploding']['reason']
     # the ATP brakes the runaway train to a stop before each end of authority: it finishes,
-    # with its interventions and stopping errors in the events, and is never ranked
-    assert results['runaway']['status'] == 'ok'
+    # but is not ok: its status names the ATP, its reason the stopping errors too
+    assert results['runaway']['status'] == 'ATP intervention'
+    assert 'ATP interventions (first at' in results['runaway']['reason']
+    assert 'stop errors' in results['runaway']['reason']
     assert 'ATP' in results['runaway']['events']
     assert results['runaway']['stop_error_m'] > 0.5
-    assert results['standing']['status'] == 'diverged'
+    assert results['standing']['status'] == 'did not finish'
     assert 'did not finish: the train never stood within its length' in \
         results['standing']['reason']
     assert results['holding']['status'] == 'faults'
@@ -106,8 +109,22 @@ def test_a_failing_or_diverging_law_is_shown_with_its_reason(monkeypatch, tmp_pa
     text = compare.markdown(list(results.values()), [], ['short_line'], 'now', 'make compare')
     assert ('| exploding | point_mass, 10 Hz | error (ZeroDivisionError: estimate reached zero) |'
             in text)
-    assert '| standing | point_mass, 10 Hz | diverged (did not finish' in text
+    assert '| standing | point_mass, 10 Hz | did not finish (did not finish' in text
     assert 'Best: **pid**' in text   # the ranking never picks a failed run
+
+
+STUCK = Path(__file__).resolve().parents[2] / 'tests' / 'data' / 'synthetic' / \
+    'stuck_traction.yaml'
+
+
+def test_a_run_with_an_atp_intervention_is_not_ok_and_its_status_says_why():
+    """A traction drive stuck at 300 kN from 60 to 200 s: the PID's train is braked by the
+    ATP; it used to be listed ok (as tan_weighted_mm with 20 interventions was)."""
+    result = compare.run_job(compare.Job(str(STUCK), 'pid', 'point_mass', 10.0))
+    assert result['status'] == 'ATP intervention'
+    count = int(result['reason'].split(' ATP interventions (first at ')[0])
+    assert count >= 2   # braked, released at the permitted speed, braked again
+    assert compare.best_law([dict(result, scenario_rate_hz=10.0)]) is None
 
 
 def test_ranking_lowest_rms_speed_error_within_the_stop_constraint():
