@@ -74,6 +74,17 @@ class Distribution:
         weights = np.asarray(self.weights or [1.0] * len(self.values), dtype=float)
         return float(self.values[int(rng.choice(len(self.values), p=weights / weights.sum()))])
 
+    @property
+    def smallest(self) -> float:
+        """The smallest value a draw can take (-inf for a normal distribution)."""
+        if self.dist in ('fixed', 'uniform'):
+            return self.a
+        if self.dist == 'truncated_normal':
+            return self.low
+        if self.dist == 'choice':
+            return min(self.values)
+        return -math.inf if self.dist == 'normal' else 0.0
+
     def describe(self) -> str:
         if self.dist == 'fixed':
             return f'{self.a:g}'
