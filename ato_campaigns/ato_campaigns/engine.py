@@ -22,8 +22,11 @@ cluster: a LocalCluster of one single-threaded worker per core, or with ``--sche
 ``scheduler-address`` configuration, e.g. DASK_SCHEDULER_ADDRESS) a running cluster whose
 workers run this project's environment; nothing else changes. ``--serial`` runs them in this
 process, in order. Each finished run is written at once as a row of the Parquet dataset
-``<out>/<name>/rows/``; a campaign started again with the same file runs only the rows that are
-missing (a row of an earlier version of the file, with another fingerprint, does not count).
+``<out>/<name>/rows/`` (ato_campaigns.dataset: every file says in its metadata what its rows
+stand on); a campaign started again with the same file runs only the rows that are missing. A
+changed file (another seed, number of draws, law list, uncertainty or window: another
+fingerprint) is refused in the folder of the earlier version, never mixed with its rows.
+``rerun`` makes one row again, offline, in this process.
 
 A row's status (``ato_common.run_events.STATUSES``) is ``ok`` only for a clean run whose train
 finished its journey on time (no ATP intervention, every stop within the platform tolerance, no
@@ -53,6 +56,13 @@ from typing import Any, Callable, Iterable, Mapping
 import numpy as np
 import yaml
 
+from ato_campaigns.dataset import (
+    check_folder,
+    compact,
+    read_rows,
+    rows_folder,
+    write_row,
+)
 from ato_campaigns.run_process import RunDied, RunFailed, RunTimeout, limited
 from ato_common import uncertainty
 from ato_common.run_events import (
@@ -78,8 +88,6 @@ DEFAULT_TIMEOUT_S = 600.0
 STOP_ERROR_LIMIT_M = 0.5
 #: a train at most this fast stands still (m/s; RunSupervision.STANDSTILL_MPS)
 STANDSTILL_MPS = 0.01
-#: the key of a row: which run it is
-KEY = ('scenario', 'law', 'draw')
 #: the per-run metrics every row has (NaN when the run did not produce them); the stop errors
 #: signed as position minus stop: ``overshoot_m`` the largest beyond a stop, ``undershoot_m``
 #: the largest short of one (0 when none), ``arrival_delay_s`` the latest arrival against the
@@ -124,15 +132,21 @@ class Campaign:
     #: ``uncertainty:`` section, else uncertainty.DEFAULTS
     specs: Mapping[str, Mapping[str, uncertainty.Distribution]] = field(default_factory=dict)
 
+    def identity(self) -> dict[str, Any]:
+        """What the rows depend on (JSON): the seed, the number of draws, the scenarios, the
+        laws, the uncertainty and the window."""
+        return json.loads(json.dumps({
+            'seed': self.seed, 'draws': self.draws, 'scenarios': list(self.scenarios),
+            'laws': [[e.label, e.law, dict(e.settings), e.gradient] for e in self.laws],
+            'spec': {scenario: {k: repr(v) for k, v in sorted(spec.items())}
+                     for scenario, spec in sorted(self.specs.items())},
+            'end_time_s': self.end_time_s}, sort_keys=True, default=str))
+
     @property
     def fingerprint(self) -> str:
-        """What the rows depend on: a row with another fingerprint is from another campaign."""
-        text = json.dumps({'seed': self.seed, 'scenarios': self.scenarios,
-                           'laws': [(e.label, e.law, dict(e.settings), e.gradient)
-                                    for e in self.laws],
-                           'spec': {scenario: {k: repr(v) for k, v in sorted(spec.items())}
-                                    for scenario, spec in sorted(self.specs.items())},
-                           'end_time_s': self.end_time_s}, sort_keys=True, default=str)
+        """The hash of ``identity``: a row with another fingerprint is from another campaign
+        (another seed, number of draws, law list, uncertainty or window)."""
+        text = json.dumps(self.identity(), sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
     def tasks(self) -> list[dict]:
@@ -168,8 +182,8 @@ def _parse(data: Any, origin: str, base: Path) -> Campaign:
     name = f.text('name')
     if not all(c.isalnum() or c in '-_.' for c in name):
         raise ConfigError(f'name: only letters, digits, - _ . (a folder name), got {name!r}')
-    seed = int(f.number('seed', 0.0, minimum=0.0, maximum=2**31 - 1))
-    draws = int(f.number('draws', 1.0, minimum=1.0, maximum=1e6))
+    seed = _whole(f, 'seed', 0, 2**31 - 1)
+    draws = _whole(f, 'draws', 1, 10**6, default=1)
     timeout = f.number('timeout_s', DEFAULT_TIMEOUT_S, minimum=0.0)
     end = f.number('end_time_s', 0.0, minimum=0.0)
     raw_scenarios = f.raw('scenarios', required=True)
@@ -219,6 +233,14 @@ def _parse(data: Any, origin: str, base: Path) -> Campaign:
     f.reject_unknown()
     return Campaign(name, origin, seed, draws, tuple(scenarios), tuple(laws), spec, baseline,
                     timeout or None, end or None, rates, models, specs)
+
+
+def _whole(f: Fields, key: str, minimum: int, maximum: int, default: int = 0) -> int:
+    """A whole number field (``draws: 2.5`` is refused, naming the field)."""
+    value = f.number(key, float(default), minimum=float(minimum), maximum=float(maximum))
+    if not value.is_integer():
+        raise ConfigError(f'{key}: must be a whole number, got {value:g}')
+    return int(value)
 
 
 def _law_entry(item: Any, i: int) -> LawEntry:
@@ -425,55 +447,6 @@ def unfinished(run) -> str:
     return ''
 
 
-# --- the rows on disk ---------------------------------------------------------------------------
-
-def rows_folder(out: Path, name: str) -> Path:
-    return out / name / 'rows'
-
-
-def write_row(folder: Path, row: dict) -> Path:
-    """One finished row as a Parquet file of the dataset, written atomically (a temporary name,
-    then a rename): an interrupted campaign leaves whole rows only."""
-    import pandas as pd
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f'part-{row["draw"]:06d}-{uuid.uuid4().hex}.parquet'
-    tmp = path.with_suffix('.tmp')
-    pd.DataFrame([row]).to_parquet(tmp, index=False)
-    os.replace(tmp, path)
-    return path
-
-
-def read_rows(folder: Path, fingerprint: str | None = None):
-    """The dataset as a DataFrame (empty if none); only the rows of ``fingerprint`` if given,
-    one per key and fingerprint (the latest written if a row was written twice)."""
-    import pandas as pd
-    files = sorted(folder.glob('*.parquet'), key=lambda p: (p.stat().st_mtime_ns, p.name)) \
-        if folder.is_dir() else []
-    if not files:
-        return pd.DataFrame()
-    table = pd.concat([pd.read_parquet(p) for p in files], ignore_index=True)
-    if fingerprint is not None:
-        table = table[table['fingerprint'] == fingerprint]
-    return table.drop_duplicates([*KEY, 'fingerprint'], keep='last').sort_values(
-        ['scenario', 'law', 'draw']).reset_index(drop=True)
-
-
-def compact(folder: Path) -> None:
-    """Merge the files of the dataset into one (after a complete campaign; the rows of other
-    fingerprints are kept)."""
-    files = sorted(folder.glob('part-*.parquet'))
-    if len(files) < 2:
-        return
-    table = read_rows(folder)
-    merged = folder / f'rows-{uuid.uuid4().hex}.parquet'
-    tmp = merged.with_suffix('.tmp')
-    table.to_parquet(tmp, index=False)
-    os.replace(tmp, merged)
-    for p in folder.glob('*.parquet'):
-        if p != merged:
-            p.unlink()
-
-
 # --- the engine ---------------------------------------------------------------------------------
 
 def missing(campaign: Campaign, folder: Path) -> list[dict]:
@@ -569,19 +542,49 @@ def _lost_row(task: Mapping, reason: str) -> dict:
     return dict(base_row(task), status='error', reason=reason)
 
 
+def data_description(campaign: Campaign) -> dict[str, Any]:
+    """What a campaign's rows stand on, for every Parquet file's metadata: the campaign, its
+    identity and fingerprint, the seed, the uncertainty of each scenario (in words too), the
+    run's end rule, the tuning artefact its laws' gains came from (empty: every law with its
+    default or given settings) and the commit of the code."""
+    from ato_campaigns.provenance import commit_description
+    from ato_simulation import plans
+    window = campaign.end_time_s is not None
+    return {
+        'campaign': campaign.name, 'origin': campaign.origin,
+        'fingerprint': campaign.fingerprint, 'identity': campaign.identity(),
+        'seed': campaign.seed, 'draws': campaign.draws,
+        'uncertainty': {scenario: {name: spec[name].describe() for name in spec}
+                        for scenario, spec in campaign.specs.items()},
+        'run_end': {
+            'rule': 'window' if window else 'journey',
+            'text': (f'the first {campaign.end_time_s:g} s of the scenario' if window else
+                     'the planned end (the timetable\'s end plus the settle time) if the train '
+                     'then stands at its last stop, else once it has stood there for the '
+                     'settle time, at most the limit past the timetable'),
+            'end_time_s': campaign.end_time_s,
+            'late_limit_share': plans.LATE_LIMIT_SHARE,
+            'late_limit_min_s': plans.LATE_LIMIT_MIN_S, 'late_after_s': LATE_AFTER_S},
+        'tuning_artefact': '',
+        'commit': commit_description()}
+
+
 def run_campaign(campaign: Campaign, out: Path = DEFAULT_OUT, *, serial: bool = False,
                  scheduler: str | None = None, workers: int | None = None, client=None,
                  runner: Callable | None = None, progress: bool = True):
-    """Run what is missing of ``campaign`` and return every row (a DataFrame)."""
+    """Run what is missing of ``campaign`` and return every row (a DataFrame). A folder that
+    holds the rows of another version of the campaign is refused (FolderConflict)."""
     from tqdm import tqdm
     folder = rows_folder(out, campaign.name)
+    check_folder(folder, campaign.fingerprint, campaign.identity())
+    description = data_description(campaign)
     pending_tasks = missing(campaign, folder)
     total = len(campaign.tasks())
     bar = tqdm(total=total, initial=total - len(pending_tasks), unit='run', disable=not progress,
                desc=campaign.name, dynamic_ncols=True, file=sys.stderr)
 
     def finished(row: dict) -> None:
-        write_row(folder, row)
+        write_row(folder, row, description)
         bar.set_postfix_str(f'{row["law"]} draw {row["draw"]}: {row["status"]}', refresh=False)
         bar.update(1)
 
@@ -593,5 +596,39 @@ def run_campaign(campaign: Campaign, out: Path = DEFAULT_OUT, *, serial: bool = 
         bar.close()
     rows = read_rows(folder, campaign.fingerprint)
     if len(rows) == total:
-        compact(folder)
+        compact(folder, description)
     return rows
+
+
+def rerun(campaign: Campaign, law: str, draw: int, scenario: str | None = None):
+    """One row of ``campaign`` made again offline, in this process, exactly as the campaign
+    made it (the same task: draw, settings, rate, window), without its time limit: (the row,
+    the OfflineRun). ``scenario``: a campaign of several scenarios needs it (a name or a file
+    as the campaign gives it)."""
+    key = _scenario_of(campaign, scenario)
+    entry = next((e for e in campaign.laws if e.label == law), None)
+    if entry is None:
+        raise ConfigError(f"--law: '{law}' is not a law of the campaign; its laws: "
+                          f"{', '.join(e.label for e in campaign.laws)}")
+    if not 0 <= draw < campaign.draws:
+        raise ConfigError(f'--draw: the campaign has draws 0 to {campaign.draws - 1}, '
+                          f'not {draw}')
+    task = task_of(campaign, key, entry, draw)
+    row = base_row(task)
+    started = time.perf_counter()
+    run = offline_run(task)
+    row.update(run_metrics(run, 1.0 / task['rate_hz']), wall_s=time.perf_counter() - started)
+    return row, run
+
+
+def _scenario_of(campaign: Campaign, scenario: str | None) -> str:
+    if scenario is None:
+        if len(campaign.scenarios) > 1:
+            raise ConfigError('--scenario: the campaign has several scenarios: '
+                              + ', '.join(campaign.scenarios))
+        return campaign.scenarios[0]
+    for key in campaign.scenarios:
+        if scenario in (key, Path(key).name, Path(key).stem):
+            return key
+    raise ConfigError(f"--scenario: '{scenario}' is not a scenario of the campaign; its "
+                      f"scenarios: {', '.join(campaign.scenarios)}")

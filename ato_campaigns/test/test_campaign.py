@@ -22,9 +22,10 @@ import pandas as pd
 import pytest
 import yaml
 
-from ato_campaigns import engine
+from ato_campaigns import dataset, engine
 from ato_campaigns import stats as cs
 from ato_campaigns.campaign import main
+from ato_campaigns.dataset import FolderConflict
 from ato_campaigns.engine import (
     METRICS,
     load_campaign,
@@ -70,6 +71,11 @@ def comparable(rows: pd.DataFrame) -> pd.DataFrame:
     ({'draws': 0}, 'draws', 'must be >= 1'),
     ({'baseline': 'tan_weighted_mm'}, 'baseline', 'not one of the campaign'),
     ({'seeds': 3}, 'the file', 'unknown field(s) seeds'),
+    ({'draws': 2.5}, 'draws', 'must be a whole number, got 2.5'),
+    ({'seed': 1.5}, 'seed', 'must be a whole number, got 1.5'),
+    ({'uncertainty': {'mass_factor': {'dist': 'truncated_normal', 'mean': 1.5, 'std': 0.05,
+                                      'low': 0.97, 'high': 1.2}}},
+     'uncertainty.mass_factor.mean', '1.5 must lie within [low, high] = [0.97, 1.2]'),
 ])
 def test_a_bad_campaign_names_the_file_and_the_field_before_anything_runs(
         tmp_path, capsys, change, field, words):
@@ -201,14 +207,82 @@ def test_an_interrupted_campaign_keeps_its_rows_and_resumes_only_the_missing(
     assert third.ran == []  # complete: nothing runs again
 
 
-def test_a_changed_campaign_does_not_take_the_rows_of_the_old_one(serial_rows, tmp_path):
+@pytest.mark.parametrize('change, differs', [
+    ({'seed': 12}, 'seed (11 there, 12 here)'),
+    # shrinking draws used to report 2 draws over the statistics of the 4 stored
+    ({'draws': 2}, 'draws (4 there, 2 here)'),
+])
+def test_a_changed_campaign_is_refused_in_the_folder_of_the_old_one(serial_rows, tmp_path,
+                                                                     capsys, change, differs):
     campaign, rows = serial_rows
     out = tmp_path / 'out'
     run_campaign(campaign, out, serial=True, progress=False)
-    changed = load_campaign(write(tmp_path, {**TINY, 'seed': 12}))
+    path = write(tmp_path, {**TINY, **change}, 'changed.yaml')
+    changed = load_campaign(path)
+    assert changed.fingerprint != campaign.fingerprint
     counting = Counting()
-    run_campaign(changed, out, serial=True, runner=counting, progress=False)
-    assert len(counting.ran) == 8
+    with pytest.raises(FolderConflict, match=r'holds the rows of another version of this '
+                                             r'campaign \(fingerprint ') as refused:
+        run_campaign(changed, out, serial=True, runner=counting, progress=False)
+    assert differs in str(refused.value) and counting.ran == []
+    assert main([str(path), '--serial', '--out', str(out)]) == 2
+    assert 'give this campaign another name' in capsys.readouterr().err
+    folder = rows_folder(out, campaign.name)
+    pd.testing.assert_frame_equal(comparable(read_rows(folder)), comparable(rows))
+    renamed = load_campaign(write(tmp_path, {**TINY, **change, 'name': 'tiny_changed'}))
+    assert len(run_campaign(renamed, out, serial=True, progress=False)) == 2 * renamed.draws
+
+
+def test_every_parquet_file_says_what_its_rows_stand_on(tmp_path):
+    campaign = load_campaign(write(tmp_path, {**TINY, 'draws': 2, 'end_time_s': 20}))
+    out = tmp_path / 'out'
+    with pytest.raises(KeyboardInterrupt):   # two part files, then the merged one
+        run_campaign(campaign, out, serial=True, runner=Counting(stop_after=2),
+                     progress=False)
+    folder = rows_folder(out, campaign.name)
+    parts = [dataset.file_description(p) for p in sorted(folder.glob('part-*.parquet'))]
+    run_campaign(campaign, out, serial=True, progress=False)
+    merged = sorted(folder.glob('*.parquet'))
+    assert len(parts) == 2 and len(merged) == 1 and merged[0].name.startswith('rows-')
+    for description in [*parts, dataset.file_description(merged[0])]:
+        assert description['fingerprint'] == campaign.fingerprint
+        assert description['identity'] == campaign.identity()
+        assert (description['seed'], description['draws']) == (11, 2)
+        spec = description['uncertainty']['short_line']
+        assert spec['mass_factor'] == uncertainty.DEFAULTS['mass_factor'].describe()
+        assert description['run_end']['rule'] == 'window'
+        assert description['run_end']['end_time_s'] == 20.0
+        assert description['tuning_artefact'] == ''
+        assert description['commit'] and 'not a git checkout' not in description['commit']
+
+
+def test_one_row_is_made_again_offline_printed_and_its_arrays_saved(tmp_path, capsys):
+    path = write(tmp_path, {**TINY, 'draws': 2, 'end_time_s': 20})
+    out = tmp_path / 'out'
+    rows = run_campaign(load_campaign(path), out, serial=True, progress=False)
+    capsys.readouterr()
+    saved = tmp_path / 'run.npz'
+    assert main(['--campaign', str(path), '--draw', '1', '--law', 'luo_xu', '--out', str(out),
+                 '--save', str(saved)]) == 0
+    printed, said = capsys.readouterr()
+    shown = json.loads(printed)
+    stored = rows[(rows['law'] == 'luo_xu') & (rows['draw'] == 1)].iloc[0]
+    assert (shown['law'], shown['draw'], shown['status']) == ('luo_xu', 1, stored['status'])
+    assert shown['rms_speed_error_kmh'] == stored['rms_speed_error_kmh']
+    assert shown['drawn']['mass_factor'] == stored['p_mass_factor']
+    assert 'the same status and metrics as the stored row' in said
+    arrays = np.load(saved)
+    assert arrays['times_s'].size == 201 and arrays['times_s'][-1] == pytest.approx(20.0)
+    assert arrays['speeds_mps'].shape == arrays['times_s'].shape
+    assert any(name.startswith('estimate_') for name in arrays.files)
+    for bad, words in ((['--draw', '2', '--law', 'pid'], '--draw: the campaign has draws 0 '
+                                                        'to 1, not 2'),
+                       (['--draw', '0', '--law', 'pdi'], "--law: 'pdi' is not a law")):
+        assert main(['--campaign', str(path), '--out', str(out), *bad]) == 2
+        assert words in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(['--campaign', str(path), '--draw', '0'])
+    assert '--draw and --law go together' in capsys.readouterr().err
 
 
 def hang_or_fail(task):
@@ -504,18 +578,6 @@ def test_the_readme_summary_is_written_between_its_markers_only(tmp_path, serial
     readme.write_text('no markers')
     with pytest.raises(ValueError, match='no campaign summary markers'):
         campaign_report.update_readme(readme, 'x')
-
-
-def test_the_rows_of_two_versions_of_a_campaign_live_side_by_side(serial_rows, tmp_path):
-    campaign, rows = serial_rows
-    out = tmp_path / 'out'
-    run_campaign(campaign, out, serial=True, progress=False)
-    changed = load_campaign(write(tmp_path, {**TINY, 'seed': 12}))
-    run_campaign(changed, out, serial=True, progress=False)
-    folder = rows_folder(out, campaign.name)
-    assert len(read_rows(folder)) == 16
-    pd.testing.assert_frame_equal(comparable(read_rows(folder, campaign.fingerprint)),
-                                  comparable(rows))
 
 
 def test_a_hidden_gradient_changes_the_controller_only_and_the_closed_loop_shows_it():

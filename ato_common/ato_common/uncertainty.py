@@ -311,6 +311,9 @@ def _any_distribution(value: Any, where: str, param: Parameter) -> Distribution:
                          bounded('low'), bounded('high'))
         if not d.high > d.low:
             raise ConfigError(f'{where}: high ({d.high:g}) must be above low ({d.low:g})')
+        if not d.low <= d.a <= d.high:  # its draws would pile up at one bound
+            raise ConfigError(f'{where}.mean: {d.a:g} must lie within [low, high] = '
+                              f'[{d.low:g}, {d.high:g}]')
     elif dist == 'lognormal':
         d = Distribution(dist, f.number('median', minimum=0.0, exclusive_minimum=True),
                          f.number('sigma', minimum=0.0, maximum=2.0))
