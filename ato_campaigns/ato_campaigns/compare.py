@@ -111,11 +111,11 @@ class Job:
     plant: str = NOMINAL  # one of PLANTS
 
 
-def plan_jobs(scenarios: list[str], laws: list[str] | None = None
-              ) -> tuple[list[Job], list[dict]]:
+def plan_jobs(scenarios: list[str], laws: list[str] | None = None,
+              plants: tuple[str, ...] = (NOMINAL,)) -> tuple[list[Job], list[dict]]:
     """The runs to make, and the (scenario, law) pairs that do not apply, with the reason
-    (``laws``: only these; default every registered law). A law runs on each of PLANTS, but
-    over a window (a faster rate) on the nominal plant only."""
+    (``laws``: only these; default every registered law). A law runs on each of ``plants``
+    (the comparison: PLANTS), but over a window (a faster rate) on the nominal plant only."""
     jobs, skipped = [], []
     for name in scenarios:
         scenario = load_scenario(name)
@@ -128,7 +128,7 @@ def plan_jobs(scenarios: list[str], laws: list[str] | None = None
                 continue
             end = MAX_STEPS / rate if duration * rate > MAX_STEPS else None
             jobs += [Job(name, law, model, rate, end, plant)
-                     for plant in (PLANTS if end is None else (NOMINAL,))]
+                     for plant in (plants if end is None else (NOMINAL,))]
     return jobs, skipped
 
 
@@ -437,7 +437,7 @@ def main(argv=None) -> int:
     scenarios = args.scenario or builtin_scenarios()
     measured = (results_page_provenance(args.results_page)
                 if args.results_page is not None else None)
-    jobs, skipped = plan_jobs(scenarios, args.law)
+    jobs, skipped = plan_jobs(scenarios, args.law, PLANTS)
     print(f'{len(jobs)} runs ({len(skipped)} law/scenario pairs not applicable) on '
           f'{args.jobs} processes', file=sys.stderr)
     results = run_all(jobs, args.jobs, args.timeout_s or None)

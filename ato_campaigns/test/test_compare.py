@@ -74,9 +74,10 @@ def test_a_law_that_needs_a_faster_rate_runs_at_it_over_a_window():
     fast = jobs['mao_multibody_adaptive']
     assert fast.rate_hz == 10000.0   # its sampled-time design refuses 10 Hz, 200 Hz and 1 kHz
     # over a window, on the nominal plant only; a whole-scenario run on both plants
-    assert [j.plant for j in compare.plan_jobs(['mao_4car'], ['mao_multibody_adaptive'])[0]] \
-        == [compare.NOMINAL]
-    assert [j.plant for j in compare.plan_jobs(['mao_4car'], ['pid'])[0]] == list(compare.PLANTS)
+    both = compare.PLANTS
+    assert [j.plant for j in compare.plan_jobs(['mao_4car'], ['mao_multibody_adaptive'],
+                                               both)[0]] == [compare.NOMINAL]
+    assert [j.plant for j in compare.plan_jobs(['mao_4car'], ['pid'], both)[0]] == list(both)
     assert fast.end_time_s == pytest.approx(compare.MAX_STEPS / 10000.0)
     assert jobs['pid'].rate_hz == 10.0 and jobs['pid'].end_time_s is None
     ranked = {'status': 'ok', 'end_time_s': None, 'stop_error_m': 0.0, 'rate_hz': 10.0,
@@ -136,9 +137,10 @@ def test_a_run_with_an_atp_intervention_is_not_ok_and_its_status_says_why():
 def test_every_law_also_runs_on_the_nominal_plant_with_a_campaign_s_smallest_actuator():
     """Defect 8: the nominal plant has no actuator lag or dead time while every campaign draw
     has some; the row nominal with actuator shows what the actuator alone does."""
-    jobs, _ = compare.plan_jobs(['short_line'], ['pid'])
+    jobs, _ = compare.plan_jobs(['short_line'], ['pid'], compare.PLANTS)
     assert [(j.law, j.plant) for j in jobs] == [('pid', 'nominal'),
                                                 ('pid', 'nominal with actuator')]
+    assert [j.plant for j in compare.plan_jobs(['short_line'], ['pid'])[0]] == ['nominal']
     # the least lag and dead time of the default uncertainty, nothing else drawn
     lag, dead = (uncertainty.DEFAULTS[name] for name in compare.ACTUATOR_PARAMETERS)
     assert (lag.dist, lag.a, dead.dist, dead.a) == ('uniform', 0.2, 'uniform', 0.1)
