@@ -41,8 +41,10 @@ Columns (errors are reference minus truth of the lead car at each control instan
 - step p99 [us]: 99th percentile of the host's step time (law, saturation, bumpless), measured
   while the runs share the cores, so it is an upper figure; ``make bench`` measures it alone.
 
-Ranking (``best`` per scenario): among the whole-scenario runs at the scenario's control rate
-with status ``ok`` whose stop error is at most STOP_ERROR_LIMIT_M, the lowest RMS speed error.
+Ranking (``best`` per scenario, and ``best_with_actuator`` on the other plant): among the
+whole-scenario runs at the scenario's control rate with status ``ok`` (a clean run that finished
+on time: ato_common.run_events) whose stop error is at most STOP_ERROR_LIMIT_M, the lowest RMS
+speed error.
 """
 
 from __future__ import annotations

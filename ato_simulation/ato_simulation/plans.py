@@ -27,18 +27,18 @@ from ato_common.types import NS_PER_S
 from profile_node.planner import Plan, plan_reference
 
 #: how long a run may go on past its timetable's end for a late train to arrive: this share of
-#: the timetable's journey time, at least LATE_LIMIT_MIN_S (a suite setting: a train that loses
-#: half its traction on a level line takes about twice as long to accelerate, and a third to a
-#: half longer over a journey; one that has not arrived by then is stranded, not late)
+#: the timetable's journey time, at least LATE_LIMIT_MIN_S (a suite setting: room for a train
+#: that has lost part of its traction to arrive; one that has not arrived by then is stranded,
+#: not late)
 LATE_LIMIT_SHARE = 0.5
 LATE_LIMIT_MIN_S = 60.0
 
 
 def stop_samples(plan: Plan, replans: tuple[Plan, ...] = (),
-                 late: tuple[float, ...] = ()) -> list[StopSample]:
+                 late: tuple[tuple[str, float], ...] = ()) -> list[StopSample]:
     """Each stop sampled at its departure in the last plan that has it (a replan's); the stops
-    whose names ``late`` maps to a time (``JourneyEnd.late_readings``: the train was not at the
-    stop at its planned time in a run that went on past its planned end) at that time."""
+    that ``late`` pairs with a time (:func:`late_readings`: the train was not at the stop at
+    its planned time in a run that went on past its planned end) at that time."""
     stops = {s.station.name: s for s in plan.stops}
     for later in replans:
         stops.update((s.station.name, s) for s in later.stops)
