@@ -74,6 +74,17 @@ class Distribution:
         weights = np.asarray(self.weights or [1.0] * len(self.values), dtype=float)
         return float(self.values[int(rng.choice(len(self.values), p=weights / weights.sum()))])
 
+    @property
+    def smallest(self) -> float:
+        """The smallest value a draw can take (-inf for a normal distribution)."""
+        if self.dist in ('fixed', 'uniform'):
+            return self.a
+        if self.dist == 'truncated_normal':
+            return self.low
+        if self.dist == 'choice':
+            return min(self.values)
+        return -math.inf if self.dist == 'normal' else 0.0
+
     def describe(self) -> str:
         if self.dist == 'fixed':
             return f'{self.a:g}'
@@ -301,6 +312,9 @@ def _any_distribution(value: Any, where: str, param: Parameter) -> Distribution:
                          bounded('low'), bounded('high'))
         if not d.high > d.low:
             raise ConfigError(f'{where}: high ({d.high:g}) must be above low ({d.low:g})')
+        if not d.low <= d.a <= d.high:  # its draws would pile up at one bound
+            raise ConfigError(f'{where}.mean: {d.a:g} must lie within [low, high] = '
+                              f'[{d.low:g}, {d.high:g}]')
     elif dist == 'lognormal':
         d = Distribution(dist, f.number('median', minimum=0.0, exclusive_minimum=True),
                          f.number('sigma', minimum=0.0, maximum=2.0))
