@@ -255,7 +255,9 @@ class StackConfig:
     record_to: Path | None = None  # bag folder: run the recorder too
     namespace: str = ''  # push the stack into it, with its own /clock ('' : the root)
     composed: bool = False  # the three loop nodes in one process (ato_stack) instead of three
-    monitor: str = 'full'  # what the run monitor watches: 'full' (FULL) or 'lean' (LEAN)
+    # what the run monitor watches: 'full' (FULL) or 'lean' (LEAN); '': no monitor (the caller
+    # subscribes to what it needs on Stack.node)
+    monitor: str = 'full'
     diagnostics_period_s: float = 1.0  # of the plant and the controller, s of simulated time
     # an ATO node of the user's instead of the suite's controller: its command line (shell
     # words), started with ``--ros-args -p scenario:=<scenario>`` and the stack's remappings
@@ -291,10 +293,11 @@ class Stack:
         self.namespace = normalised_namespace(config.namespace)
         rclpy.init(context=self.context, domain_id=config.domain_id)
         self.node = Node('ato_run_monitor', namespace=self.namespace, context=self.context)
-        if config.monitor not in MONITORS:
-            raise ValueError(f'monitor {config.monitor!r}: one of {", ".join(MONITORS)}')
-        watch, batch = MONITORS[config.monitor]
-        self.monitor = Monitor(self.node, self.namespace, watch, batch)
+        if config.monitor and config.monitor not in MONITORS:
+            raise ValueError(f'monitor {config.monitor!r}: one of {", ".join(MONITORS)}, or '
+                             "'' for none")
+        self.monitor = Monitor(self.node, self.namespace, *MONITORS[config.monitor]) \
+            if config.monitor else None
         # The process that runs the plant (and so ends the run at end_time_s).
         self.plant_process = 'loop' if config.composed else 'plant'
         self.parameter_clients: dict[str, object] = {}
@@ -311,7 +314,7 @@ class Stack:
         # by the stamps of /clock and of the messages in lockstep: they need no use_sim_time
         # (which would cost each a /clock subscription taking every step).
         recorder = int(c.record_to is not None)
-        watch = self.monitor.watch
+        watch = self.monitor.watch if self.monitor else ()
         # every monitor reads /diagnostics (FULL and LEAN): each node's first status too
         common['wait_for_diagnostics_readers'] = int('diagnostics' in watch)
         common['wait_for_recorders'] = recorder
@@ -350,16 +353,18 @@ class Stack:
             else:
                 self.start_process(name, params[name])
 
-    def start_external_controller(self) -> subprocess.Popen:
+    def start_external_controller(self, scenario: str | None = None) -> subprocess.Popen:
         """The user's ATO node (``StackConfig.controller_command``) as the process
-        ``controller``: told the scenario as the suite's nodes are (a ``scenario`` parameter,
-        and ATO_SCENARIO in its environment), in the stack's namespace."""
+        ``controller``: told the scenario (default the stack's) as the suite's nodes are (a
+        ``scenario`` parameter, and ATO_SCENARIO in its environment), in the stack's
+        namespace."""
         words = shlex.split(self.config.controller_command)
         if not words:
             raise ValueError('the controller command is empty')
-        args = ros_args({'scenario': self.config.scenario}, self.namespace)
+        scenario = scenario or self.config.scenario
+        args = ros_args({'scenario': scenario}, self.namespace)
         return self.start_process('controller', {}, command=[*words, *args],
-                                  env={'ATO_SCENARIO': self.config.scenario})
+                                  env={'ATO_SCENARIO': scenario})
 
     def start_composed(self, params: dict[str, dict]) -> subprocess.Popen:
         """The three loop nodes in one process (``ato_stack``), each with its own parameters
@@ -502,7 +507,7 @@ class Stack:
                     process.kill()
                     process.wait()
         self.executor.shutdown()
-        if self.monitor.batch_node is not None:
+        if self.monitor is not None and self.monitor.batch_node is not None:
             self.monitor.batch_node.destroy_node()
         self.node.destroy_node()
         if self.context.ok():
