@@ -165,6 +165,16 @@ def test_composed_starts_one_process_with_a_section_per_node(launch_file):
     assert controller['controller'] == 'luo_xu' and controller['lockstep'] is True
     plant = sections['/**/train_plant_node']['ros__parameters']
     assert plant['end_time_s'] == 12.5 and 'controller' not in plant
+    assert plant['model'] == 'point_mass'
+    # composed, the 4-car unit gets the multi-car plant too
+    configurations.update(scenario='mao_4car', controller='mao_multibody_rigid')
+    entities = opaque.kwargs['function'](types.SimpleNamespace(
+        launch_configurations=configurations))
+    (node,) = [e for e in entities if type(e).__name__ == 'Node']
+    (path,) = node.kwargs['parameters']
+    sections = yaml.safe_load(Path(path).read_text())
+    Path(path).unlink()
+    assert sections['/**/train_plant_node']['ros__parameters']['model'] == 'multi_car'
 
 
 def test_the_nodes_get_the_middleware_defaults_unless_the_user_set_them(launch_file,

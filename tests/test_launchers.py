@@ -84,6 +84,17 @@ def test_a_killed_peer_ends_the_launch_naming_it_and_the_others_stop_in_time(tmp
             if set(names) >= set(expected) or time.monotonic() > deadline:
                 break
         assert sorted(names) == expected, names
+        ato = {'env': environment(domain_id), 'capture_output': True, 'text': True,
+               'timeout': 60}
+        got = subprocess.run(['ato', 'param', 'get', '/ato_controller_node', 'controller'], **ato)
+        assert got.stdout.strip() == 'String value is: pid', got.stderr
+        listed = subprocess.run(['ato', 'param', 'list', 'ato_controller_node'], **ato).stdout
+        assert '  luo_xu.c1' in listed.splitlines() and '  controller' in listed.splitlines()
+        topics = subprocess.run(['ato', 'topic', 'list', '-t', '--spin-time', '2'], **ato).stdout
+        assert '/ato/command [sensor_msgs/msg/JointState]' in topics.splitlines()
+        echoed = subprocess.run(['ato', 'topic', 'echo', 'ato/command', '--once'], **ato)
+        assert echoed.returncode == 0 and '  frame_id: pid' in echoed.stdout, echoed.stderr
+        assert echoed.stdout.rstrip().endswith('---') and 'effort:' in echoed.stdout
         controller = subprocess.run(['pgrep', '-P', str(launch.pid), '-f',
                                      'lib/ato_controller_node/ato_controller_node'],
                                     capture_output=True, text=True).stdout.split()
