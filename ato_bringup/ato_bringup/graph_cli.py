@@ -207,10 +207,8 @@ def topic(args: argparse.Namespace) -> int:
                   + '---', flush=True)
         node.create_subscription(message_class(type_name), name, on_message,
                                  echo_qos(args, node, name))
-        try:
-            spin_until(executor, lambda: args.once and received, float('inf'))
-        except KeyboardInterrupt:
-            pass
+        # until the first message with --once, else until Ctrl-C (ato: a clean exit 0)
+        spin_until(executor, lambda: args.once and received, float('inf'))
         return 0
 
 

@@ -48,6 +48,8 @@ LAUNCH_FILE = ('ato_bringup', 'ato.launch.py')
 SIGTERM_TIMEOUT_S = 5.0
 #: wall time between stopping one node and the next (discovery settles)
 SETTLE_S = 0.3
+#: how long the output of stopped nodes is read to its end at the most, s
+DRAIN_S = 2.0
 PR_SET_PDEATHSIG = 1
 
 
@@ -159,9 +161,9 @@ class Launch:
                 code = child.process.returncode
                 if code not in (0, None):
                     log(f'{child.name} exited with {describe_exit(code)} while stopping')
-        for child in self.children:
-            self.wait(child, 0.0)
-        while self.selector.get_map():
+        # what they wrote last (bounded: a process of theirs could hold the pipe open)
+        deadline = time.monotonic() + DRAIN_S
+        while self.selector.get_map() and time.monotonic() < deadline:
             self.pump(0.1)
 
     def watch(self) -> int:
