@@ -22,7 +22,7 @@ setup(
     tests_require=['pytest', 'hypothesis', 'numpy'],
     entry_points={
         'console_scripts': [
-            'ato_controller_node = ato_controller_node.node:main'
+            'ato_controller_node = ato_controller_node.entry:main'
         ],
     },
 )
