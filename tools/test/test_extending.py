@@ -58,7 +58,10 @@ def _copy_of_the_repository(target: Path) -> Path:
                             cwd=REPOSITORY, capture_output=True, check=True).stdout
     for name in filter(None, listed.decode().split('\0')):
         source = REPOSITORY / name
-        if source.is_file() and not source.is_symlink():
+        if source.is_symlink():  # ros_ws/src: the list of packages, kept as links
+            (target / name).parent.mkdir(parents=True, exist_ok=True)
+            (target / name).symlink_to(source.readlink())
+        elif source.is_file():
             (target / name).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(source, target / name)
     subprocess.run(['git', 'init', '-q'], cwd=target, check=True)
