@@ -203,8 +203,7 @@ def _capped(line: Line, speed: float) -> Line:
     """The line's static limits capped at the train's maximum speed (part of the MRSP)."""
     limits = line.speed_limit_mps
     capped = PiecewiseConstant(limits.starts, [min(v, speed) for v in limits.values])
-    return Line(line.name, line.length_m, line.stations, capped, line.grade_sine, line.curves,
-                line.tunnels)
+    return replace(line, speed_limit_mps=capped)
 
 
 def _parse_supervision(f: Fields, train: TrainParameters,
