@@ -92,6 +92,18 @@ class SupervisionSettings:
     eoa_beyond_stop_m: float = 50.0       # stopping point -> end of authority
     overlap_m: float = 50.0               # EOA -> supervised location
     release_speed_max_mps: float = 40.0 / 3.6  # the highest release speed (V_release)
+    # The on-board odometry's declared accuracy (SUBSET-026 3.6.4, SUBSET-041 5.3.1): its
+    # confidence interval is location_accuracy_m + odometry_accuracy times the distance run
+    # since the last relevant balise group, on each side of the estimated front end; the
+    # speed's is speed_accuracy_mps + speed_accuracy_share times the estimated speed. Zero
+    # (the default): the odometry declares itself exact.
+    # The train's highest acceleration by its own traction on level track (its starting effort
+    # over its mass), train data the ATP anticipates a control cycle with (0: none given).
+    traction_acceleration_mps2: float = 0.0
+    location_accuracy_m: float = 0.0
+    odometry_accuracy: float = 0.0
+    speed_accuracy_mps: float = 0.0
+    speed_accuracy_share: float = 0.0
 
 
 def constant_deceleration(value: float) -> Callable[[float], float]:
@@ -348,6 +360,16 @@ class SpeedSupervision:
         speeds = [c(position_m) for c in self.curves['permitted']]
         lowest = min(range(len(speeds)), key=speeds.__getitem__)
         return self.targets[lowest] if speeds[lowest] < self.mrsp(position_m) else None
+
+    def ceiling(self, name: str) -> tuple[list[float], list[float]]:
+        """The ceiling of a named limit section by section, (starts, speeds): the MRSP plus
+        the name's dV (``ebi``, ``sbi``, ``warning``), the MRSP itself (``permitted``,
+        ``indication``). A train whose front may lie anywhere in an interval is bound by the
+        lowest ceiling over it (SUBSET-026 3.6.4: the max safe front end for the start of a
+        restriction, the min safe front end for its end)."""
+        dv = {'ebi': DV_EBI_KMH, 'sbi': DV_SBI_KMH, 'warning': DV_WARNING_KMH}.get(name)
+        return (list(self.mrsp.starts),
+                [v + (ceiling_margin(v, dv) if dv else 0.0) for v in self.mrsp.values])
 
     def permitted_speed(self, position_m: float) -> float:
         """min(MRSP, the permitted curves of every target), m/s; 0 beyond the SvL."""

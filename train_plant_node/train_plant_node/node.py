@@ -140,84 +140,11 @@ class TrainPlantNode(RunNodeHooks, Node):
         self.period_ns = (control_period_ns(rate) if self.lockstep
                           else control_period_ns(p['real_time_rate_hz']))
         self.end_ns = nanoseconds(p['end_time_s'])
-        if p['emergency_periods'] < p['watchdog_periods']:
-            raise ConfigError(f"emergency_periods ({p['emergency_periods']}) must not be below "
-                              f"watchdog_periods ({p['watchdog_periods']})")
-        if not self.lockstep and self.get_parameter('use_sim_time').value:
-            raise ConfigError('use_sim_time is true on a real-time plant (lockstep false): '
-                              'nobody publishes /clock then, so its clock would never advance '
-                              'and it would publish nothing; set use_sim_time false (only the '
-                              'other nodes of a lockstep run use simulated time)')
         self.control_period_ns = control_period_ns(rate)
-        try:
-            self.sim = TrainSimulation(
-                self.scenario, p['model'],
-                SensorSettings(p['sensor_position_noise_m'], p['sensor_speed_noise_mps'],
-                               p['seed']),
-                SafetySettings(p['watchdog_periods'], p['emergency_periods']),
-                max_substep_s=p['max_substep_s'])
-        except ConfigError:
-            raise  # names the scenario's field already (plant.sensors...)
-        except FailureRejected as error:
-            raise ConfigError(f'plant.failures: {error}') from None
-        except ValueError as error:  # e.g. multi_car with a train that has no car description
-            raise ConfigError(f"model {p['model']}: {error}") from None
-        self.last_valid_command_wall = time.monotonic()
-        self.safety_state = (NORMAL, False)
-        self.finished = False
-        self.started = False
-        self.last_rejection = ''
-        self.last_publish_wall = 0.0
-        self.next_diagnostic_ns = 0
-        self.wall_start_ns = 0
-        self.step_messages = None
-        self.steps_published = 0  # re-sent steps included: what a recording must hold
-        self.ready_since: float | None = None
-        self.wrong_stamp_commands = 0   # dropped for their stamp (lockstep and real time)
-        self.last_wrong_stamp = ''      # why the last one was dropped
-        self.publishing = Publishing(self)
-        self.failures_reported = 0
-        self.step_since_wall = 0.0      # when the current step was first published
-        self.waiting_reported_wall = 0.0
-        self.waiting = ''               # lockstep: the wait for a command beyond the limit
-        self.held_reported_wall = 0.0   # lockstep: a step held for a recorder, last reported
-        self.held = ''                  # lockstep: the wait for a recorder beyond the limit
-        self.status_name = status_name(self, 'simulation')
-
-        self.truth_pub = self.create_publisher(JointTrajectory, topic('state').name,
-                                               qos_profile(topic('state').qos))
-        self.measured_pub = self.create_publisher(JointTrajectory, topic('state_measured').name,
-                                                  qos_profile(topic('state_measured').qos))
-        self.diag_pub = self.create_publisher(DiagnosticArray, topic('diagnostics').name,
-                                              qos_profile(topic('diagnostics').qos))
-        self.clock_pub = (self.create_publisher(Clock, topic('clock').name,
-                                                qos_profile(topic('clock').qos))
-                          if self.lockstep else None)
-        self.commanded_pub = self.create_publisher(
-            JointState, topic('actuators_commanded').name,
-            qos_profile(topic('actuators_commanded').qos))
-        self.applied_pub = self.create_publisher(
-            JointState, topic('actuators_applied').name,
-            qos_profile(topic('actuators_applied').qos))
-        self.observations = tuple(Observation(self, p) for p in (
-            self.truth_pub, self.commanded_pub, self.applied_pub))
-        # The per-step messages for the recorders, bundled (ato_ros.step_records).
-        self.records = step_recorder(self, self.publishing)
-        # Lockstep: a step waits while a recorder has not written the steps more than the lead
-        # before it (back-pressure: what a SIGKILLed recorder loses is bounded).
-        self.recorder_lead = None
-        if self.lockstep and p['recorder_lead_s'] > 0:
-            least = least_lead_s(seconds(self.period_ns))
-            if p['recorder_lead_s'] < least:
-                raise ConfigError(
-                    f"recorder_lead_s {p['recorder_lead_s']:g} s is under the least lead of "
-                    f'this loop, {least:g} s (the step records\' bundle and acknowledgement '
-                    'periods and two control periods: a smaller lead would wait for records no '
-                    'node sends before the next step); give at least that, or 0 not to wait '
-                    'for recorders')
-            self.recorder_lead = RecorderLead(self, p['recorder_lead_s'], self.publish_step)
-        self.identity_pub = self.create_publisher(String, topic('identity').name,
-                                                  qos_profile(topic('identity').qos))
+        self.sim = self._simulation()
+        self._start_state()
+        self._create_outputs()
+        self.recorder_lead = self._recorder_lead()
         self.identity = scenario_identity(self.scenario)
         self.publishing(self.identity_pub, String(data=self.identity))
         self.add_on_set_parameters_callback(self.check_use_sim_time)
@@ -239,6 +166,96 @@ class TrainPlantNode(RunNodeHooks, Node):
             f"{'lockstep at ' + format(rate, 'g') + ' Hz' if self.lockstep else 'real time'}, "
             f'actuators {list(self.sim.actuator_names)}')
         freeze_startup_objects()
+
+    def _simulation(self) -> TrainSimulation:
+        """The simulation the parameters ask for; a parameter or scenario it refuses is a
+        ConfigError naming it."""
+        p = self.params
+        if p['emergency_periods'] < p['watchdog_periods']:
+            raise ConfigError(f"emergency_periods ({p['emergency_periods']}) must not be below "
+                              f"watchdog_periods ({p['watchdog_periods']})")
+        if not self.lockstep and self.get_parameter('use_sim_time').value:
+            raise ConfigError('use_sim_time is true on a real-time plant (lockstep false): '
+                              'nobody publishes /clock then, so its clock would never advance '
+                              'and it would publish nothing; set use_sim_time false (only the '
+                              'other nodes of a lockstep run use simulated time)')
+        try:
+            return TrainSimulation(
+                self.scenario, p['model'],
+                SensorSettings(p['sensor_position_noise_m'], p['sensor_speed_noise_mps'],
+                               p['seed']),
+                SafetySettings(p['watchdog_periods'], p['emergency_periods']),
+                max_substep_s=p['max_substep_s'])
+        except ConfigError:
+            raise  # names the scenario's field already (plant.sensors...)
+        except FailureRejected as error:
+            raise ConfigError(f'plant.failures: {error}') from None
+        except ValueError as error:  # e.g. multi_car with a train that has no car description
+            raise ConfigError(f"model {p['model']}: {error}") from None
+
+    def _start_state(self) -> None:
+        """The node's own state before the first step."""
+        self.last_valid_command_wall = time.monotonic()
+        self.safety_state = (NORMAL, False)
+        self.finished = False
+        self.started = False
+        self.last_rejection = ''
+        self.last_publish_wall = 0.0
+        self.next_diagnostic_ns = 0
+        self.wall_start_ns = 0
+        self.step_messages = None
+        self.steps_published = 0  # re-sent steps included: what a recording must hold
+        self.ready_since: float | None = None
+        self.wrong_stamp_commands = 0   # dropped for their stamp (lockstep and real time)
+        self.last_wrong_stamp = ''      # why the last one was dropped
+        self.failures_reported = 0
+        self.step_since_wall = 0.0      # when the current step was first published
+        self.waiting_reported_wall = 0.0
+        self.waiting = ''               # lockstep: the wait for a command beyond the limit
+        self.held_reported_wall = 0.0   # lockstep: a step held for a recorder, last reported
+        self.held = ''                  # lockstep: the wait for a recorder beyond the limit
+
+    def _create_outputs(self) -> None:
+        """The plant's outputs: the state (true and measured), /clock in lockstep, the
+        actuator forces, diagnostics, the step records and the identity."""
+        self.publishing = Publishing(self)
+        self.status_name = status_name(self, 'simulation')
+        self.truth_pub = self.create_publisher(JointTrajectory, topic('state').name,
+                                               qos_profile(topic('state').qos))
+        self.measured_pub = self.create_publisher(JointTrajectory, topic('state_measured').name,
+                                                  qos_profile(topic('state_measured').qos))
+        self.diag_pub = self.create_publisher(DiagnosticArray, topic('diagnostics').name,
+                                              qos_profile(topic('diagnostics').qos))
+        self.clock_pub = (self.create_publisher(Clock, topic('clock').name,
+                                                qos_profile(topic('clock').qos))
+                          if self.lockstep else None)
+        self.commanded_pub = self.create_publisher(
+            JointState, topic('actuators_commanded').name,
+            qos_profile(topic('actuators_commanded').qos))
+        self.applied_pub = self.create_publisher(
+            JointState, topic('actuators_applied').name,
+            qos_profile(topic('actuators_applied').qos))
+        self.observations = tuple(Observation(self, p) for p in (
+            self.truth_pub, self.commanded_pub, self.applied_pub))
+        # The per-step messages for the recorders, bundled (ato_ros.step_records).
+        self.records = step_recorder(self, self.publishing)
+        self.identity_pub = self.create_publisher(String, topic('identity').name,
+                                                  qos_profile(topic('identity').qos))
+
+    def _recorder_lead(self) -> RecorderLead | None:
+        """Lockstep: a step waits while a recorder has not written the steps more than the lead
+        before it (back-pressure: what a SIGKILLed recorder loses is bounded)."""
+        lead_s = self.params['recorder_lead_s']
+        if not (self.lockstep and lead_s > 0):
+            return None
+        least = least_lead_s(seconds(self.period_ns))
+        if lead_s < least:
+            raise ConfigError(
+                f'recorder_lead_s {lead_s:g} s is under the least lead of this loop, {least:g} s '
+                "(the step records' bundle and acknowledgement periods and two control periods: "
+                'a smaller lead would wait for records no node sends before the next step); '
+                'give at least that, or 0 not to wait for recorders')
+        return RecorderLead(self, lead_s, self.publish_step)
 
     # --- time ----------------------------------------------------------------------------------
     def stamp_ns(self) -> int:
@@ -313,17 +330,23 @@ class TrainPlantNode(RunNodeHooks, Node):
 
     def safety_message(self) -> str:
         sim = self.sim
-        if sim.atp_intervention:
-            if not sim.atp_holds_to_standstill:
+        atp, odometry = sim.atp, sim.odometry
+        if atp.emergency_brake:
+            if sim.actuators.failures and sim.actuators.drive_fault(sim.time_s):
+                until = ('a traction drive delivers force it is not asked for: brake and '
+                         'traction cut-off held until the failure is isolated')
+            elif atp.odometry_lost:
+                until = 'the odometry is lost (its position and speed sensors failed)'
+            elif not atp.hold_to_standstill:
                 until = (f'until at or under the permitted '
-                         f'{units.mps_to_kmh(sim.permitted_speed()):.1f} km/h')
-            elif sim.lead_position() < sim.supervision.legs[sim.leg].end_of_authority_m:
+                         f'{units.mps_to_kmh(atp.permitted_speed(odometry)):.1f} km/h')
+            elif odometry.max_safe_front_m < sim.supervision.legs[atp.leg].end_of_authority_m:
                 until = 'until standstill (target-speed monitoring)'
             else:
                 until = 'past the end of authority (trip): until the authority moves on'
             return ('ATP emergency brake intervention: '
-                    f'{units.mps_to_kmh(sim.lead_speed()):.1f} km/h, intervention speed '
-                    f'{units.mps_to_kmh(sim.intervention_speed()):.1f} km/h, {until}')
+                    f'{units.mps_to_kmh(odometry.speed_mps):.1f} km/h, intervention speed '
+                    f'{units.mps_to_kmh(atp.intervention_speed(odometry)):.1f} km/h, {until}')
         if sim.watchdog != NORMAL:
             cause = self.last_rejection or self.last_wrong_stamp
             return (f'command watchdog: {sim.watchdog} after {sim.missed_periods} control '
@@ -371,25 +394,24 @@ class TrainPlantNode(RunNodeHooks, Node):
             failed and f'{failed} publishes failed (last: {self.publishing.last_failure})')
         level = (DiagnosticStatus.ERROR if safety else
                  DiagnosticStatus.WARN if warning else DiagnosticStatus.OK)
+        sim = self.sim
         status = diagnostic_status(
             self.status_name, self.scenario.train.name, level,
             safety or warning or 'running',
-            {'time_s': self.sim.time_s, 'commanded_n': list(self.sim.commanded),
-             'applied_n': list(self.sim.applied),
-             'rejected_commands': self.sim.rejected_commands,
+            {'time_s': sim.time_s, 'commanded_n': list(sim.commanded),
+             'applied_n': list(sim.applied),
+             'rejected_commands': sim.rejected_commands,
              'wrong_stamp_commands': self.wrong_stamp_commands,
              'last_wrong_stamp': self.last_wrong_stamp or 'none',
-             'supervised_leg': self.sim.leg,
-             'emergency_brake': self.sim.emergency_brake,
+             'emergency_brake': sim.emergency_brake,
+             'emergency_brake_held_s': self.emergency_brake_held_s(),
              'steps_published': self.steps_published,
-             'watchdog': self.sim.watchdog, 'missed_periods': self.sim.missed_periods,
-             'atp_intervention': self.sim.atp_intervention,
-             'atp_interventions': self.sim.atp_interventions,
-             'permitted_speed_mps': self.sim.permitted_speed(),
-             'mode_index': self.sim.mode_index(),
+             'watchdog': sim.watchdog, 'missed_periods': sim.missed_periods,
+             **self.supervision_values(),
+             'mode_index': sim.setup.mode_index(sim.time_s, sim.lead_position()),
              'active_failures': '; '.join(f.describe() for f in
-                                          self.sim.active_failures().values()) or 'none',
-             'scheduled_failures': len(self.sim.failures),
+                                          sim.actuators.active(sim.time_s).values()) or 'none',
+             'scheduled_failures': len(sim.actuators.failures),
              'waiting_for_command_s': (time.monotonic() - self.step_since_wall
                                        if self.waiting else 0.0),
              'held_for_recorder_s': (time.monotonic() - self.recorder_lead.held_since
@@ -400,6 +422,25 @@ class TrainPlantNode(RunNodeHooks, Node):
              'identity': self.identity,
              **self.publishing.values()})
         self.publishing(self.diag_pub, DiagnosticArray(header=self._header(), status=[status]))
+
+    def supervision_values(self) -> dict:
+        """The ATP's and its odometry's state, for the diagnostics."""
+        atp, odometry = self.sim.atp, self.sim.odometry
+        return {'supervised_leg': atp.leg, 'supervision_status': atp.status(odometry),
+                'atp_intervention': atp.emergency_brake,
+                'atp_interventions': atp.interventions,
+                'holding_brake': atp.holding_brake,
+                'permitted_speed_mps': atp.permitted_speed(odometry),
+                'odometry_position_m': odometry.position_m,
+                'odometry_interval_m': odometry.max_safe_front_m - odometry.min_safe_front_m,
+                'odometry_speed_mps': odometry.speed_mps,
+                'odometry_relocations': odometry.relocations,
+                'odometry_outside_interval': odometry.outside_interval}
+
+    def emergency_brake_held_s(self) -> float:
+        """How long the emergency brake has been held without a break, s of simulated time."""
+        since = self.sim.actuators.brake_since_s
+        return 0.0 if since is None else self.sim.time_s - since
 
     def _header(self) -> Header:
         return Header(stamp=to_time(self.stamp_ns()))
