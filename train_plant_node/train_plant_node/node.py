@@ -68,6 +68,9 @@ from train_plant_node.simulation import (
     control_period_ns,
 )
 
+#: the exit code of a run ended because its emergency brake held beyond emergency_brake_limit_s
+EMERGENCY_BRAKE_HELD = 3
+
 PARAMS = (
     Param('scenario', DEFAULT_SCENARIO, 'built-in scenario name or path to a scenario YAML file'),
     Param('model', 'point_mass', 'plant model', choices=tuple(sorted(MODELS))),
@@ -126,6 +129,9 @@ PARAMS = (
     Param('final_delivery_timeout_s', 5.0, 'at end_time_s: wall time to wait for every matched '
           'subscriber to acknowledge the last step before exiting, s', minimum=0.0,
           maximum=60.0),
+    Param('emergency_brake_limit_s', 300.0, "a run whose emergency brake (the ATP's or the "
+          "watchdog's) has held for longer than this, in s of simulated time, ends with exit "
+          f'code {EMERGENCY_BRAKE_HELD} and the reason (0: no limit)', minimum=0.0, maximum=1e6),
 )
 
 
@@ -214,6 +220,7 @@ class TrainPlantNode(RunNodeHooks, Node):
         self.waiting = ''               # lockstep: the wait for a command beyond the limit
         self.held_reported_wall = 0.0   # lockstep: a step held for a recorder, last reported
         self.held = ''                  # lockstep: the wait for a recorder beyond the limit
+        self.ended = ''                 # why the run ended before end_time_s ('' if it did not)
 
     def _create_outputs(self) -> None:
         """The plant's outputs: the state (true and measured), /clock in lockstep, the
@@ -397,7 +404,7 @@ class TrainPlantNode(RunNodeHooks, Node):
         sim = self.sim
         status = diagnostic_status(
             self.status_name, self.scenario.train.name, level,
-            safety or warning or 'running',
+            self.ended or safety or warning or 'running',
             {'time_s': sim.time_s, 'commanded_n': list(sim.commanded),
              'applied_n': list(sim.applied),
              'rejected_commands': sim.rejected_commands,
@@ -532,6 +539,8 @@ class TrainPlantNode(RunNodeHooks, Node):
             steps = min(max(behind_ns // self.period_ns, 1), nanoseconds(1.0) // self.period_ns)
             for _ in range(steps):
                 self.advance()
+                if self.finished:
+                    break
 
     def report_held(self, now: float) -> None:
         """A step held for a recorder beyond command_wait_limit_s is reported (WARN log and
@@ -557,12 +566,15 @@ class TrainPlantNode(RunNodeHooks, Node):
                 return  # the previous step's command again (it answered a re-sent step)
             wrong = self.wrong_stamp(command.stamp_ns)
             if wrong:
+                # Dropped and counted. In lockstep it is no command for this step: the plant
+                # waits on for the one stamped for it (re-sending the step), so a controller
+                # that fell behind or ahead answers the step it is sent and the loop is in
+                # step again; advancing here would leave the gap open for good.
                 self.wrong_stamp_commands += 1
                 self.last_wrong_stamp = wrong
                 self.get_logger().warning(wrong, throttle_duration_sec=1.0)
-                if self.lockstep:  # this step's command was not valid: the watchdog counts it
-                    self.sim.command_missed()
-                    self.advance()
+                if self.lockstep:
+                    self.publish_diagnostics()
                 return
             self.sim.apply_command(command.forces)
             self.last_valid_command_wall = time.monotonic()
@@ -601,6 +613,10 @@ class TrainPlantNode(RunNodeHooks, Node):
     def advance(self) -> None:
         self.sim.advance(self.period_ns)
         self.publish_step()
+        limit = self.params['emergency_brake_limit_s']
+        if limit and self.emergency_brake_held_s() > limit:
+            self.end_on_held_brake(limit)
+            return
         if self.end_ns and self.sim.stamp_ns >= self.end_ns:
             self.publish_diagnostics()
             held = self.recorder_lead
@@ -608,6 +624,20 @@ class TrainPlantNode(RunNodeHooks, Node):
                 f'; {held.steps_held} steps waited {held.held_s:.2f} s of wall time in all for '
                 'the recorders' if held and held.steps_held else ''))
             self.finished = True
+
+    def end_on_held_brake(self, limit_s: float) -> None:
+        """The emergency brake has held longer than ``emergency_brake_limit_s``: the run
+        cannot go on as a run of the ATO, so it ends now with ``EMERGENCY_BRAKE_HELD``, the
+        reason in the log and the diagnostics."""
+        sim = self.sim
+        cause = self.safety_message() or 'emergency brake'
+        self.ended = (f'run ended at t = {sim.time_s:.3f} s: the emergency brake held for '
+                      f'{self.emergency_brake_held_s():.1f} s of simulated time, over the limit '
+                      f'emergency_brake_limit_s {limit_s:g} s ({cause})')
+        self.get_logger().error(self.ended)
+        self.publish_diagnostics()
+        self.exit_code = EMERGENCY_BRAKE_HELD
+        self.finished = True
 
     def close_outputs(self) -> None:
         """The last step (and diagnostics) reach every matched subscriber before the exit."""
