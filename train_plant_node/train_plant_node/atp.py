@@ -95,14 +95,20 @@ class OnboardATP:
                  start_speed_mps: float = 0.0):
         self.run = run
         self.acceleration_mps2 = acceleration_mps2
-        self.leg = 0
+        self._leg(0)
         self.emergency_brake = False
         self.interventions = 0
         self.hold_to_standstill = False   # the intervention is target-speed monitoring's
         self.standing_since_s: float | None = None  # continuous standstill in the stop zone
         self.previous_speed_mps = start_speed_mps   # the odometry's speed at the last cycle
         self.odometry_lost = False
-        self._tables: dict[tuple[int, str], tuple[SampledLimit, list[float], list[float]]] = {}
+
+    def _leg(self, leg: int) -> None:
+        """The leg ``leg`` is under supervision: its tables are looked up once."""
+        self.leg = leg
+        self._tables: dict[str, tuple[SampledLimit, list[float], list[float]]] = {}
+        self._zone = self.run.stop_zone(leg)
+        self._dwell_s = self.run.dwell_s(leg)
 
     @property
     def holding_brake(self) -> bool:
@@ -110,21 +116,15 @@ class OnboardATP:
         return self.standing_since_s is not None
 
     # --- the limits ----------------------------------------------------------------------------
-    def _table(self, name: str) -> tuple[SampledLimit, list[float], list[float]]:
-        """The leg's sampled limit and its ceiling (starts, speeds), built once per leg."""
-        key = (self.leg, name)
-        table = self._tables.get(key)
-        if table is None:
-            authority = self.run.legs[self.leg]
-            table = (authority.sampled(name), *authority.ceiling(name))
-            self._tables[key] = table
-        return table
-
     def limit(self, name: str, low_m: float, high_m: float) -> float:
         """The named limit for a front end anywhere in [low_m, high_m]: the sampled limit at
         ``high_m`` (curves fall towards their targets) and the lowest ceiling over the
         interval (a higher limit applies once the whole interval has left the lower one)."""
-        sampled, starts, ceilings = self._table(name)
+        table = self._tables.get(name)
+        if table is None:  # the leg's sampled limit and its ceiling, built once per leg
+            authority = self.run.legs[self.leg]
+            table = self._tables[name] = (authority.sampled(name), *authority.ceiling(name))
+        sampled, starts, ceilings = table
         value = sampled(high_m)
         first = bisect_right(starts, low_m) - 1
         last = bisect_right(starts, high_m) - 1
@@ -185,15 +185,15 @@ class OnboardATP:
     def track_stop(self, time_s: float, odometry: OdometryReading) -> None:
         """The authority moves on after a continuous standstill of the dwell in the stop zone
         (module docstring)."""
-        low, high = self.run.stop_zone(self.leg)
-        if not (odometry.valid and odometry.standstill and odometry.max_safe_front_m >= low
-                and odometry.min_safe_front_m <= high):
+        low, high = self._zone
+        if not (odometry.standstill and odometry.max_safe_front_m >= low
+                and odometry.min_safe_front_m <= high and odometry.valid):
             self.standing_since_s = None
             return
         if self.standing_since_s is None:
             self.standing_since_s = time_s
-        if time_s - self.standing_since_s >= self.run.dwell_s(self.leg) - DWELL_TOLERANCE_S:
-            self.leg += 1
+        if time_s - self.standing_since_s >= self._dwell_s - DWELL_TOLERANCE_S:
+            self._leg(self.leg + 1)
             self.standing_since_s = None
 
     def status(self, odometry: OdometryReading) -> str:

@@ -76,7 +76,7 @@ class Sensors:
         # The ATO's position reading equals the truth before noise.
         self._exact_position = position.ideal and speed.bias == 0.0
         # The odometer's sensors fail at some time of the run (``odometer_failed``).
-        self._may_fail = not (math.isinf(position.failed_from_s)
+        self.may_fail = not (math.isinf(position.failed_from_s)
                               and math.isinf(speed.failed_from_s))
         self.moving_s = 0.0             # how long the train has moved (the speed bias's time)
         self._moving_at: dict[float, float] = {start_m: 0.0}  # reset point -> moving_s there
@@ -133,7 +133,7 @@ class Sensors:
     def odometer_failed(self, time_s: float) -> bool:
         """The lead car's position or speed sensor has failed at ``time_s``."""
         s = self.setup
-        return self._may_fail and (s.position.failed(time_s, self.lead)
+        return self.may_fail and (s.position.failed(time_s, self.lead)
                                    or s.speed.failed(time_s, self.lead))
 
     def reset_point(self, position_m: float) -> float:

@@ -300,8 +300,9 @@ class TrainSimulation:
         """The on-board units' cycle after a period: the odometer's reading to the odometry,
         the odometry's estimate and the drives' fault report to the ATP, its demand to the
         actuators. The truth goes no further than the sensors."""
-        odometry = self.odometry
-        if self._exact_odometry and not self.sensors.odometer_failed(self.time_s):
+        odometry, sensors = self.odometry, self.sensors
+        if self._exact_odometry and not (sensors.may_fail and sensors.odometer_failed(
+                self.stamp_ns / NS_PER_S)):
             odometry.exact(float(self.state[0]), self.model.lead_speed(self.state))
         else:
             position, speed = float(self.state[0]), self.model.lead_speed(self.state)
