@@ -23,8 +23,9 @@ What is modelled (all in SI, positions along the line, the front of the train):
 
 Simplified against SUBSET-026: the gradient is the one at the front of the train (not the
 lowest under the whole train); no speed-dependent brake build-up, no correction factors Kdry/Kwet
-or Kv/Kr/Kt (the deceleration tables are taken as already corrected), no speed measurement
-accuracy, no guidance curve. ``permitted_speed(position)`` is the minimum of the MRSP and the
+or Kv/Kr/Kt (the deceleration tables are taken as already corrected), no guidance curve (the
+odometry's confidence interval and speed accuracy are the plant's ATP's, which looks these
+curves up at the max safe front end). ``permitted_speed(position)`` is the minimum of the MRSP and the
 permitted curves of every target: the speed an ATO target must stay below.
 
 Deviation from SUBSET-026, on the safe side: the EBD of a zero-speed target ends at the EOA,
@@ -42,9 +43,8 @@ before the EOA), at most ``release_speed_max_mps``.
 
 Stops (:class:`RunSupervision`): the authority of a leg ends at its stop; it moves on to the
 next leg only once the train has stood still at the stop (from ``STOP_WINDOW_M`` before the
-stopping point to the SvL) and the station's dwell time has passed since, the train staying
-within that zone. Until then the braking curves to the
-stop, its EOA and its SvL are supervised, wherever the train is.
+stopping point to the SvL) without a break for the station's dwell time. Until then the braking
+curves to the stop, its EOA and its SvL are supervised, wherever the train is.
 """
 
 from __future__ import annotations
@@ -438,12 +438,12 @@ _RUNS: dict[str, 'RunSupervision'] = {}
 
 class RunSupervision:
     """One movement authority per leg of a run (station to station). The leg in force is the
-    supervised train's state (``TrainSimulation`` keeps it): it moves on to the next leg only
-    once the train has stood still at the leg's stop (``at_stop``: from ``STOP_WINDOW_M``
-    before the stopping point to the SvL, at most ``STANDSTILL_MPS``) and the stop's dwell
-    time has passed since, the train staying within that zone. Look-ups without a leg take
-    ``leg_at``: the leg of a train that stopped at every earlier station (for plans and
-    figures, not for supervising a train)."""
+    supervised train's state (the plant's ATP, ``train_plant_node.atp``, keeps it): it moves on
+    to the next leg only once the train has stood still at the leg's stop (``at_stop``: from
+    ``STOP_WINDOW_M`` before the stopping point to the SvL, at most ``STANDSTILL_MPS``) without
+    a break for the stop's dwell time. Look-ups without a leg take ``leg_at``: the leg of a
+    train that stopped at every earlier station (for plans and figures, not for supervising a
+    train)."""
 
     STOP_WINDOW_M = 0.5
     STANDSTILL_MPS = 0.01
