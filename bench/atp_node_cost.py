@@ -168,7 +168,9 @@ def report(pairs: list[list[dict]], seconds: float, command: str) -> str:
         f'{cell([r["wall_ms_per_step"] for r in atp])} |', '',
         f'Paired difference: {cell(cpu_extra)} ms of CPU per step more with the node, the run '
         f'{statistics.median(share):.0f} % slower in wall time (median of the pairs; range '
-        f'{min(share):.0f} to {max(share):.0f} %).'])
+        f'{min(share):.0f} to {max(share):.0f} %). The node cost more CPU per step in '
+        f'{sum(d > 0 for d in cpu_extra)} of {len(pairs)} pairs and more wall time in '
+        f'{sum(d > 0 for d in share)} of {len(pairs)}.'])
 
 
 def write(page: Path, text: str) -> None:
