@@ -23,12 +23,10 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import statistics
 import subprocess
 import sys
 import time
-from datetime import datetime, timezone
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,6 +36,7 @@ START_S = 10.0   # the steady window starts here (start-up, discovery and the fi
 
 def child(variant: str, seconds: float) -> dict:
     """One composed run in this process; the CPU and wall time per step of its steady part."""
+    from rclpy.node import Node
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from std_msgs.msg import Float64MultiArray, Header
 
@@ -45,7 +44,6 @@ def child(variant: str, seconds: float) -> dict:
     from ato_ros.lifecycle import RunNodeHooks, run_nodes
     from ato_ros.messages import to_time
     from profile_node.node import ProfileNode
-    from rclpy.node import Node
     from train_plant_node.node import TrainPlantNode
 
     qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -126,28 +124,9 @@ def run_pair(seconds: float, env: dict) -> list[dict]:
     return out
 
 
-def machine() -> str:
-    model = platform.processor() or platform.machine()
-    try:
-        for line in Path('/proc/cpuinfo').read_text().splitlines():
-            if line.startswith('model name'):
-                model = line.split(':', 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f'{model}, {os.cpu_count()} cores'
-
-
-def commit() -> str:
-    head = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=ROOT, capture_output=True,
-                          text=True, check=False).stdout.strip()
-    dirty = subprocess.run(['git', 'status', '--porcelain', '--untracked-files=no'], cwd=ROOT,
-                           capture_output=True, text=True, check=False).stdout.strip()
-    return head + (' (with local changes)' if dirty else '')
-
-
-def report(pairs: list[list[dict]], seconds: float, command: str) -> str:
-    """The measured figures as the plant page shows them."""
+def report(pairs: list[list[dict]], seconds: float, command: str, measured) -> str:
+    """The measured figures as the plant page shows them (``measured``: the provenance taken
+    when the measurement started)."""
     def cell(values: list[float]) -> str:
         return f'{statistics.median(values):.3f} (range {min(values):.3f}-{max(values):.3f})'
     base = [p[0] for p in pairs]
@@ -155,12 +134,10 @@ def report(pairs: list[list[dict]], seconds: float, command: str) -> str:
     cpu_extra = [a['cpu_ms_per_step'] - b['cpu_ms_per_step']
                  for b, a in pairs]
     share = [100.0 * (a['wall_ms_per_step'] / b['wall_ms_per_step'] - 1.0) for b, a in pairs]
-    now = datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
     return '\n'.join([
-        f'Measured {now} on {machine()}, commit {commit()}, with `{command}` '
-        f'({len(pairs)} pairs of composed lockstep runs of short_line, {seconds:g} s of '
-        f'simulated time each, the steady part from {START_S:g} s; medians and ranges; the '
-        'machine was shared with other work):', '',
+        f'{measured.markdown(command)} {len(pairs)} pairs of composed lockstep runs of '
+        f'short_line, {seconds:g} s of simulated time each, the steady part from {START_S:g} s; '
+        'medians and ranges:', '',
         '| composed stack | CPU ms per step | wall ms per step |', '|---|---|---|',
         f'| as it is (the ATP inside the plant) | {cell([r["cpu_ms_per_step"] for r in base])} '
         f'| {cell([r["wall_ms_per_step"] for r in base])} |',
@@ -190,8 +167,10 @@ def main() -> int:
     if args.child:
         print(json.dumps(child(args.child, args.seconds)))
         return 0
+    from ato_campaigns.provenance import results_page_provenance
     from ato_common.domains import free_domain
     from ato_ros.middleware import with_middleware_defaults
+    measured = results_page_provenance(args.write or ROOT / 'docs/guide/plant.md')
     with free_domain() as domain:
         env = with_middleware_defaults(dict(os.environ, ROS_DOMAIN_ID=str(domain),
                                             ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST'))
@@ -200,7 +179,7 @@ def main() -> int:
                                                    else '') + (
         f' --seconds {args.seconds:g}' if args.seconds != 300.0 else '') + (
         f' --write {args.write}' if args.write else '')
-    text = report(pairs, args.seconds, command)
+    text = report(pairs, args.seconds, command, measured)
     print(text)
     if args.write:
         write(args.write, text)

@@ -25,8 +25,8 @@ Simplified against SUBSET-026: the gradient is the one at the front of the train
 lowest under the whole train); no speed-dependent brake build-up, no correction factors Kdry/Kwet
 or Kv/Kr/Kt (the deceleration tables are taken as already corrected), no guidance curve (the
 odometry's confidence interval and speed accuracy are the plant's ATP's, which looks these
-curves up at the max safe front end). ``permitted_speed(position)`` is the minimum of the MRSP and the
-permitted curves of every target: the speed an ATO target must stay below.
+curves up at the max safe front end). ``permitted_speed(position)`` is the minimum of the MRSP
+and the permitted curves of every target: the speed an ATO target must stay below.
 
 Deviation from SUBSET-026, on the safe side: the EBD of a zero-speed target ends at the EOA,
 not at the SvL (3.13.8.3). An emergency brake triggered on the EBI therefore stops the train

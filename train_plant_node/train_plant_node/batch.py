@@ -105,7 +105,9 @@ def run_commands(sim, commands, period_ns: int) -> Trajectory:
             q[k:end] = values
         interventions[k:end] = held
         k = end
-    return Trajectory(sim.model.car_names, stamps, *quantities, interventions)
+    positions, speeds, accelerations, forces_out = quantities
+    return Trajectory(sim.model.car_names, stamps, positions, speeds, accelerations, forces_out,
+                      interventions)
 
 
 def compiled_periods(sim, wanted: int, period_ns: int) -> int:

@@ -7,8 +7,14 @@ while integrating to t_k+1, and publishes again. Until the first command arrives
 waiting for one) it re-publishes the current step every ``resend_period_s`` of wall time, so
 start-up order and DDS discovery do not matter. A step whose command has not come after
 ``command_wait_limit_s`` of wall time (the controller or the profile gone) is reported as a WARN
-in the diagnostics and in the log, again each such period. Real time: the same simulation
-advanced by a wall-clock timer, commands held as they come.
+in the diagnostics and in the log, again each such period. A command stamped for another step
+is dropped and counted, and the plant waits on at its step: the command stamped for it moves
+the loop on (a controller that fell behind or ahead is in step again at once). Real time: the
+same simulation advanced by a wall-clock timer, commands held as they come.
+
+A run whose emergency brake has held for longer than ``emergency_brake_limit_s`` of simulated
+time ends with exit code ``EMERGENCY_BRAKE_HELD`` (3) and the reason, in the log and the
+diagnostics.
 
 The plant publishes the identity of what it simulates, latched (``train/identity``: the
 scenario's name and a hash of the resolved scenario); the controller and the profile refuse to

@@ -161,11 +161,11 @@ class Sensors:
             return truth
         s = self.setup
         cars = truth.car_names
-        positions = truth.positions
+        positions: Sequence[float] = truth.positions
         if not self._exact_position:
             bias = s.position.bias
             positions = [x + (self.position_error(x) - bias) for x in positions]
-        speeds = truth.speeds
+        speeds: Sequence[float] = truth.speeds
         if s.speed.scale_error or s.speed.bias:
             speeds = [(1.0 + s.speed.scale_error) * v + (s.speed.bias if v != 0.0 else 0.0)
                       for v in speeds]

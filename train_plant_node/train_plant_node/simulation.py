@@ -141,14 +141,14 @@ class TrainSimulation:
         self.missed_periods = 0
         self.level = DRIVE                 # what the safety functions make of the drives
         self.events = scheduled_times(self.setup, self.actuators.failures)
-        self._env_key = None
+        self._env_key: tuple | None = None
         self._env: Surroundings | None = None
         # Nothing switches the surroundings during the run: one for all steps.
         self._constant_env = not self.setup.modes and not self.setup.abrupt_changes
         # One integration step per period is possible (see ``advance``).
         self._one_step_possible = self.actuators.instant and \
             self.setup.disturbance.kind != 'random'
-        self._applied_for = None  # the state ``applied`` was last computed for
+        self._applied_for: object = None  # the state ``applied`` was last computed for
         self._update_applied()
 
     # --- time and state ----------------------------------------------------------------------
@@ -169,10 +169,12 @@ class TrainSimulation:
         setup = self.setup
         t = self.time_s if time_s is None else time_s
         key = (setup.mode_index(t, self.lead_position()), setup.abrupt_change(t))
-        if key != self._env_key:
+        env = self._env
+        if key != self._env_key or env is None:
             self._env_key = key
-            self._env = surroundings_at(setup, self.scenario.train, t, self.lead_position())
-        return self._env
+            env = self._env = surroundings_at(setup, self.scenario.train, t,
+                                              self.lead_position())
+        return env
 
     # --- commands, failures and the watchdog ----------------------------------------------------
     def apply_command(self, forces: Sequence[float]) -> tuple[float, ...]:
