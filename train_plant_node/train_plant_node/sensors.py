@@ -14,10 +14,11 @@ One odometer (a wheel sensor) gives both the distance and the speed:
   x + s_x (x - r) + b_v T_moving(since r) + b_x;
 - then white noise and quantisation, NaN when dropped out or failed (the ATO's reading only).
 
-The ATP's odometry gets the odometer's count (``odometer``): the initial position plus its bias
-and everything counted since the start (never reset: relocating is the odometry's own work),
-and the speed, without noise; and, at each balise group of the line the train's front passes,
-the count at that moment (``follow``).
+The ATP's odometry gets the odometer's count (``odometer``): the position it reads, without
+noise, reset only where the odometer itself is (``reset_positions_m``: relocating at the line's
+balise groups is the odometry's own work), and the speed, without noise and nil below the wheel
+sensor's resolution (the odometry's standstill); and, at each balise group of the line the
+train's front passes, the count at that moment (``follow``).
 """
 
 from __future__ import annotations
@@ -56,18 +57,21 @@ def merged_sensors(setup: SensorSetup, overrides: SensorSettings | None) -> Sens
 
 class Sensors:
     """The sensors of one run (module docstring). ``balise_groups_m``: where the line's balise
-    groups lie (the odometer is reset there too); ``start_m``: the lead car's initial
-    position; ``lead``: the lead car's name."""
+    groups lie; ``start_m``: the lead car's initial position; ``lead``: the lead car's name;
+    ``resolution_mps``: the lowest speed the odometer's wheel sensor resolves in a control
+    period (below it, it gives no pulse: the ATP's odometry reads standstill)."""
 
     def __init__(self, setup: SensorSetup, balise_groups_m: Sequence[float], start_m: float,
-                 lead: str):
+                 lead: str, resolution_mps: float = 0.0):
         self.setup = setup
         self.rng = np.random.default_rng(setup.seed)
         self.start_m = start_m
         self.lead = lead
+        self.resolution_mps = resolution_mps
         self.balise_groups_m = tuple(balise_groups_m)
-        self.resets_m = tuple(sorted(set(setup.position.reset_positions_m)
-                                     | set(balise_groups_m)))
+        self._balise_groups = set(balise_groups_m)
+        self.sensor_resets_m = tuple(sorted(setup.position.reset_positions_m))
+        self.resets_m = tuple(sorted(set(self.sensor_resets_m) | self._balise_groups))
         position, speed = setup.position, setup.speed
         self.ideal = setup.ideal
         # The odometer's count equals the truth (no systematic error: the odometry's exact case).
@@ -77,24 +81,23 @@ class Sensors:
         self._exact_position = position.ideal and speed.bias == 0.0
         # The odometer's sensors fail at some time of the run (``odometer_failed``).
         self.may_fail = not (math.isinf(position.failed_from_s)
-                              and math.isinf(speed.failed_from_s))
+                             and math.isinf(speed.failed_from_s))
         self.moving_s = 0.0             # how long the train has moved (the speed bias's time)
         self._moving_at: dict[float, float] = {start_m: 0.0}  # reset point -> moving_s there
         self._last_m = start_m
-        self._points = self.resets_m if speed.bias else self.balise_groups_m
 
     # --- the run goes on -----------------------------------------------------------------------
     def follow(self, position_m: float, period_s: float) -> list[tuple[float, float]]:
         """The lead car is at ``position_m`` after a period: count the time it moved and note
-        the reset points and balise groups it passed. Returns each balise group passed with
-        the odometer's count there (the moving time at the crossing interpolated in the
-        period), in order."""
+        the reset points it passed. Returns each balise group of the line passed with the
+        odometer's count there (the moving time at the crossing interpolated in the period),
+        in order."""
         last, self._last_m = self._last_m, position_m
         if position_m == last:
             return []
         before = self.moving_s
         self.moving_s = before + period_s
-        points = self._points
+        points = self.resets_m
         if not points:
             return []
         first, end = bisect_right(points, last), bisect_right(points, position_m)
@@ -102,28 +105,37 @@ class Sensors:
         for point in points[first:end]:
             moving = before + period_s * (point - last) / (position_m - last)
             self._moving_at[point] = moving
-            if point in self.balise_groups_m:
-                passed.append((point, point + self._count_error(point, moving)))
+            if point in self._balise_groups:
+                passed.append((point, point + self._error(point, self.sensor_resets_m, moving)))
         return passed
 
     # --- what the sensors report ---------------------------------------------------------------
-    def _count_error(self, position_m: float, moving_s: float) -> float:
-        """The odometer's count less the truth at a position, m: the position's bias, its
-        scale error since the start and the speed's integrated bias."""
+    def _error(self, position_m: float, resets: tuple[float, ...], moving_s: float) -> float:
+        """A reading less the truth at a position, before noise: the bias, the scale error
+        since the last of ``resets`` behind the position (or the start) and the speed's bias
+        integrated over the time moved since the train passed it."""
         s = self.setup
-        return (s.position.bias + s.position.scale_error * (position_m - self.start_m)
-                + s.speed.bias * moving_s)
+        error = s.position.bias
+        reset = self.reset_point(position_m, resets)
+        if s.position.scale_error:
+            error += s.position.scale_error * max(position_m - reset, 0.0)
+        if s.speed.bias:
+            error += s.speed.bias * (moving_s - self._moving_at.get(reset, moving_s))
+        return error
 
     def odometer(self, time_s: float, position_m: float, speed_mps: float) -> tuple[float, float]:
-        """(count, speed) of the lead car's odometer for the ATP's odometry: the count is a
-        position reading that is never reset; each NaN where its sensor has failed."""
+        """(count, speed) of the lead car's odometer for the ATP's odometry, each NaN where its
+        sensor has failed. The count is a position reading reset only where the odometer itself
+        is (the position sensor's ``reset_positions_m``): relocating at the line's balise
+        groups is the odometry's own work. The speed is nil below the wheel sensor's
+        resolution."""
         s = self.setup
         if self.exact_odometer:
             count, speed = position_m, speed_mps
         else:
-            count = position_m + self._count_error(position_m, self.moving_s)
-            speed = (1.0 + s.speed.scale_error) * speed_mps + (
-                s.speed.bias if speed_mps != 0.0 else 0.0)
+            count = position_m + self._error(position_m, self.sensor_resets_m, self.moving_s)
+            speed = (1.0 + s.speed.scale_error) * speed_mps + s.speed.bias \
+                if abs(speed_mps) > self.resolution_mps else 0.0
         if s.position.failed(time_s, self.lead):
             count = math.nan
         if s.speed.failed(time_s, self.lead):
@@ -134,26 +146,21 @@ class Sensors:
         """The lead car's position or speed sensor has failed at ``time_s``."""
         s = self.setup
         return self.may_fail and (s.position.failed(time_s, self.lead)
-                                   or s.speed.failed(time_s, self.lead))
+                                  or s.speed.failed(time_s, self.lead))
 
-    def reset_point(self, position_m: float) -> float:
+    def reset_point(self, position_m: float, resets: tuple[float, ...] | None = None) -> float:
         """The odometer's last reset point at or behind a position: the run's initial position,
-        a reset point of the position sensor or a balise group of the line."""
-        i = bisect_right(self.resets_m, position_m)
-        return max(self.start_m, self.resets_m[i - 1] if i else -math.inf)
+        or the last of ``resets`` (default: the position sensor's reset points and the line's
+        balise groups, where the ATO's reading is reset)."""
+        resets = self.resets_m if resets is None else resets
+        i = bisect_right(resets, position_m)
+        return max(self.start_m, resets[i - 1] if i else -math.inf)
 
     def position_error(self, position_m: float) -> float:
         """The ATO's position reading less the truth at a position, m, before noise: the bias,
         the scale error since the last reset point and the speed's bias integrated since the
-        lead car passed it (module docstring)."""
-        s = self.setup
-        error = s.position.bias
-        if s.position.scale_error:
-            error += s.position.scale_error * max(position_m - self.reset_point(position_m), 0.0)
-        if s.speed.bias:
-            since = self._moving_at.get(self.reset_point(self._last_m), self.moving_s)
-            error += s.speed.bias * (self.moving_s - since)
-        return error
+        train passed it (module docstring)."""
+        return self._error(position_m, self.resets_m, self.moving_s)
 
     def measured(self, truth: TrainState, time_s: float) -> TrainState:
         """What the on-board sensors report to the ATO; a missing measurement is NaN."""

@@ -96,12 +96,12 @@ def onboard_units(scenario: Scenario, run: RunSupervision, model: PlantModel, mo
     setup = merged_sensors(scenario.plant.sensors, sensors)
     setup.check_cars(model.car_names, model_name)
     start, speed = float(state[0]), model.lead_speed(state)
-    balise_groups = scenario.line.balise_groups_m
-    units = Sensors(setup, balise_groups, start, model.car_names[0])
+    units = Sensors(setup, scenario.line.balise_groups_m, start, model.car_names[0],
+                    run.STANDSTILL_MPS)
     acceleration = highest_acceleration(scenario.supervision, scenario.line)
     count, reading = units.odometer(0.0, start, speed)
     odometry = Odometry(scenario.supervision, count, reading, run.STANDSTILL_MPS, acceleration)
-    if start in balise_groups:  # the train stands on a balise group at the start of mission
+    if start in units.balise_groups_m:  # the train stands on a balise group at its start
         odometry.update(0.0, count, reading, [(start, count)])
     atp = OnboardATP(run, acceleration, odometry.speed_mps)
     return units, odometry, atp, units.exact_odometer and odometry.exact_accuracy
