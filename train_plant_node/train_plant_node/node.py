@@ -173,6 +173,11 @@ class TrainPlantNode(RunNodeHooks, Node):
         # Wall-clock timer: start-up, re-sends in lockstep, integration in real time.
         self.timer = self.create_timer(
             0.02 if self.lockstep else 1.0 / p['real_time_rate_hz'], self.on_timer)
+        if not (self.sim.sensors.exact_odometer or self.scenario.line.balise_groups_m):
+            self.get_logger().warning(
+                'the odometer errs (plant.sensors) and the line declares no balise groups: the '
+                "ATP's odometry cannot relocate, so an odometer error beyond its declared "
+                'interval goes unseen by the supervision (declare line.balise_groups)')
         self.get_logger().info(
             f"scenario {self.scenario.name} ({self.scenario.origin}), model {p['model']}, "
             f"{'lockstep at ' + format(rate, 'g') + ' Hz' if self.lockstep else 'real time'}, "
