@@ -5,8 +5,8 @@ step) on the plant itself. In every case the train's true front never passes the
 authority of the leg under supervision, the authority at Midway moves on only after a
 continuous standstill of its dwell, and the true speed never exceeds the ceiling (the MRSP plus
 dV_ebi), on short_line with the balise groups and the odometry accuracy an ETCS line and train
-would declare (SUBSET-041 5.3.1: +/-(5 m + 5 %) of the distance since the last balise group,
-+/-2 km/h and 2 % of the speed)."""
+would declare (SUBSET-041 5.3.1: +/-(5 m + 5 %) of the distance since the last balise group;
+the speed's +/-2 km/h at low speed, taken as 2 km/h plus 2 % of the speed)."""
 
 from __future__ import annotations
 

@@ -453,6 +453,7 @@ class TrainPlantNode(RunNodeHooks, Node):
                 'odometry_interval_m': odometry.max_safe_front_m - odometry.min_safe_front_m,
                 'odometry_speed_mps': odometry.speed_mps,
                 'odometry_relocations': odometry.relocations,
+                'odometry_last_discrepancy_m': odometry.last_discrepancy_m,
                 'odometry_outside_interval': odometry.outside_interval}
 
     def emergency_brake_held_s(self) -> float:

@@ -57,7 +57,6 @@ class Odometry:
         self._correction = 0.0    # 1 / scale - 1
         self.lrbg_m: float | None = None   # the last relevant balise group's position
         self._fix = (count_m, count_m)     # (position, count) the estimate is counted from
-        self._previous_fix: tuple[float, float] | None = None
         self.relocations = 0
         self.outside_interval = 0  # balise groups found outside the confidence interval
         self.last_discrepancy_m = 0.0
