@@ -398,6 +398,8 @@ class ProfileNode(RunNodeHooks, Node):
 
     def report_decision(self, kind: str, stamp_ns: int, position: float, plan: Plan,
                         start_s: float) -> None:
+        if self.replanner.note:  # an odometer's error placed the train outside the line
+            self.get_logger().warning(self.replanner.note)
         if kind == 'replanned':
             late = self.replanner.replans[-1][1]
             self.get_logger().warning(
