@@ -64,7 +64,7 @@ from typing import Callable
 
 import numpy as np
 
-from ato_campaigns.engine import execute, finite, judged
+from ato_campaigns.engine import execute, finite, judged, motion
 from ato_campaigns.provenance import results_page_provenance, write_results_page
 from ato_campaigns.run_process import RunDied, RunFailed, RunTimeout, limited
 from ato_common import uncertainty
@@ -182,7 +182,7 @@ def run_job(job: Job) -> dict:
                       detail=traceback.format_exc(limit=3), wall_s=time.perf_counter() - started)
         return result
     result['wall_s'] = time.perf_counter() - started
-    result.update(figures(run, scenario.train.mass_kg, 1.0 / job.rate_hz))
+    result.update(figures(run, 1.0 / job.rate_hz))
     step = max(1, run.times_s.size // PLOT_POINTS)
     keys = sorted({k for e in run.estimates for k in e if 'hat' in k})
     result['curves'] = {
@@ -193,15 +193,14 @@ def run_job(job: Job) -> dict:
     return result
 
 
-def figures(run, mass_kg: float, dt: float) -> dict:
+def figures(run, dt: float) -> dict:
     """A run's figures in the comparison and its status and reason, judged as a campaign's
     (``ato_campaigns.engine.judged``: ``ok`` only for a clean run that finished on time)."""
     if not finite(run):
         return {'status': 'diverged', 'reason': 'non-finite state or force'}
     metrics = run.metrics()
     stop_error = max((abs(e) for e in metrics.stop_errors_m.values()), default=math.nan)
-    jerk = float(np.max(np.abs(np.diff(run.forces)))) / (mass_kg * dt) \
-        if run.forces.size > 1 else 0.0
+    jerk = float(np.max(np.abs(motion(run.speeds, dt)[1])))
     return dict(
         judged(run, metrics),
         rms_speed_error_kmh=metrics.rms_speed_error_kmh,
@@ -313,9 +312,10 @@ def markdown(results: list[dict], skipped: list[dict], scenarios: list[str], sta
              'clean run that finished on time, else the most serious of what went wrong '
              '(ato_common.run_events). Columns: RMS/max speed error (km/h), RMS position error '
              '(m), worst stop error |x - station| (m), traction energy (kWh), max jerk '
-             'max|dF|/(M dt) (m/s^3), host step time p99 (us, measured while the runs share the '
-             'cores), events (ATP interventions, missed journey windows and stop errors beyond '
-             'the platform tolerance, each with its first occurrence). Best, on each plant: '
+             'from the second difference of the speed (m/s^3), host step time p99 (us, '
+             'measured while the runs share the cores), events (ATP interventions, missed '
+             'journey windows and stop errors beyond the platform tolerance, each with its '
+             'first occurrence). Best, on each plant: '
              'lowest RMS speed error among the `ok` runs over the whole scenario at its control '
              f'rate with a stop error <= {STOP_ERROR_LIMIT_M} m (a law that needs a faster rate '
              'is listed, not ranked).', '']

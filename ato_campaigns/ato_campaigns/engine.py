@@ -355,15 +355,22 @@ def finite(run) -> bool:
     return all(np.all(np.isfinite(a)) for a in (run.positions, run.speeds, run.forces))
 
 
+def motion(speeds: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """What the passengers feel of a run sampled every ``dt``: its acceleration and its jerk,
+    by differences of the lead car's speed (a brake that holds a train at rest moves nobody,
+    so neither is read from the forces)."""
+    acc = np.diff(speeds) / dt if speeds.size > 1 else np.zeros(1)
+    jerk = np.diff(acc) / dt if acc.size > 1 else np.zeros(1)
+    return acc, jerk
+
+
 def run_metrics(run, dt: float) -> dict:
     """The per-run metrics of an OfflineRun (METRICS) and its status and reason (``judged``);
     status diverged if it is not finite."""
     if not finite(run):
         return {'status': 'diverged', 'reason': 'non-finite state or force'}
     m = run.metrics()
-    v = run.speeds
-    acc = np.diff(v) / dt if v.size > 1 else np.zeros(1)
-    jerk = np.diff(acc) / dt if acc.size > 1 else np.zeros(1)
+    acc, jerk = motion(run.speeds, dt)
     arrival = []
     for stop in run.plan.stops:
         if stop.arrival_s > run.times_s[-1]:

@@ -111,7 +111,9 @@ def test_a_failing_or_diverging_law_is_shown_with_its_reason(monkeypatch, tmp_pa
     # The comparison's own figures: pid on short_line tracks within its test's bounds.
     assert results['pid']['rms_speed_error_kmh'] < 0.2
     assert results['pid']['stop_error_m'] < 0.1
-    assert 0.0 < results['pid']['max_jerk_mps3'] < 1.0
+    # the jerk the passengers feel (the speed's second difference): its peak is at the grade
+    # change at 17 km, a step in the line's force that no law anticipates
+    assert 0.0 < results['pid']['max_jerk_mps3'] < 2.0
     assert results['pid']['step_p99_us'] > 0.0
     text = compare.markdown(list(results.values()), [], ['short_line'], 'now', 'make compare')
     assert ('| exploding | nominal | point_mass, 10 Hz | error (ZeroDivisionError: estimate '
@@ -126,11 +128,15 @@ STUCK = Path(__file__).resolve().parents[2] / 'tests' / 'data' / 'synthetic' / \
 
 def test_a_run_with_an_atp_intervention_is_not_ok_and_its_status_says_why():
     """A traction drive stuck at 300 kN from 60 to 200 s: the PID's train is braked by the
-    ATP; it used to be listed ok (as tan_weighted_mm with 20 interventions was)."""
+    ATP, which holds its brake while the train interface reports the faulty drive; it used to
+    be listed ok (as tan_weighted_mm with 20 interventions was). Held that long, the train
+    does not reach B by the run's end: the most serious status says so, the reason names the
+    ATP."""
     result = compare.run_job(compare.Job(str(STUCK), 'pid', 'point_mass', 10.0))
-    assert result['status'] == 'ATP intervention'
-    count = int(result['reason'].split(' ATP interventions (first at ')[0])
-    assert count >= 2   # braked, released at the permitted speed, braked again
+    assert result['status'] == 'did not finish'
+    reason = result['reason']
+    count = int(reason.split(' ATP interventions (first at ')[0].split('; ')[-1])
+    assert count == 1   # one intervention, held through the drive's fault
     assert compare.best_law([dict(result, scenario_rate_hz=10.0)]) is None
 
 

@@ -7,6 +7,7 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -122,11 +123,16 @@ def test_journey_windows_missed_by_the_run_are_events(tmp_path):
 
 
 def test_the_offline_events_are_the_interventions_the_plant_made():
-    """A drive stuck at full traction from 60 to 200 s: the plant's ATP brakes, releases at the
-    permitted speed and brakes again; the offline run's events are exactly those."""
+    """A drive stuck at full traction from 60 to 200 s: the plant's ATP brakes and holds its
+    brake while the train interface reports the faulty drive, then releases it; the offline
+    run's events are exactly those."""
     run = run_offline_loop(parse_scenario(yaml.safe_load(STUCK), 'stuck.yaml'), 'pid',
                            end_time_s=300.0)
-    assert run.atp_interventions >= 2
+    assert run.atp_interventions == 1
+    # held to standstill until the fault ends at 200 s, then driven on
+    standing = (run.times_s > run.atp_times_s[0] + 60.0) & (run.times_s < 199.0)
+    assert standing.any() and np.all(run.speeds[standing] == 0.0)
+    assert run.speeds[-1] > 1.0
     assert len(run.atp_times_s) == run.atp_interventions
     assert list(run.atp_times_s) == sorted(run.atp_times_s)
     assert 60.0 < run.atp_times_s[0] < 200.0

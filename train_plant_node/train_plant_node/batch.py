@@ -125,6 +125,9 @@ def compiled_periods(sim, wanted: int, period_ns: int) -> int:
         return 0
     if sim.emergency_brake or sim.missed_periods or sim.atp.holding_brake:
         return 0  # braking, or dwelling at a stop: period by period
+    standing = getattr(sim.model, 'standing', None)
+    if standing is not None and standing(sim.state):
+        return 0  # a train at rest: the model's ``step`` holds it (the kernels do not)
     events = sim.events
     i = bisect_right(events, sim.time_s + EVENT_TOLERANCE_S)
     if i == len(events):
