@@ -23,6 +23,7 @@ from ato_common.metrics import RunMetrics, compute_metrics
 from ato_common.scenario import Scenario
 from ato_common.types import nanoseconds, seconds
 from ato_common.uncertainty import knowledge_options, perturbed
+from ato_controller_node.gains import configured
 from ato_controller_node.host import ControllerHost
 from ato_simulation.plans import (
     cached_plan,
@@ -87,6 +88,7 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
                 sensors: SensorSettings = SensorSettings(), model: str = 'point_mass',
                 end_time_s: float | None = None, controller_rate_hz: float | None = None,
                 uncertainty=None, replan_check_period_s: float | None = None,
+                gains: str = 'published', envelope: bool = True,
                 **model_options) -> OfflineRun:
     """Run ``controller`` on ``scenario`` with the plant ``model``; ``switches`` maps times to
     law names selected then; ``end_time_s`` and ``controller_rate_hz`` override the scenario's
@@ -98,7 +100,10 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
     run then follows the new plan (to its end, if that is later). ``replan_check_period_s``:
     decide as the profile node does in lockstep (``profile_node.replan.LockstepPlans``: the
     measured state read at check instants this far apart, a replan or a resume from a standing
-    train applied two periods later) instead of replanning from every step's state at once."""
+    train applied two periods later) instead of replanning from every step's state at once.
+    ``gains``: the laws' configuration (``ato_controller_node.gains``: 'published' or 'tuned',
+    for the scenario's train), with ``settings`` on top; ``envelope``: the host's ATO envelope
+    (``ato_controller_node.envelope``) on or off, for every law."""
     key = scenario_key(scenario)
     plan = cached_plan(scenario, key)
     period_ns = nanoseconds(1.0 / (controller_rate_hz or scenario.run.controller_rate_hz))
@@ -109,8 +114,11 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
     in_force = plan
     truth_scenario = perturbed(scenario, uncertainty) if uncertainty is not None else scenario
     sim = TrainSimulation(truth_scenario, model, sensors=sensors, **model_options)
+    laws = {controller, *(switches or {}).values()}
     host = ControllerHost(knowledge_of(scenario, **knowledge_options(uncertainty)),
-                          seconds(period_ns), controller, settings)
+                          seconds(period_ns), controller,
+                          configured(gains, scenario.train.name, laws, settings),
+                          envelope=envelope)
     end = end_time_s if end_time_s is not None else run_end_time_s(scenario, plan)
     steps = int(end * 1e9 // period_ns)
     references = sampled_references(plan, key, period_ns, steps)
