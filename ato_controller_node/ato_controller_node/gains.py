@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
-from ato_controller_node.laws import LAWS
+from ato_controller_node import laws as registry
 from ato_controller_node.laws.base import setting_fields, validated_settings
 
 #: the configurations, the default first
@@ -77,14 +77,15 @@ def read_artefact(path: Path) -> TunedArtefact:
     if not isinstance(record, dict) or record.get('format') != FORMAT:
         raise ValueError(f'{path}: not a tuned-gains file of format {FORMAT}')
     law, train, settings = record.get('law'), record.get('train'), record.get('settings')
-    if law not in LAWS:
-        raise ValueError(f"{path}: unknown law {law!r}; valid: {', '.join(sorted(LAWS))}")
+    if law not in registry.LAWS:
+        raise ValueError(f'{path}: unknown law {law!r}; valid: '
+                         f"{', '.join(sorted(registry.LAWS))}")
     if (law, train) != (path.stem, path.parent.name):
         raise ValueError(f'{path}: holds {law} on {train}, not what its name says')
     if not isinstance(settings, dict):
         raise ValueError(f'{path}: settings must be a mapping')
     try:
-        validated_settings(LAWS[law].Settings, settings)
+        validated_settings(registry.LAWS[law].Settings, settings)
     except ValueError as error:
         raise ValueError(f'{path}: {error}') from None
     return TunedArtefact(law, train, settings, record, path)
@@ -107,8 +108,8 @@ def settings_for(law: str, gains: str, train: str, folder: Path | None = None
     reason = check_gains(gains)
     if reason:
         raise ValueError(reason)
-    if law not in LAWS:
-        raise KeyError(f"unknown law '{law}'; valid: {', '.join(sorted(LAWS))}")
+    if law not in registry.LAWS:
+        raise KeyError(f"unknown law '{law}'; valid: {', '.join(sorted(registry.LAWS))}")
     if gains == 'published':
         return {}
     return dict(tuned_artefact(law, train, folder).settings)
@@ -130,5 +131,6 @@ def configured(gains: str, train: str, laws: Iterable[str],
 
 def published_settings(law: str) -> dict[str, Any]:
     """Every setting of ``law`` at its published value (its defaults), by name."""
-    defaults = LAWS[law].Settings()
-    return {f.name: getattr(defaults, f.name) for f in setting_fields(LAWS[law].Settings)}
+    settings_type = registry.LAWS[law].Settings
+    defaults = settings_type()
+    return {f.name: getattr(defaults, f.name) for f in setting_fields(settings_type)}
