@@ -1,5 +1,6 @@
-"""The ATO envelope: saturation-aware anti-windup of the position and speed errors, in the
-controller host, the same for every law (on for every law or off for every law).
+"""The ATO envelope: saturation-aware anti-windup of the position error, the integral of the
+speed error, in the controller host, the same for every law (on for every law or off for every
+law).
 
 While the actuators cannot give what a law wants, the reference runs away from the train: the
 position error, the integral of the speed error, winds up, and a law acting on it keeps its

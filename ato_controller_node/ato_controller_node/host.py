@@ -3,9 +3,10 @@ actuator limits, guard against missing or non-finite input and output, the check
 fits the train and the running plant, and the split over actuators.
 
 The ATO envelope (:mod:`ato_controller_node.envelope`, ``envelope=True``, the default): the
-saturation-aware anti-windup of the position and speed errors, the same for every law: the law
-is given a reference shifted by the envelope, which it winds from what the limits took away.
-Off (``envelope=False``) every law runs on the reference itself.
+saturation-aware anti-windup of the position error (the integral of the speed error), the same
+for every law: the law is given a reference position shifted by the envelope, which winds it
+from what the limits took away. Off (``envelope=False``) every law runs on the reference
+itself.
 
 Bumpless transfer: on a switch the new law is reset from the current state and told the last
 command; whatever step remains between the last command and the new law's first output is
