@@ -109,8 +109,8 @@ class Dimension:
 
 def search_space(law: str) -> list[Dimension]:
     """The admissible settings of ``law`` (its tuning search space)."""
-    return [Dimension(f.name, *f.metadata['admissible'], f.metadata['scale'] == 'log')
-            for f in admissible_fields(LAWS[law].Settings)]
+    return [Dimension(f.name, f.metadata['admissible'][0], f.metadata['admissible'][1],
+                      f.metadata['scale'] == 'log') for f in admissible_fields(LAWS[law].Settings)]
 
 
 @dataclass(frozen=True)
@@ -236,7 +236,8 @@ def training_campaign(campaign, seed: int, draws: int, laws: list[str]):
 
 def run_round(training, searches: list[LawSearch], execute_runs) -> None:
     """One trial of every law: ask, run its training draws on the cluster, tell."""
-    pending, tasks = {}, []
+    pending: dict[str, tuple[LawSearch, Any, list]] = {}
+    tasks = []
     for search in searches:
         trial, settings = search.ask()
         if settings is None:

@@ -79,7 +79,8 @@ class ControllerHost:
         self._actuators = len(train.actuator_names)  # the knowledge is frozen
         self._fit = (None, None, None, None)  # (law, knowledge, cars, law.fits' reason) checked
         self._decay = (None, None, 1.0)   # (dt, time constant, the offset's decay per step)
-        self._gains = (None, None, None)  # (law, its settings, law.feedback_gains()) asked
+        # (law, its settings, law.feedback_gains()) asked
+        self._gains: tuple[Any, Any, Any] = (None, None, None)
 
     def measurement(self, time_s: float, state: TrainState) -> Measurement:
         """The law's measurement of a measured ``state`` at run time ``time_s``, with the
