@@ -59,7 +59,7 @@ from ato_campaigns.engine import (
     run_task,
     task_of,
 )
-from ato_campaigns.provenance import provenance, write_results_page
+from ato_campaigns.provenance import REPOSITORY, provenance, write_results_page
 from ato_common.scenario import load_scenario
 from ato_common.validation import ConfigError
 from ato_controller_node import gains as gains_module
@@ -300,7 +300,7 @@ def artefact(search: LawSearch, campaign, scenario: str, trials: int, draws: int
             'first_trial': 'the published settings',
         },
         'budget': {'trials': trials, 'draws_per_trial': draws, 'runs': trials * draws},
-        'training': {'campaign': campaign.origin, 'scenario': scenario, 'seed': seed,
+        'training': {'campaign': _relative(campaign.origin), 'scenario': scenario, 'seed': seed,
                      'draws': draws, 'uncertainty': 'the campaign\'s',
                      'envelope': True, 'sampler_seed': seed},
         'result': {'trial': number, 'feasible': best.feasible,
@@ -312,6 +312,14 @@ def artefact(search: LawSearch, campaign, scenario: str, trials: int, draws: int
         'produced': {'commit': measured.commit, 'date': measured.date_utc,
                      'machine': measured.machine, 'wall_s': round(wall_s, 1)},
     }
+
+
+def _relative(path: str) -> str:
+    """``path`` relative to the repository where it lies in it (an artefact names no machine)."""
+    try:
+        return str(Path(path).resolve().relative_to(REPOSITORY))
+    except ValueError:
+        return path
 
 
 def _optuna_version() -> str:
