@@ -23,6 +23,7 @@ from ato_common.metrics import RunMetrics, compute_metrics
 from ato_common.scenario import Scenario
 from ato_common.types import nanoseconds, seconds
 from ato_common.uncertainty import knowledge_options, perturbed
+from ato_controller_node.gains import configured
 from ato_controller_node.host import ControllerHost
 from ato_simulation.plans import (
     JourneyEnd,
@@ -100,6 +101,7 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
                 sensors: SensorSettings = SensorSettings(), model: str = 'point_mass',
                 end_time_s: float | None = None, controller_rate_hz: float | None = None,
                 uncertainty=None, replan_check_period_s: float | None = None,
+                gains: str = 'published', envelope: bool = True,
                 **model_options) -> OfflineRun:
     """Run ``controller`` on ``scenario`` with the plant ``model``; ``switches`` maps times to
     law names selected then; ``end_time_s`` and ``controller_rate_hz`` override the scenario's
@@ -117,9 +119,16 @@ def run_offline(scenario: Scenario, controller: str = 'pid', settings=None,
     Without ``end_time_s`` (and without a stated end in the scenario) the run's end follows
     the journey (``ato_simulation.plans.JourneyEnd``): the planned end if the train then
     stands at its last stop, else once it has stood there for the settle time (a late train),
-    at the latest a stated limit past the timetable."""
+    at the latest a stated limit past the timetable.
+
+    ``gains``: the laws' configuration (``ato_controller_node.gains``: 'published' or 'tuned',
+    for the scenario's train), with ``settings`` on top; ``envelope``: the host's ATO envelope
+    (``ato_controller_node.envelope``) on or off, for every law."""
+    laws = {controller, *(switches or {}).values()}
+    settings = configured(gains, scenario.train.name, laws, settings)
     loop = _ClosedLoop(scenario, controller, settings, sensors, model, end_time_s,
-                       controller_rate_hz, uncertainty, replan_check_period_s, model_options)
+                       controller_rate_hz, uncertainty, replan_check_period_s, model_options,
+                       envelope)
     loop.run(sorted((switches or {}).items()))
     return loop.result()
 
@@ -146,7 +155,8 @@ class _ClosedLoop:
 
     def __init__(self, scenario: Scenario, controller: str, settings, sensors: SensorSettings,
                  model: str, end_time_s: float | None, controller_rate_hz: float | None,
-                 uncertainty, replan_check_period_s: float | None, model_options: dict):
+                 uncertainty, replan_check_period_s: float | None, model_options: dict,
+                 envelope: bool = True):
         self.scenario, self.end_time_s = scenario, end_time_s
         self.key = key = scenario_key(scenario)
         self.plan = plan = cached_plan(scenario, key)
@@ -161,7 +171,8 @@ class _ClosedLoop:
         truth = perturbed(scenario, uncertainty) if uncertainty is not None else scenario
         self.sim = TrainSimulation(truth, model, sensors=sensors, **model_options)
         self.host = ControllerHost(knowledge_of(scenario, **knowledge_options(uncertainty)),
-                                   seconds(period_ns), controller, settings)
+                                   seconds(period_ns), controller, settings,
+                                   envelope=envelope)
         self.journey = JourneyEnd.of(scenario, plan) if end_time_s is None else None
         end = end_time_s if end_time_s is not None else run_end_time_s(scenario, plan)
         steps = int(end * 1e9 // period_ns)

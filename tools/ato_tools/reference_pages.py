@@ -134,14 +134,18 @@ def laws_page() -> str:
         module = inspect.getmodule(law)
         lines += ['', f'## {name}', '', f'`{law.__module__}.{law.__qualname__}`: '
                   f'{_first_paragraph(law.__doc__) or law.summary}', '',
-                  '| setting | default | range | units | description |', '|---|---|---|---|---|']
+                  '| setting | default | range | tuned over | units | description |',
+                  '|---|---|---|---|---|---|']
         for f in setting_fields(law.Settings):
             meta = f.metadata
             valid = '' if isinstance(f.default, bool) else \
                 f'{meta["minimum"]:g} .. {meta["maximum"]:g}'
             default = str(f.default).lower() if isinstance(f.default, bool) else f'{f.default:g}'
-            lines.append(f'| `{f.name}` | `{default}` | {valid} | {_cell(meta["units"])} | '
-                         f'{_cell(meta["description"])} |')
+            admissible = meta.get('admissible')
+            tuned = (f'{admissible[0]:g} .. {admissible[1]:g}'
+                     + (' (log)' if meta.get('scale') == 'log' else '')) if admissible else '-'
+            lines.append(f'| `{f.name}` | `{default}` | {valid} | {tuned} | '
+                         f'{_cell(meta["units"])} | {_cell(meta["description"])} |')
         if module is not None and module.__doc__:
             lines += ['', f'From the module `{module.__name__}`:', '', '```text',
                       inspect.cleandoc(module.__doc__), '```']
