@@ -83,6 +83,43 @@ def tear_down(executor, node: RunNodeHooks | Sequence[RunNodeHooks]) -> None:
         each.destroy_node()
 
 
+def parameter_files(args: Sequence[str]) -> list[str]:
+    """The files of the ``--params-file`` options in the ``--ros-args`` parts of a command
+    line (each part ends at ``--`` or at the end)."""
+    files, in_ros_args = [], False
+    words = iter(args)
+    for word in words:
+        if word == '--ros-args':
+            in_ros_args = True
+        elif word == '--':
+            in_ros_args = False
+        elif in_ros_args and word == '--params-file':
+            files.append(next(words, ''))
+    return files
+
+
+def refused_command_line(args=None) -> str | None:
+    """Why a node's command line is refused before rclpy starts (None if it is not): a
+    parameters file refused by :mod:`ato_common.files` (deep nesting, an alias bomb, a key given
+    twice: rcl would silently keep the last value) or ROS arguments rcl cannot parse (rcl refuses
+    YAML aliases in a parameters file)."""
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+    from rclpy.utilities import remove_ros_args
+
+    from ato_common.files import load_yaml
+    from ato_common.validation import ConfigError
+    argv = list(sys.argv if args is None else args)
+    try:
+        for path in parameter_files(argv):
+            load_yaml(path)
+        remove_ros_args(argv)
+    except ConfigError as error:
+        return f'--params-file {error}'
+    except rclpy_implementation.RCLInvalidROSArgsError as error:
+        return ' '.join(str(error).split())
+    return None
+
+
 def help_requested(args=None) -> bool:
     """Whether the command line (without its ``--ros-args`` part) asks for ``-h``/``--help``."""
     from rclpy.utilities import remove_ros_args
@@ -123,7 +160,8 @@ def run_node(make_node: Callable[[], RunNodeHooks], args=None,
     file, with no time limit), then, within ``TEARDOWN_LIMIT_S``, the executor (it lets go of
     every entity while the context is still valid), the node, the context.
 
-    ``usage``: the text ``-h``/``--help`` prints (then the node exits 0 without starting)."""
+    ``usage``: the text ``-h``/``--help`` prints (then the node exits 0 without starting). A
+    command line :func:`refused_command_line` refuses is printed and gives exit 2."""
     return run_nodes((make_node,), args, usage)
 
 
@@ -158,6 +196,10 @@ def run_nodes(makers: Sequence[Callable[[], RunNodeHooks]], args=None,
     ``ato_bringup.composed``): built in the order given, spun together until any of them is
     finished; each one's outputs are closed in that order; the exit code is the first non-zero
     ``exit_code`` among them (0 if none)."""
+    refused = refused_command_line(args)
+    if refused is not None:
+        print(f'error: {refused}', file=sys.stderr)
+        return 2
     if usage is not None and help_requested(args):
         print(usage())
         return 0
