@@ -10,6 +10,7 @@ import os
 import signal
 import sys
 import textwrap
+import threading
 from typing import Callable, Iterable, Sequence
 
 import rclpy
@@ -17,6 +18,7 @@ import rclpy.exceptions
 import rclpy.signals
 
 from ato_ros.publishing import shared_step_recorders
+from ato_ros.stall import StallWatch
 
 
 def make_executor(context=None):
@@ -44,9 +46,17 @@ def freeze_startup_objects() -> None:
 
 
 # A node asked to stop must end: if tearing down the executor, the node's rcl entities and the
-# context takes longer than this (a rare middleware hang), every thread's Python stack is written
-# to stderr and the process exits with code 1, instead of waiting for its supervisor's SIGKILL.
+# context makes no progress for this long (a rare middleware hang: stalled time, ato_ros.stall,
+# not the time a starved process waits for a CPU), every thread's Python stack is written to
+# stderr and the process exits with code 1, instead of waiting for its supervisor's SIGKILL.
 TEARDOWN_LIMIT_S = 5.0
+# ... and in any case after this long in wall time, even if the hang holds the GIL (then the
+# watchdog thread cannot run: faulthandler's own thread ends the process) or periodic middleware
+# threads make a hung process look runnable on a loaded machine.
+TEARDOWN_WALL_LIMIT_S = 120.0
+#: how often the teardown's watchdog judges the progress, s
+WATCH_PERIOD_S = 0.1
+_teardown_watch: threading.Event | None = None
 
 
 class RunNodeHooks:
@@ -72,12 +82,45 @@ class RunNodeHooks:
         """Nothing to close by default."""
 
 
+def watch_teardown() -> None:
+    """From now until the process exits (or :func:`cancel_teardown_watch`): once the process
+    has made no progress for ``TEARDOWN_LIMIT_S`` although it could have (:mod:`ato_ros.stall`)
+    or ``TEARDOWN_WALL_LIMIT_S`` have passed, write every thread's stack to stderr and exit with
+    code 1. A node starved of CPU by other processes (the recorder at nice 19 on a loaded
+    machine) is slow, not hung, and is left to finish."""
+    global _teardown_watch
+    cancel_teardown_watch()
+    faulthandler.dump_traceback_later(TEARDOWN_WALL_LIMIT_S, exit=True)
+    stop = _teardown_watch = threading.Event()
+    watch = StallWatch()
+
+    def watchdog() -> None:
+        while not stop.wait(WATCH_PERIOD_S):
+            if watch.update() > TEARDOWN_LIMIT_S:
+                print(f'Timeout: the teardown made no progress for {TEARDOWN_LIMIT_S:g} s '
+                      '(stalled, not waiting for a CPU); every thread:', file=sys.stderr,
+                      flush=True)
+                faulthandler.dump_traceback(all_threads=True)
+                os._exit(1)
+
+    threading.Thread(target=watchdog, name='teardown watchdog', daemon=True).start()
+
+
+def cancel_teardown_watch() -> None:
+    """Stop :func:`watch_teardown`'s limits (a test that tears a node down in its own
+    process)."""
+    global _teardown_watch
+    faulthandler.cancel_dump_traceback_later()
+    if _teardown_watch is not None:
+        _teardown_watch.set()
+        _teardown_watch = None
+
+
 def tear_down(executor, node: RunNodeHooks | Sequence[RunNodeHooks]) -> None:
     """Shut the executor down (it lets go of every entity while the context is still valid),
-    then destroy the node (or each of the nodes), within ``TEARDOWN_LIMIT_S``: past it,
-    faulthandler writes every thread's stack to stderr and the process exits with code 1. The
+    then destroy the node (or each of the nodes), under :func:`watch_teardown`'s limits. The
     caller shuts rclpy down."""
-    faulthandler.dump_traceback_later(TEARDOWN_LIMIT_S, exit=True)
+    watch_teardown()
     executor.shutdown(timeout_sec=TEARDOWN_LIMIT_S)
     for each in (node if isinstance(node, (list, tuple)) else (node,)):
         each.destroy_node()
@@ -157,8 +200,8 @@ def run_node(make_node: Callable[[], RunNodeHooks], args=None,
     object is a TypeError naming its class.
 
     Teardown order: the node's own outputs first (``node.close_outputs()``, e.g. the recorder's
-    file, with no time limit), then, within ``TEARDOWN_LIMIT_S``, the executor (it lets go of
-    every entity while the context is still valid), the node, the context.
+    file, with no time limit), then, under the limits of :func:`watch_teardown`, the executor
+    (it lets go of every entity while the context is still valid), the node, the context.
 
     ``usage``: the text ``-h``/``--help`` prints (then the node exits 0 without starting). A
     command line :func:`refused_command_line` refuses is printed and gives exit 2."""
