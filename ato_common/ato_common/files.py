@@ -136,8 +136,8 @@ class _Loader(Composer, SafeConstructor, Resolver, _Parser):
                 + ''.join(self.path[-3:]).lstrip('.'))
 
     def compose_node(self, parent: Any, index: Any) -> Any:
-        if self.check_event(yaml.AliasEvent):
-            event = self.peek_event()
+        event: Any = self.peek_event()
+        if isinstance(event, yaml.AliasEvent):
             node = self.anchors.get(event.anchor)
             if node is not None and id(node) not in self.extent:
                 self.path.append(_segment(index) if parent is not None else '')
@@ -145,10 +145,9 @@ class _Loader(Composer, SafeConstructor, Resolver, _Parser):
                                   'to (a document that contains itself)', event.start_mark)
             return super().compose_node(parent, index)  # an undefined alias: PyYAML's error
         # the collection starting here is nested in len(self.path) others
-        if (self.check_event(yaml.SequenceStartEvent, yaml.MappingStartEvent)
+        if (isinstance(event, (yaml.SequenceStartEvent, yaml.MappingStartEvent))
                 and len(self.path) >= MAX_DEPTH):
-            raise self.refuse(f'nested deeper than {MAX_DEPTH} levels',
-                              self.peek_event().start_mark)
+            raise self.refuse(f'nested deeper than {MAX_DEPTH} levels', event.start_mark)
         self.path.append(_segment(index) if parent is not None else '')
         node = super().compose_node(parent, index)
         self.measure(node)
