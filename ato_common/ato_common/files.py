@@ -36,7 +36,7 @@ from yaml.resolver import Resolver
 
 from ato_common.validation import ConfigError
 
-#: the largest YAML file read, bytes (PyYAML parses in pure Python: a few seconds at this size)
+#: the largest YAML file read, bytes (its nodes are composed in Python: seconds at this size)
 MAX_YAML_BYTES = 4 * 1024 * 1024
 #: the largest JSON file read, bytes
 MAX_JSON_BYTES = 16 * 1024 * 1024
@@ -83,7 +83,7 @@ def _where(mark: Any) -> str:
     return f'line {mark.line + 1}, column {mark.column + 1}'
 
 
-try:  # libyaml's scanner and parser (about three times as fast), when PyYAML was built with it
+try:  # libyaml's scanner and parser (in C), when PyYAML was built with it
     from yaml._yaml import CParser as _Parser
 
     def _parser_init(loader: Any, text: str, origin: str) -> None:
@@ -205,9 +205,7 @@ def load_yaml_text(text: str, origin: str) -> Any:
         return None if node is None else loader.construct_document(node)
     except ConfigError:
         raise
-    except yaml.YAMLError as error:
-        raise ConfigError(f'{origin}: not valid YAML: {error}') from None
-    except (ValueError, OverflowError) as error:
+    except (yaml.YAMLError, ValueError, OverflowError) as error:
         raise ConfigError(f'{origin}: not valid YAML: {error}') from None
     finally:
         loader.dispose()
