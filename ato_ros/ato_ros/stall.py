@@ -4,9 +4,10 @@ A node that takes too long to tear down is ended by a limit (its own, :func:`ato
 tear_down`, and its supervisor's, ``ato_bringup.stack.Stack.stop``). Counted in wall time, such a
 limit also ends a node that is merely slow because other processes have the CPUs: the recorder of
 a lockstep run runs at nice 19 (``--background``), and beside two busy processes on two cores it
-gets about 1.5 % of a core, so the 50 ms of CPU its teardown needs take about 3.5 s of wall
-time, and closing a recording of a few thousand messages more. Such a recorder was ended half-way
-through ``destroy_node`` ("Fatal Python error: Aborted", exit -6, issue 29).
+gets about 1.5 % of a core (the scheduler weighs nice 19 at 15 against 1024 for nice 0), so
+every millisecond of CPU its teardown needs takes tens of milliseconds of wall time. Such a
+recorder was ended half-way through ``destroy_node`` ("Fatal Python error: Aborted", exit -6,
+issue 29).
 
 What a limit on hanging should count instead is the time in which the process made no progress
 although it could have: wall time not matched by time in which its threads were runnable (on a
