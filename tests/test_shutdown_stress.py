@@ -8,7 +8,7 @@ For the shutdown, every thread of both processes is moved to one core where busy
 a nice-19 process beside two busy ones gets well under 1 % of it, as on a machine whose every core
 is busy, while the test costs the machine one core and only while they stop (they start on an
 unloaded core: their start-up is not what is tested). ``make test`` repeats it twice beside two
-busy processes; ``make test-stress`` (``--stress-load``) eight times beside three."""
+busy processes; ``make test-stress`` (``--stress-load``) five times beside three."""
 
 import contextlib
 import os
@@ -21,7 +21,7 @@ from ato_bringup.stack import Stack, StackConfig
 
 #: (repetitions, busy processes on the core) in make test and in make test-stress
 MODEST = (2, 2)
-HEAVY = (8, 3)
+HEAVY = (5, 3)
 BAD_SIGNS = ('Fatal Python error', 'Timeout', 'Traceback', 'Segmentation fault',
              'terminate called')
 #: the core the stopping processes share with the busy ones
