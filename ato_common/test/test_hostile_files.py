@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 from ato_common import files
 from ato_common.files import MAX_DEPTH, load_json, load_yaml, load_yaml_text
+from ato_common.plant_setup import parse_failure_injection
 from ato_common.scenario import Scenario, load_scenario
 from ato_common.ttobench import load_track, load_train
 from ato_common.validation import ConfigError
@@ -117,6 +118,18 @@ def test_a_tunnel_past_the_end_of_the_line_is_refused(tmp_path):
                                                              'length_m: 2000}'))
     assert message.endswith('line.tunnels[0].length_m: the tunnel ends at 37000 m, past the end '
                             'of the line (36000 m)')
+
+
+@pytest.mark.timeout(60)
+def test_a_failure_injected_at_run_time_is_read_with_the_same_limits():
+    # ros2 param set ... inject_failure: YAML text a peer sends to the running plant
+    train = load_scenario('mao_2017_modes').train
+    for text, words in [('{actuator: motor_1, kind: loss, actuator: motor_2}',
+                         "the key 'actuator' is given twice"),
+                        ('\n' + alias_bomb(), 'its aliases expand it beyond'),
+                        ('[' * 5000 + ']' * 5000, 'nested deeper than')]:
+        with pytest.raises(ConfigError, match=f'^inject_failure: .*{words}'):
+            parse_failure_injection(text, train.actuator_names, 0.0)
 
 
 def test_a_file_larger_than_the_limit_is_not_read(tmp_path, monkeypatch):
