@@ -11,8 +11,10 @@ PYTEST_ARGS ?=
 # make test: two pytest workers, the graph tests one after the other on one of them
 # (tests/conftest.py), the unit tests on both
 PYTEST_WORKERS ?= 2
+# make test-stress: the integration tests one after the other beside this many busy processes
+STRESS_LOAD ?= 2
 
-.PHONY: help setup build demo compare campaign reproduce test test-unit test-integration lint docs docs-serve bench curves clean
+.PHONY: help setup build demo compare campaign tune reproduce test test-unit test-integration test-stress lint docs docs-serve bench curves clean
 
 help:
 	@echo "make setup   create .venv with pinned packages and build ros_ws (idempotent)"
@@ -24,9 +26,14 @@ help:
 	@echo "make campaign the default robustness campaign (laws under uncertainty, on Dask): rows in"
 	@echo "             runs/campaigns/default/, report.md and plots beside them, the results page"
 	@echo "             (CAMPAIGN=file for another, SCHEDULER=tcp://host:8786 for a running cluster)"
+	@echo "make tune    the tuning procedure of the campaign's laws on Dask: the tuned gains"
+	@echo "             (ato_controller_node/ato_controller_node/tuned/) and docs/results/tuning.md"
+	@echo "             (SCHEDULER=tcp://host:8786 for a running cluster)"
 	@echo "make reproduce run the papers' reproduction tests and write docs/results/reproduction.md"
 	@echo "make test    lint, build the docs strictly, run every test (unit tests of the cores and"
 	@echo "             integration tests over rclpy)"
+	@echo "make test-stress the integration tests beside two busy processes (STRESS_LOAD=n), as on"
+	@echo "             a loaded machine; a failure shows the end of every process log"
 	@echo "make lint    ruff over the repository"
 	@echo "make docs    build the documentation site into site/ (warnings are errors)"
 	@echo "make bench   lockstep real-time factor through the ROS graph and controller step times"
@@ -51,6 +58,10 @@ campaign: setup
 	  $(if $(CAMPAIGN),$(CAMPAIGN),--results-page docs/results/campaign.md --readme README.md) \
 	  $(if $(SCHEDULER),--scheduler $(SCHEDULER))
 
+tune: setup
+	@$(ENV) python -m ato_campaigns.tuning --results-page docs/results/tuning.md \
+	  $(if $(SCHEDULER),--scheduler $(SCHEDULER))
+
 reproduce: setup
 	@$(ENV) python -m ato_tools.reproduction
 
@@ -71,6 +82,10 @@ test-unit: setup
 
 test-integration: setup
 	@$(ENV) python -m pytest -m integration $(PYTEST_ARGS)
+
+test-stress: setup
+	@$(ENV) python -m pytest -p no:xdist -m integration --stress-load $(STRESS_LOAD) tests \
+	  $(PYTEST_ARGS)
 
 bench: setup
 	@$(ENV) python bench/bench.py \

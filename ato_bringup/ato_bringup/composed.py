@@ -22,13 +22,14 @@ gives the same state sequence, bit for bit, as the same run in three processes
 
 from __future__ import annotations
 
-from ato_ros.lifecycle import node_usage, run_nodes
+from ato_ros.interrupts import quiet_until_running
 
 NODES = ('train_plant_node', 'profile_node', 'ato_controller_node')
 
 
 def usage() -> str:
     from ato_controller_node import node as controller
+    from ato_ros.lifecycle import node_usage
     from profile_node import node as profile
     from train_plant_node import node as plant
     parts = [__doc__.strip().split('\n\n')[0], '']
@@ -42,7 +43,9 @@ def usage() -> str:
 
 
 def main(args=None) -> int:
+    quiet_until_running()  # a stop while importing ends the process cleanly
     from ato_controller_node.node import AtoControllerNode
+    from ato_ros.lifecycle import run_nodes
     from profile_node.node import ProfileNode
     from train_plant_node.node import TrainPlantNode
     # The plant first: its latched identity is there when the others subscribe.

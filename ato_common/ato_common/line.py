@@ -100,6 +100,9 @@ class Line:
     grade_sine: PiecewiseConstant      # sin(track angle), positive uphill in the running direction
     curves: tuple[Curve, ...] = ()
     tunnels: tuple[Tunnel, ...] = ()
+    #: where the line's balise groups lie, m, increasing: the fixed points at which an on-board
+    #: odometry relocates the train (SUBSET-026 3.6.4, the last relevant balise group)
+    balise_groups_m: tuple[float, ...] = ()
 
     def line_force_per_kg(self, position: float, gravity: float = units.STANDARD_GRAVITY) -> float:
         """Specific force of the line opposing motion at a position, m/s^2 (negative downhill).
@@ -131,6 +134,19 @@ def _radius(item: Fields, key: str) -> float:
         raise ConfigError(f'{item.where}.{key}: a radius of 0 m is not a curve (the sign gives '
                           'the direction: positive right, negative left)')
     return radius
+
+
+def _balise_groups(f: Fields, length: float, where: str) -> tuple[float, ...]:
+    """``balise_groups: [{position_m: ...}, ...]``: on the line, strictly increasing."""
+    positions: list[float] = []
+    for item in f.items('balise_groups'):
+        position = item.number('position_m', minimum=0.0, maximum=length)
+        item.reject_unknown()
+        if positions and position <= positions[-1]:
+            raise ConfigError(f'{item.where}.position_m: positions must increase, got '
+                              f'{positions[-1]:g} then {position:g}')
+        positions.append(position)
+    return tuple(positions)
 
 
 def parse_line(data, where: str = 'line') -> Line:
@@ -187,10 +203,16 @@ def parse_line(data, where: str = 'line') -> Line:
     for item in f.items('tunnels'):
         start = item.number('start_m', minimum=0.0, maximum=length)
         tunnel_length = item.number('length_m', minimum=0.0, exclusive_minimum=True)
+        if start + tunnel_length > length:
+            raise ConfigError(f'{item.where}.length_m: the tunnel ends at '
+                              f'{start + tunnel_length:g} m, past the end of the line '
+                              f'({length:g} m)')
         section = (item.number('cross_section_m2', minimum=0.0, exclusive_minimum=True)
                    if item.has('cross_section_m2') else None)
         tunnels.append(Tunnel(start, tunnel_length, section))
         item.reject_unknown()
+    balise_groups = _balise_groups(f, length, where)
     f.reject_unknown()
     return Line(name, length, tuple(stations), PiecewiseConstant(limit_starts, limits),
-                PiecewiseConstant(grade_starts, grades), tuple(curves), tuple(tunnels))
+                PiecewiseConstant(grade_starts, grades), tuple(curves), tuple(tunnels),
+                balise_groups)

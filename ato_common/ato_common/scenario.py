@@ -22,14 +22,13 @@ from importlib import resources
 from pathlib import Path
 from typing import Mapping
 
-import yaml
-
 from ato_common import trains, ttobench, units
 from ato_common.braking_curves import (
     SupervisionSettings,
     constant_deceleration,
     tabulated_deceleration,
 )
+from ato_common.files import load_yaml, load_yaml_text
 from ato_common.line import Line, PiecewiseConstant, parse_line
 from ato_common.plant_setup import PlantSetup, parse_plant_setup
 from ato_common.trains import TRAIN_PRESETS, TrainParameters, train_preset
@@ -115,7 +114,7 @@ def load_scenario(name_or_path: str) -> Scenario:
     if name_or_path in builtin_scenarios():
         origin = f'built-in scenario {name_or_path}'
         folder = resources.files('ato_common') / 'scenarios'
-        text = (folder / f'{name_or_path}.yaml').read_text()
+        data = load_yaml_text((folder / f'{name_or_path}.yaml').read_text(), origin)
         base = Path(str(folder))
     else:
         path = Path(name_or_path)
@@ -124,14 +123,7 @@ def load_scenario(name_or_path: str) -> Scenario:
                               f"({', '.join(builtin_scenarios())}) nor a readable file")
         origin = str(path)
         base = path.parent
-        try:
-            text = path.read_text()
-        except (OSError, UnicodeDecodeError) as error:
-            raise ConfigError(f'{path}: cannot read: {error}') from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        raise ConfigError(f'{origin}: not valid YAML: {error}') from None
+        data = load_yaml(path)
     try:
         return parse_scenario(data, origin, base)
     except ConfigError as error:
@@ -208,8 +200,12 @@ def _capped(line: Line, speed: float) -> Line:
     """The line's static limits capped at the train's maximum speed (part of the MRSP)."""
     limits = line.speed_limit_mps
     capped = PiecewiseConstant(limits.starts, [min(v, speed) for v in limits.values])
-    return Line(line.name, line.length_m, line.stations, capped, line.grade_sine, line.curves,
-                line.tunnels)
+    return replace(line, speed_limit_mps=capped)
+
+
+#: the odometry's declared accuracy in ``supervision:`` and the largest value each may take
+ODOMETRY_ACCURACY_BOUNDS = {'location_accuracy_m': 1000.0, 'odometry_accuracy': 0.5,
+                            'speed_accuracy_mps': 10.0, 'speed_accuracy_share': 0.5}
 
 
 def _parse_supervision(f: Fields, train: TrainParameters,
@@ -237,9 +233,12 @@ def _parse_supervision(f: Fields, train: TrainParameters,
                 'overlap_m'):
         default = times.get(key, getattr(defaults, key))
         values[key] = s.number(key, default, minimum=0.0, maximum=1000.0)
+    for key, most in ODOMETRY_ACCURACY_BOUNDS.items():
+        values[key] = s.number(key, 0.0, minimum=0.0, maximum=most)
     s.reject_unknown()
     return SupervisionSettings(defaults.emergency_deceleration, defaults.service_deceleration,
-                               **values)
+                               traction_acceleration_mps2=train.traction.max_traction_force_n
+                               / train.mass_kg, **values)
 
 
 def _journey_gives_times(journey: ttobench.TTOBenchJourney | None) -> bool:
