@@ -11,7 +11,7 @@ from typing import Callable
 import numpy as np
 
 from ato_bringup.processes import describe_exit
-from ato_bringup.stack import Sample, Stack, StackConfig
+from ato_bringup.stack import Monitor, Sample, Stack, StackConfig
 from ato_common.metrics import RunMetrics, compute_metrics
 from ato_common.run_events import PLATFORM_TOLERANCE_M, RunEvents, run_events, stations_of
 from ato_common.scenario import Scenario, load_scenario
@@ -97,7 +97,8 @@ def progress_bar(end_time_s: float):
 def last_reports(stack: Stack) -> str:
     """Each node's newest diagnostics message and the tail of its log (a stalled run)."""
     newest = {}
-    for _, name, _, message in stack.monitor.diagnostics:
+    monitor = stack.monitor
+    for _, name, _, message in (monitor.diagnostics if monitor is not None else ()):
         newest[name] = message
     lines = [f'  {name}: {message}' for name, message in sorted(newest.items())]
     alive = [n for n in stack.processes if not stack.exited(n)]
@@ -118,7 +119,7 @@ class RunClock:
     """The run's simulated time as the monitor sees it: the newest state's stamp in lockstep;
     in real time (stamps on the wall clock) the time since the first state's stamp."""
 
-    monitor: object
+    monitor: Monitor
     lockstep: bool
     origin_ns: int | None = None
 
