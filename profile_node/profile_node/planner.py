@@ -793,6 +793,9 @@ class _LegSolver:
                 chosen = candidate
         builder.segments.extend(chosen.segments)
         builder.t, builder.x, builder.v, builder.a = chosen.t, chosen.x, chosen.v, chosen.a
+        # the least-energy curve at the fastest price can be a little faster than the fastest
+        # builder's curve (its switches fall elsewhere under the jerk limit): the shorter
+        shortest = min(shortest, chosen.t - departure)
         self.timings.append(LegTiming(f'{end_m:.0f} m', departure, target, chosen.t, shortest))
 
     @staticmethod
