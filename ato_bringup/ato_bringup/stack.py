@@ -318,6 +318,9 @@ class Stack:
     def start(self, order=('controller', 'profile', 'plant')) -> None:
         self.config.log_dir.mkdir(parents=True, exist_ok=True)
         params = self.node_params()
+        if self.config.composed:
+            self.start_composed(params)
+            return
         if self.config.record_to is not None:
             # unstamped topics are logged at simulated time in lockstep: that of the /clock the
             # recorder records (--sim-time: no second subscription to /clock); it runs at the
@@ -327,20 +330,21 @@ class Stack:
                                ['-o', str(self.config.record_to),
                                 *(['--sim-time', '--background'] if self.config.lockstep
                                   else [])])
-        if self.config.composed:
-            self.start_composed(params)
-            return
         for name in order:
             self.start_process(name, params[name])
 
     def start_composed(self, params: dict[str, dict]) -> subprocess.Popen:
         """The three loop nodes in one process (``ato_stack``), each with its own parameters
-        from a parameters file with a section per node (the file is kept in the log folder)."""
+        from a parameters file with a section per node (the file is kept in the log folder);
+        with ``record_to``, the recorder in that process too (``ato_stack --record``)."""
         sections = {f'/**/{NODE_NAMES[key]}': {'ros__parameters': params[key]}
                     for key in NODE_NAMES}
         path = self.config.log_dir / 'loop_parameters.yaml'
         path.write_text(yaml.safe_dump(sections, sort_keys=True))
-        return self.start_process('loop', {}, extra_ros_args=['--params-file', str(path)])
+        record = [] if self.config.record_to is None else [
+            '--record', '-o', str(self.config.record_to)]
+        return self.start_process('loop', {}, record,
+                                  extra_ros_args=['--params-file', str(path)])
 
     def start_process(self, name: str, params: dict, args: list[str] = (),
                       extra_ros_args: list[str] = (), kind: str | None = None

@@ -144,7 +144,7 @@ TOPICS = {
                       "recorder's node name; in lockstep the plant runs at most "
                       'recorder_lead_s past the oldest acknowledgement (ato_ros.'
                       'RecorderLead)',
-                      rate='every 0.2 s of simulated time of step records written'),
+                      rate='every 0.3 s of simulated time of step records written'),
 }
 
 #: The per-step topics the loop nodes put in their step records (``step_records``): the recorder

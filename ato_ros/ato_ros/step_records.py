@@ -45,12 +45,15 @@ PERIOD_S = 0.4
 WALL_PERIOD_S = 0.05
 #: a recorder acknowledges a namespace's step records (topic ``recorded``) once the oldest of
 #: what it has written of them has advanced by this much since its last acknowledgement, s of
-#: their stamps (half a bundle: the nodes' bundles of a period arrive one after the other)
-ACK_PERIOD_S = PERIOD_S / 2
+#: their stamps; it flushes its file before each (an acknowledgement and a flush are most of
+#: what a recorder spends per step besides the takes: fewer of them cost less, a longer lead)
+ACK_PERIOD_S = 0.3
 #: in lockstep the plant runs at most this far past the oldest acknowledgement of the recorders
 #: that acknowledge (back-pressure: ``ato_ros.publishing.RecorderLead``), s of simulated time: what
-#: a SIGKILLed recorder can lose (docs/guide/recording.md; the plant's recorder_lead_s)
-LEAD_S = 0.9
+#: a SIGKILLed recorder can lose (docs/guide/recording.md; the plant's recorder_lead_s). A
+#: control period over the least lead at 10 Hz (``least_lead_s``), so that a recorder that
+#: keeps up never holds the loop.
+LEAD_S = 1.0
 
 
 def least_lead_s(control_period_s: float) -> float:
