@@ -101,7 +101,9 @@ def test_stamped_topics_are_logged_at_their_stamp(recorded):
         assert all(m.log_time_ns == cdr_stamp_ns(m.data) for m in messages), topic
         # and the publish time is the publisher's, not a copy of the log time
         assert any(m.publish_time_ns != m.log_time_ns for m in messages), topic
-    assert metadata(recorded)['custom_data'] == {'log_time': 'stamp'}
+    custom = metadata(recorded)['custom_data']
+    assert sorted(custom) == ['log_time', 'recorded_utc', 'suite_commit']
+    assert custom['log_time'] == 'stamp' and custom['recorded_utc'].endswith(' UTC')
 
 
 def test_replay_rerecorded_gives_the_same_log_times(recorded, tmp_path, domain_id):

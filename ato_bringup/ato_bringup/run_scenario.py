@@ -43,7 +43,7 @@ from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios
 from ato_common.validation import ConfigError
 from ato_controller_node.laws import LAWS
 from recorder.bag import BagError
-from recorder.report import load_run, plot
+from recorder.report import build_report, write_report
 
 
 def positive_seconds(text: str) -> float:
@@ -155,12 +155,13 @@ def run(args: argparse.Namespace) -> int:
     print(outcome.events.format())
     if record_to is not None:
         try:
-            plots = plot(load_run(record_to), record_to / 'report')
+            page = write_report(build_report(record_to, scenario=args.scenario),
+                                record_to / 'report')
         except BagError as error:
             print(f'error: the recording cannot be read: {error}', file=sys.stderr)
             return 1
         print(f'recording             {record_to} (ros2 run recorder info {record_to})')
-        print(f'report                {plots[0].parent} ({", ".join(p.name for p in plots)})')
+        print(f'report                {page}')
     return final_exit_code(outcome.events, not args.no_fail_on_events)
 
 

@@ -52,7 +52,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from datetime import datetime
+from datetime import datetime, timezone
 from operator import itemgetter
 from pathlib import Path
 
@@ -552,7 +552,8 @@ def parse_args(argv: list[str], prog: str = 'recorder') -> argparse.Namespace:
                         help='the time of unstamped messages: the simulated time of the last '
                              '/clock (as use_sim_time, without its second /clock subscription)')
     parser.add_argument('--custom-data', action='append', default=[], metavar='KEY=VALUE',
-                        help="a string pair for metadata.yaml's custom_data (repeatable)")
+                        help="a string pair for metadata.yaml's custom_data (repeatable; the "
+                             'recorder adds log_time and recorded_utc, when it started)')
     parser.add_argument('--no-step-records', dest='step_records', action='store_false',
                         help="subscribe to the suite's per-step topics one by one, as to any "
                              "other, instead of taking them from the loop nodes' step records "
@@ -570,7 +571,8 @@ def parse_args(argv: list[str], prog: str = 'recorder') -> argparse.Namespace:
 def bag_writer(options: argparse.Namespace) -> BagWriter:
     """The bag the options ask for; BagError or ValueError naming what is wrong."""
     output = options.output or Path('runs') / datetime.now().strftime('rec-%Y%m%d-%H%M%S')
-    custom_data = {'log_time': options.log_time}
+    custom_data = {'log_time': options.log_time,
+                   'recorded_utc': datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M:%S UTC')}
     for pair in options.custom_data:
         key, sep, value = pair.partition('=')
         if not sep or not key:
