@@ -223,13 +223,34 @@ class RecorderNode(RunNodeHooks, Node):
             self.get_logger().warning(f'{error}; not recorded')
             self.subscribed[topic] = None
             return
-        if step_recorded(topic) is not None and self.carries_records(step_recorded(topic)[1]):
-            self.direct.add(topic)  # a publisher of its own: its entries in the records left out
         stamped = logs_at_stamp(topic, type_name, self.log_time)
-        self._subscribe(topic, msg_type, subscription_qos(offered),
-                        self._handler(topic, stamped))
+        recorded = step_recorded(topic)
+        if recorded is not None and self.carries_records(recorded[1]):
+            self._subscribe_per_step(topic, msg_type, subscription_qos(offered), recorded[1])
+        else:
+            self._subscribe(topic, msg_type, subscription_qos(offered),
+                            self._handler(topic, stamped))
         self.get_logger().info(f'recording {topic} [{type_name}], logged at '
                                f'{"its stamp" if stamped else "receipt"}')
+
+    def _subscribe_per_step(self, topic: str, msg_type, qos, namespace: str) -> None:
+        """A per-step topic of a namespace whose step records this recorder takes, with a
+        publisher of its own (an ATO node outside the suite on ato/command): its entries in the
+        step records are left out, and it is taken as it comes, each message written at its
+        stamp and counted in what is written of the namespace (``Written``): the
+        acknowledgements, and so the plant's lead, cover it as they cover the step records."""
+        self.direct.add(topic)
+        written = self.written.get(namespace)
+        handler = self._handler(topic, stamped=True)
+
+        def on_message(data: bytes) -> None:
+            handler(data)
+            stamp = cdr_stamp_ns(data)
+            if written is not None and stamp is not None:
+                written.wrote(topic, stamp)
+        self.subscribed[topic] = self.create_subscription(msg_type, topic, on_message, qos,
+                                                          raw=True)
+        self.step_subscriptions.append(self.subscribed[topic])  # taken at the close too
 
     def carries_records(self, namespace: str) -> bool:
         """Whether this recorder takes the step records of ``namespace``."""
@@ -296,15 +317,19 @@ class RecorderNode(RunNodeHooks, Node):
         if not offered:
             return  # no publisher yet
         self.bundled.add(namespace)
+        written = self.written[namespace] = Written()
         for other in list(self.takes):
-            if self.taken_from_records(other):
-                subscription, _ = self.takes.pop(other)
-                self.taker.destroy_subscription(subscription)
-                del self.subscribed[other]
-                self.direct.discard(other)
+            recorded = step_recorded(other)
+            if recorded is None or recorded[1] != namespace:
+                continue
+            subscription, _ = self.takes.pop(other)
+            self.taker.destroy_subscription(subscription)
+            del self.subscribed[other]
+            if not self.taken_from_records(other):  # a publisher of its own: as it comes
+                self._subscribe_per_step(other, subscription.msg_type, subscription.qos_profile,
+                                         namespace)
         # Taken as they come (an executor's subscription, not the take period's): in lockstep
         # the plant waits for their acknowledgement (ato_ros.publishing.RecorderLead).
-        written = self.written[namespace] = Written()
         acknowledgements = self.create_publisher(
             Header, namespace.rstrip('/') + '/' + RECORDED.name, qos_profile(RECORDED.qos))
         self.step_subscriptions.append(self.create_subscription(
