@@ -129,7 +129,7 @@ def state_stamp(message) -> int:
     return from_time(deserialize_message(message.data, JointTrajectory).header.stamp)
 
 
-# In lockstep the plant runs at most recorder_lead_s (0.9 s) past what the recorder has
+# In lockstep the plant runs at most recorder_lead_s (1 s) past what the recorder has
 # acknowledged as in its file (back-pressure: docs/guide/recording.md), so the bound holds however
 # loaded the machine (before back-pressure, beside a second pytest worker on 2 cores, a recorder
 # starved of CPU once lost 20 s of simulated time).
