@@ -12,6 +12,8 @@ The file is written by the Foxglove SDK's MCAP writer (``foxglove.open_mcap``, R
 object per message). Two fields of a message record are the writer's, not rosbag2's: the sequence
 counts each channel's messages from 1 (rosbag2 writes 0) and the publish time is the log time
 (rosbag2 writes the publisher's send time); every reader the suite is tested with ignores both.
+A topic without a message has no channel in the file (the writer registers a channel with its
+first message), so it is left out of the bag's metadata too (rosbag2 lists it with no message).
 
 Chunks are zstd-compressed and closed at least every ``flush_period_s`` of wall time and every
 ``flush_period_log_s`` of log time (simulated time in a lockstep run), so a killed recorder loses
@@ -345,8 +347,12 @@ class BagWriter:
         return info
 
     def info(self) -> BagInfo:
+        """The bag as written so far: the topics with a message (a topic without one has no
+        channel in the file, the SDK's writer registering a channel with its first message, and
+        readers that take the topics of metadata.yaml need every one's schema)."""
         start = self.start_ns or 0
-        return BagInfo(self.path, start, max(self.end_ns, start), dict(self.topics),
+        return BagInfo(self.path, start, max(self.end_ns, start),
+                       {name: t for name, t in self.topics.items() if t.message_count},
                        dict(self.custom_data))
 
 
@@ -483,31 +489,8 @@ def bag_info(path: Path) -> BagInfo:
     topics = {channel.topic: topic_of(file, channel, summary.schemas.get(channel.schema_id),
                                       stats.channel_message_counts.get(channel_id, 0))
               for channel_id, channel in summary.channels.items()}
-    for topic in _recorded_topics(records):  # with no message: no channel in the file
-        topics.setdefault(topic.name, topic)
     return BagInfo(file, stats.message_start_time, stats.message_end_time, topics,
                    _custom_data(file, records))
-
-
-def _recorded_topics(records: Iterable[Metadata]) -> list[TopicInfo]:
-    """The topics of the last ``rosbag2`` record that lists any (the one written at the close),
-    with their message counts. The file has a channel only for a topic with a message."""
-    topics: list[TopicInfo] = []
-    for record in records:
-        if record.name != METADATA_RECORD:
-            continue
-        try:
-            listed = yaml.safe_load(record.metadata['serialized_metadata'])[
-                'topics_with_message_count'] or []
-            found = [TopicInfo(t['topic_metadata']['name'], t['topic_metadata']['type'],
-                               parse_qos_profiles(t['topic_metadata']['offered_qos_profiles']),
-                               int(t['message_count']),
-                               t['topic_metadata'].get('type_description_hash', ''))
-                     for t in listed]
-        except (KeyError, TypeError, ValueError, yaml.YAMLError):
-            continue  # not a record this suite can read: the channels say what there is
-        topics = found or topics
-    return topics
 
 
 def topic_of(file: Path, channel: Channel, schema: Schema | None, count: int) -> TopicInfo:

@@ -285,3 +285,21 @@ def test_the_stamp_is_read_from_the_cdr_bytes_of_stamped_types():
     clock = serialize_message(Clock(clock=Time(sec=12, nanosec=345)))
     assert cdr_stamp_ns(clock) == 12_000_000_345
     assert cdr_stamp_ns(serialize_message(Float64(data=1.0))[:8]) is None  # too short
+
+
+def test_a_topic_without_a_message_is_left_out_so_that_rosbags_converts_the_bag(tmp_path):
+    """The SDK's writer has no channel (so no schema) for a topic without a message; listing it
+    in metadata.yaml would leave rosbags without its type."""
+    from rosbags.convert import convert
+    writer = write_bag(tmp_path / 'run', count=5)
+    writer.add_topic('/parameter_events', 'rcl_interfaces/msg/ParameterEvent')
+    info = writer.close()
+    assert sorted(info.topics) == ['/train/state']
+    metadata = yaml.safe_load((tmp_path / 'run' / 'metadata.yaml').read_text())
+    assert [t['topic_metadata']['name'] for t in
+            metadata['rosbag2_bagfile_information']['topics_with_message_count']] == \
+        ['/train/state']
+    convert([tmp_path / 'run'], tmp_path / 'converted', dst_storage='mcap', dst_version=9,
+            compress=None, compress_mode='file', default_typestore=None, typestore=None,
+            exclude_topics=(), include_topics=(), exclude_msgtypes=(), include_msgtypes=())
+    assert bag_info(tmp_path / 'converted').topics['/train/state'].message_count == 5

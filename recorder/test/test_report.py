@@ -89,8 +89,10 @@ def test_a_namespace_without_the_topics_or_a_recording_without_any_says_where_th
     bag = record(tmp_path / 'run', {'/train1': 0.0})
     with pytest.raises(BagError, match=r'in namespace /train9; it holds them in /train1'):
         load_run(bag, '/train9')
+    from std_msgs.msg import String
     other = BagWriter(tmp_path / 'other')
     other.add_topic('/chatter', 'std_msgs/msg/String')
+    other.write('/chatter', 1, serialize_message(String(data='hello')))
     other.close()
     with pytest.raises(BagError, match=r"none of the suite's topics \(train/state, "
                                        r'ato/reference, .*\) in any namespace; it has /chatter'):
