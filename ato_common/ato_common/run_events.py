@@ -229,18 +229,6 @@ def journey_events(scenario: Scenario, times_s: Sequence[float], positions: Sequ
     return RunEvents(tuple(events), {JOURNEY: len(events)}, tolerance_m)
 
 
-def stop_times(times_s: Sequence[float], positions: Sequence[float], position_m: float,
-               tolerance_m: float = PLATFORM_TOLERANCE_M) -> tuple[float | None, float | None]:
-    """(arrival, departure) of the front at a stopping point, as the journey's timing points
-    time them: the first instant within the tolerance of it, the last before it is beyond it by
-    more than the tolerance (None: never, or the run started there: no arrival)."""
-    times_s, positions = list(times_s), list(positions)
-    started_there = bool(positions) and abs(positions[0] - position_m) <= tolerance_m
-    arrival = None if started_there else _first_at_or_beyond(times_s, positions,
-                                                             position_m - tolerance_m)
-    return arrival, _departure(times_s, positions, position_m + tolerance_m)
-
-
 def _bound(value: float | None) -> str:
     return '-' if value is None else f'{value:g}'
 

@@ -32,7 +32,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -42,12 +42,7 @@ from mcap_ros2.decoder import DecoderFactory
 from ato_common.conventions import TOPICS, status_in_namespace
 from ato_common.identity import identity_mismatch, parse_identity, scenario_identity
 from ato_common.metrics import RunMetrics, StopSample, compute_metrics, format_summary
-from ato_common.run_events import (
-    PLATFORM_TOLERANCE_M,
-    journey_events,
-    stop_times,
-    timing_points_passed,
-)
+from ato_common.run_events import PLATFORM_TOLERANCE_M, journey_events, timing_points_passed
 from ato_common.scenario import builtin_scenarios, load_scenario
 from ato_common.validation import ConfigError
 from recorder.bag import BagError, bag_info, read_messages
@@ -112,17 +107,19 @@ def resolve_topics(bag: Path, namespace: str | None = None) -> dict[str, str]:
 
 @dataclass(frozen=True)
 class PlannedStop:
-    """A standstill of the target curve: where, and from when to when it stands (the planned
-    arrival and departure); ``name`` the station's where the scenario is known."""
+    """A standstill of the target curve: where, from when (the planned arrival) and until when
+    (``read_s``: the planned departure, or the end of the curve at the last stop, where
+    ``departure_s`` is None); ``name`` the station's where the scenario is known."""
 
     name: str
     position_m: float
     arrival_s: float
-    departure_s: float
+    read_s: float
+    departure_s: float | None
 
     def sample(self) -> StopSample:
         """Where the metrics read the stopping error: at the end of the dwell."""
-        return StopSample(self.name, self.position_m, self.departure_s)
+        return StopSample(self.name, self.position_m, self.read_s)
 
 
 @dataclass
@@ -189,7 +186,8 @@ def stops_from_curve(times: np.ndarray, positions: np.ndarray, speeds: np.ndarra
             while j + 1 < times.size and speeds[j + 1] == 0.0:
                 j += 1
             stops.append(PlannedStop(f'stop at {positions[i]:.0f} m', float(positions[i]),
-                                     float(times[i]), float(times[j])))
+                                     float(times[i]), float(times[j]),
+                                     float(times[j]) if j + 1 < times.size else None))
             i = j + 1
         else:
             i += 1
@@ -434,7 +432,7 @@ def name_stops(data: RunData, scenario) -> None:
     for stop in data.planned_stops:
         station = min(scenario.line.stations, key=lambda s: abs(s.position_m - stop.position_m))
         if abs(station.position_m - stop.position_m) <= 1.0:
-            stop = PlannedStop(station.name, stop.position_m, stop.arrival_s, stop.departure_s)
+            stop = replace(stop, name=station.name)
         named.append(stop)
     data.planned_stops = named
 
@@ -446,21 +444,45 @@ def _time(value: float | None) -> str:
 STOP_COLUMNS = ('station', 'position (m)', 'arrival, planned (s)', 'arrival (s)',
                 'departure, planned (s)', 'departure (s)', 'dwell, planned (s)', 'dwell (s)',
                 'stopping error (m)')
+#: a train stands at a stop while it is this slow, m/s, and this near it, m (a stopping error
+#: beyond is a failed stop, whose times the table does not give)
+STANDSTILL_MPS = 0.01
+STANDSTILL_RANGE_M = 5.0
+
+
+def standstill(times, positions, speeds, position_m: float
+               ) -> tuple[float | None, float | None]:
+    """(arrival, departure) of the train at a stop: the first and last instant of its first
+    standstill near it (None: never, or the run started or ended standing there)."""
+    standing = (np.abs(np.asarray(speeds)) <= STANDSTILL_MPS) & \
+        (np.abs(np.asarray(positions) - position_m) <= STANDSTILL_RANGE_M)
+    found = np.flatnonzero(standing)
+    if found.size == 0:
+        return None, None
+    first = found[0]
+    last = first
+    while last + 1 < standing.size and standing[last + 1]:
+        last += 1
+    return (None if first == 0 else float(times[first]),
+            None if last == standing.size - 1 else float(times[last]))
+
+
+def _dwell(arrival: float | None, departure: float | None) -> float | None:
+    return departure - arrival if arrival is not None and departure is not None else None
 
 
 def stop_rows(data: RunData, metrics: RunMetrics) -> list[tuple[str, ...]]:
     """Each stop of the target curve: the station, its planned (the curve's standstill) and
-    actual arrival, departure and dwell (the front within the platform tolerance of the stop,
-    as the journey's timing points time them; '-' at the start or the end of the run) and its
-    stopping error."""
+    actual (the train's standstill) arrival, departure and dwell ('-' where the run starts or
+    ends standing) and its stopping error."""
     times, rows = data.stamps_ns / 1e9, []
     for stop in data.planned_stops:
-        arrival, departure = stop_times(times, data.positions, stop.position_m)
-        dwell = departure - arrival if arrival is not None and departure is not None else None
+        arrival, departure = standstill(times, data.positions, data.speeds, stop.position_m)
         error = metrics.stop_errors_m.get(stop.name)
         rows.append((stop.name, f'{stop.position_m:.1f}', _time(stop.arrival_s), _time(arrival),
                      _time(stop.departure_s), _time(departure),
-                     _time(stop.departure_s - stop.arrival_s), _time(dwell),
+                     _time(_dwell(stop.arrival_s, stop.departure_s)),
+                     _time(_dwell(arrival, departure)),
                      '-' if error is None else f'{error:+.3f}'))
     return rows
 
@@ -586,7 +608,9 @@ def build_report(bag: Path, namespace: str | None = None, scenario: str | None =
 def write_report(report: Report, folder: Path) -> Path:
     """The plots and ``report.html`` in ``folder``; the page's path."""
     plots = plot(report.data, folder, report.metrics.stop_errors_m)
-    return write_html(folder / 'report.html', f'Run report: {report.bag.name}', report, plots)
+    title = f'Run report: {report.bag.name}' if report.scenario is None else \
+        f'Run report: {report.scenario.name} ({report.bag.name})'
+    return write_html(folder / 'report.html', title, report, plots)
 
 
 def print_report(report: Report) -> None:

@@ -402,6 +402,11 @@ def test_the_report_tells_the_journey(tmp_path, capsys):
     where the run comes from; the same in report.html."""
     bag, scenario = stopping_run(tmp_path, lag_m=0.25)
     assert main([str(bag), '--scenario', str(scenario), '--output', str(tmp_path / 'out')]) == 0
+    from recorder.report import build_report, stop_rows
+    report = build_report(bag, scenario=str(scenario))
+    late = replace(report.data, speeds=report.data.speeds.copy())
+    late.speeds[5] = 0.5  # still rolling at 5 s: it arrives at 6 s
+    assert stop_rows(late, report.metrics)[0][3] == '6.0'
     out = capsys.readouterr().out
     assert 'scenario              stopping_line\n' in out
     assert 'train                 crh3_luo_xu' in out
@@ -409,11 +414,12 @@ def test_the_report_tells_the_journey(tmp_path, capsys):
     assert 'recorded at           2026-12-03 12:00 UTC' in out
     assert 'suite commit of the run abc123def456' in out
     assert 'report made at' in out
-    # the train lags 0.25 m: it is within the 0.5 m of Halt from 5 s to 8 s, when it leaves;
-    # the target stands still from 5 s to 7 s (at 8 s it has the speed it leaves with)
-    assert ('station Halt at 50.0 m: arrival 5.0 s (planned 5.0), departure 8.0 s (planned '
-            '7.0), dwell 3.0 s (planned 2.0), stopping error -0.250 m') in out
-    assert 'station End at 90.0 m: arrival 12.0 s (planned 12.0), departure - s' in out
+    # the target and the train 0.25 m behind it stand still at Halt from 5 s to 7 s (at 8 s
+    # they have the speed they leave with), at End from 12 s to the end of the run
+    assert ('station Halt at 50.0 m: arrival 5.0 s (planned 5.0), departure 7.0 s (planned '
+            '7.0), dwell 2.0 s (planned 2.0), stopping error -0.250 m') in out
+    assert ('station End at 90.0 m: arrival 12.0 s (planned 12.0), departure - s (planned -), '
+            'dwell - s (planned -)') in out
     assert 'stop at' not in out  # stations by name
     assert 'traction energy' in out
     assert 'stop errors beyond 0.5 m 0\n' in out  # the label and its value apart

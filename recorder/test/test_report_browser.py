@@ -113,7 +113,7 @@ def test_the_html_report_renders_every_plot_in_chromium(tmp_path):
         except subprocess.TimeoutExpired:
             browser.kill()
     assert errors == []
-    assert page['title'] == 'Run report: run'
+    assert page['title'] == 'Run report: stopping_line (run)'
     assert page['summaryRows'] >= 5
     assert page['tables'] == ['journey', 'summary', 'stations']  # no windows, no events: text
     assert page['stations'] == ['Halt', 'End']
