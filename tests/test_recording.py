@@ -307,7 +307,8 @@ def test_the_recorder_acknowledges_step_records_once_they_are_in_its_file(tmp_pa
         stack.start_process('recorder', {}, ['-o', str(tmp_path / 'bag')])
         assert stack.spin_until(lambda: publisher.get_subscription_count() >= 1, 60.0), \
             stack.log_tail('recorder')
-        stamps = [7_000_000_000 + k * 100_000_000 for k in range(4)]
+        # a bundle a step, over one acknowledgement period and a step more
+        stamps = [7_000_000_000 + k * 100_000_000 for k in range(round(ACK_PERIOD_S * 10) + 2)]
         for stamp in stamps:
             bundle = Bundle()
             state.header.stamp.sec, state.header.stamp.nanosec = divmod(stamp, 1_000_000_000)

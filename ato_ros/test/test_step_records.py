@@ -240,16 +240,17 @@ def test_an_in_process_recorder_is_handed_the_messages_a_period_at_a_time():
     assert records.publisher.get_subscription_count() == 1
     state, clock = _Publisher('/train/state'), _Publisher('/clock')
     period_ns = round(PERIOD_S * 1e9)
-    for k in range(7):
+    steps = period_ns // 100_000_000 + 1  # the batch is handed on at the step it spans a period
+    total = steps + 3
+    for k in range(total):
         stamp = k * 100_000_000
         assert records.begin_step()
         records.add(clock, stamp, b'c%d' % k)
         records.add(state, stamp, b's%d' % k)
         records.end_step(stamp)
     records.flush()
-    steps = period_ns // 100_000_000 + 1  # the batch is handed on at the step it spans a period
-    assert [len(batch) for batch in handed] == [2 * steps, 2 * (7 - steps)]
+    assert [len(batch) for batch in handed] == [2 * steps, 2 * (total - steps)]
     assert [entry for batch in handed for entry in batch] == [
-        (name, k * 100_000_000, b'%s%d' % (tag, k)) for k in range(7)
+        (name, k * 100_000_000, b'%s%d' % (tag, k)) for k in range(total)
         for name, tag in (('/clock', b'c'), ('/train/state', b's'))]
     assert node.publishers[0].published == []  # nobody subscribed through the middleware

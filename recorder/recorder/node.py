@@ -43,7 +43,7 @@ thread of its own (``recorder.background``), with the same back-pressure.
 SIGINT and SIGTERM close the file properly; a SIGKILL loses at most the last take and flush
 periods: chunks are flushed every ``--flush-period`` of wall time (0.5 s) and every
 ``--flush-period-log`` of log time (0.5 s, simulated time in a lockstep run), whichever comes
-first, and before each acknowledgement (in lockstep, what the plant's lead bounds: 1 s of
+first, and before each acknowledgement (in lockstep, what the plant's lead bounds: 1.7 s of
 simulated time by default); ``ros2 run recorder recover <bag>`` makes a valid bag of the rest.
 """
 
