@@ -12,7 +12,7 @@ PYTEST_ARGS ?=
 # (tests/conftest.py), the unit tests on both
 PYTEST_WORKERS ?= 2
 
-.PHONY: help setup build demo compare campaign reproduce test test-unit test-integration lint docs docs-serve bench curves clean
+.PHONY: help setup build demo compare campaign tune reproduce test test-unit test-integration lint docs docs-serve bench curves clean
 
 help:
 	@echo "make setup   create .venv with pinned packages and build ros_ws (idempotent)"
@@ -25,6 +25,9 @@ help:
 	@echo "make campaign the default robustness campaign (laws under uncertainty, on Dask): rows in"
 	@echo "             runs/campaigns/default/, report.md and plots beside them, the results page"
 	@echo "             (CAMPAIGN=file for another, SCHEDULER=tcp://host:8786 for a running cluster)"
+	@echo "make tune    the tuning procedure of the campaign's laws on Dask: the tuned gains"
+	@echo "             (ato_controller_node/ato_controller_node/tuned/) and docs/results/tuning.md"
+	@echo "             (SCHEDULER=tcp://host:8786 for a running cluster)"
 	@echo "make reproduce run the papers' reproduction tests and write docs/results/reproduction.md"
 	@echo "make test    lint, build the docs strictly, run every test (unit tests of the cores and"
 	@echo "             integration tests over rclpy)"
@@ -50,6 +53,10 @@ compare: setup
 campaign: setup
 	@$(ENV) python -m ato_campaigns.campaign \
 	  $(if $(CAMPAIGN),$(CAMPAIGN),--results-page docs/results/campaign.md --readme README.md) \
+	  $(if $(SCHEDULER),--scheduler $(SCHEDULER))
+
+tune: setup
+	@$(ENV) python -m ato_campaigns.tuning --results-page docs/results/tuning.md \
 	  $(if $(SCHEDULER),--scheduler $(SCHEDULER))
 
 reproduce: setup

@@ -20,8 +20,9 @@ setup(
     maintainer_email='ato-emulator@example.org',
     description=(
         'Bring-up of the ATO emulator: the launch file, the scenario runner that starts the '
-        'stack, drives it to the end of a scenario and prints the run summary, and the composed '
-        'stack (the three loop nodes in one process).'
+        'stack, drives it to the end of a scenario and prints the run summary, the composed '
+        'stack (the three loop nodes in one process), the ato command line and the conformance '
+        'harness for an ATO node of your own.'
     ),
     license='Apache-2.0',
     tests_require=['pytest'],
@@ -31,6 +32,7 @@ setup(
             'run_offline = ato_simulation.run_offline:main',
             'campaign = ato_campaigns.campaign:main',
             'ato_stack = ato_bringup.composed:main',
+            'conformance = ato_bringup.conformance:main',
         ],
     },
 )

@@ -21,7 +21,7 @@ setup(
         "scenario, the worker's run process and the provenance of the results pages."
     ),
     license='Apache-2.0',
-    tests_require=['pytest', 'numpy', 'PyYAML', 'pandas', 'distributed'],
+    tests_require=['pytest', 'numpy', 'scipy', 'PyYAML', 'pandas', 'distributed'],
     entry_points={
         'console_scripts': [
             'campaign = ato_campaigns.campaign:main',

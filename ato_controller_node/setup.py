@@ -6,6 +6,8 @@ setup(
     name=PACKAGE_NAME,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
+    # the tuned gains (ato_controller_node.gains): one artefact per train and law
+    package_data={PACKAGE_NAME: ['tuned/*/*.json']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
         ('share/' + PACKAGE_NAME, ['package.xml']),
@@ -22,7 +24,7 @@ setup(
     tests_require=['pytest', 'hypothesis', 'numpy'],
     entry_points={
         'console_scripts': [
-            'ato_controller_node = ato_controller_node.node:main'
+            'ato_controller_node = ato_controller_node.entry:main'
         ],
     },
 )

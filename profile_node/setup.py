@@ -22,7 +22,7 @@ setup(
     tests_require=['pytest', 'numpy', 'PyYAML'],
     entry_points={
         'console_scripts': [
-            'profile_node = profile_node.node:main'
+            'profile_node = profile_node.entry:main'
         ],
     },
 )

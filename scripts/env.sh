@@ -24,6 +24,12 @@ case ":${PYTHONPATH:-}:" in
   *":$_ato_root/tools:"*) ;;
   *) export PYTHONPATH="$_ato_root/tools${PYTHONPATH:+:$PYTHONPATH}" ;;
 esac
+# The suite's command line (scripts/bin/ato: ato run, ato launch, ato param, ...), which takes the
+# arguments of the ros2 commands the docs show: the wheels have no ros2.
+case ":${PATH}:" in
+  *":$_ato_root/scripts/bin:"*) ;;
+  *) export PATH="$_ato_root/scripts/bin:$PATH" ;;
+esac
 # Keep DDS traffic on this machine unless the user asked otherwise.
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
 unset _ato_root _ato_venv

@@ -118,10 +118,16 @@ def test_a_drive_stuck_at_its_maximum_from_the_start_is_stopped(line, tmp_path, 
         # (quoted: a ``-p name:=value`` is YAML, and the parameter is a text)
         start_plant(stack, line, inject_failure=f"'{{actuator: {names[0]}, kind: stuck, "
                                                 f"force_n: {share}, start_s: 0}}'")
-        drive_until_standing(stack, controller, scenario, [share] * len(names))
+        last = drive_until_standing(stack, controller, scenario, [share] * len(names))
         check_supervised(stack, scenario)
+        # issue 29 item 1: the brake holds while the drive pushes; no hop towards the EOA
+        for k in range(last + 1, last + 101):
+            controller.answer(k * PERIOD_NS, [share] * len(names), names)
+        held = {s.positions[0] for _, s in stack.monitor.complete_samples()[-90:]}
+        assert len(held) == 1  # standing, braked
         status = plant_status(stack.monitor)
         assert any(m.startswith('ATP emergency brake intervention') for _, m, _ in status)
+        assert any('held until the failure is isolated' in m for _, m, _ in status)
         assert any(names[0] in v.get('active_failures', '') for _, _, v in status)
 
 
@@ -148,8 +154,22 @@ def test_a_drive_stuck_at_an_absurd_force_is_refused(line, tmp_path, domain_id):
         assert 'exceeds what a drive can physically exert' in stack.log_tail('plant')
 
 
-def test_wrongly_stamped_commands_are_counted_and_the_watchdog_stops_the_train(
+def publish_stamped(controller, names, efforts, stamp_ns):
+    """A command with a stamp of the test's choosing."""
+    from sensor_msgs.msg import JointState
+
+    from ato_ros.messages import to_time
+    msg = JointState(name=list(names), effort=list(efforts))
+    msg.header.stamp = to_time(stamp_ns)
+    controller.publisher.publish(msg)
+
+
+def test_wrongly_stamped_commands_are_counted_and_do_not_advance_the_plant(
         line, tmp_path, domain_id):
+    """Issue 29 item 2: a command stamped for another step used to count as a missed period
+    and advance the plant, so a burst of them left the controller behind for good. Now it is
+    dropped and counted, the plant waits at its step (re-sending it), and the command stamped
+    for the step moves it on."""
     scenario = load_scenario(line)
     names = scenario.train.actuator_names
     config = StackConfig(scenario=line, domain_id=domain_id, log_dir=tmp_path / 'logs')
@@ -158,29 +178,50 @@ def test_wrongly_stamped_commands_are_counted_and_the_watchdog_stops_the_train(
         start_plant(stack, line)
         monitor = stack.monitor
         n = len(names)
-        for k in range(300):  # get moving with valid commands
+        for k in range(30):  # get moving with valid commands
             controller.answer(k * PERIOD_NS, [1e9] * n, names)
-        # then every command stamped 1000 s ahead of its step
-        from sensor_msgs.msg import JointState
-
-        from ato_ros.messages import to_time
-        moving = monitor.samples[300 * PERIOD_NS].speeds[0]
-        assert moving > 1.0
-        for k in range(300, 1500):
-            stamp = k * PERIOD_NS
-            assert stack.spin_until(lambda s=stamp: monitor.last_stamp_ns == s, 60.0)
-            msg = JointState(name=list(names), effort=[1e9] * n)
-            msg.header.stamp = to_time(stamp + 1000 * 10**9)
-            controller.publisher.publish(msg)
-            assert stack.spin_until(lambda s=stamp: monitor.last_stamp_ns > s, 30.0)
-            if monitor.samples[stamp + PERIOD_NS].speeds[0] <= 0.01:
-                break
-        final = check_supervised(stack, scenario)
-        assert final.speeds[0] == 0.0
-        stack.spin_for(1.5)
+        step = 30 * PERIOD_NS
+        assert stack.spin_until(lambda: monitor.last_stamp_ns == step, 60.0)
+        for offset_ns in (10**15, 10**15, -PERIOD_NS * 3):  # 1e6 s ahead, ahead, behind
+            publish_stamped(controller, names, [1e9] * n, step + offset_ns)
+        stack.spin_until(lambda: int(plant_status(monitor)[-1][2]['wrong_stamp_commands']) == 3
+                         if plant_status(monitor) else False, 30.0)
+        stack.spin_for(1.0)  # re-sent steps: the same stamp
+        assert monitor.last_stamp_ns == step
         status = plant_status(monitor)
-        assert int(status[-1][2]['wrong_stamp_commands']) >= 10
-        assert any('command stamped 1000.000 s ahead of the step' in m for _, m, _ in status)
+        assert int(status[-1][2]['wrong_stamp_commands']) == 3
+        assert any('command stamped 1000000.000 s ahead of the step' in v['last_wrong_stamp']
+                   for _, _, v in status)
+        for k in range(30, 60):  # in step again at once
+            controller.answer(k * PERIOD_NS, [1e9] * n, names)
+        stack.spin_for(1.0)
+        assert not any('watchdog' in m for _, m, _ in plant_status(monitor))
+        assert not stack.exited('plant')
+
+
+def test_a_burst_of_wrongly_stamped_commands_leaves_the_loop_in_step(tmp_path, domain_id):
+    """Issue 29 item 2 with the real profile and controller: three commands stamped 1e6 s
+    ahead in the middle of a run used to leave the controller steps behind, every later
+    command dropped, the watchdog braking to the end, and the plant exiting 0. The run now
+    goes on in step to its end."""
+    config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path / 'logs',
+                         end_time_s=40.0)
+    with Stack(config) as stack:
+        stack.start()
+        controller = ControllerStandIn(stack)
+        monitor = stack.monitor
+        assert stack.spin_until(lambda: monitor.last_stamp_ns >= 10 * 10**9, 180.0)
+        for _ in range(3):
+            publish_stamped(controller, ['traction'], [1e9], monitor.last_stamp_ns + 10**15)
+        assert stack.spin_until(lambda: stack.exited('plant'), 300.0), stack.log_tail('plant')
+        stack.spin_for(0.5)
+        codes = stack.stop()
+        assert codes['plant'] == 0, stack.log_tail('plant')
+        status = plant_status(monitor)
+        assert int(status[-1][2]['wrong_stamp_commands']) == 3
+        assert not any('watchdog' in m for _, m, _ in status)
+        final = monitor.complete_samples()[-1]
+        assert final[0] == 400 * PERIOD_NS and final[1].speeds[0] > 10.0  # on the way
 
 
 def test_the_profile_killed_in_real_time_stops_the_train(line, tmp_path, domain_id):
@@ -285,3 +326,94 @@ def test_the_reference_resumes_after_a_safety_brake_and_a_plant_restart(tmp_path
         stack.spin_for(0.5)
         assert state().positions[0] < 50.0
         assert reference() - state().positions[0] < RESUME_GAP_M
+
+
+SLOW = """name: slow
+train: {preset: crh3_luo_xu}
+line: {name: slow, length_m: 20000, stations: [{name: A, position_m: 0},
+       {name: B, position_m: 19000}], speed_limits: [{start_m: 0, speed_kmh: 30}]}
+planning: {max_acceleration_mps2: 0.3, service_deceleration_mps2: 0.5, max_jerk_mps3: 0.3}
+"""
+
+
+def test_a_run_whose_emergency_brake_holds_too_long_ends_with_the_reason(tmp_path, domain_id):
+    """Issue 29 item 2: a run whose emergency brake held from 100 s to its end exited 0. A
+    drive stuck from the start keeps the ATP's brake applied at standstill; past
+    ``emergency_brake_limit_s`` of it the plant ends the run with exit code 3, saying why."""
+    path = tmp_path / 'slow.yaml'
+    path.write_text(SLOW)
+    config = StackConfig(scenario=str(path), domain_id=domain_id, log_dir=tmp_path / 'logs')
+    with Stack(config) as stack:
+        controller = ControllerStandIn(stack)
+        start_plant(stack, str(path), emergency_brake_limit_s=20.0,
+                    inject_failure="'{actuator: traction, kind: stuck, force_n: 3.0e+5, "
+                                   "start_s: 0}'")
+        monitor = stack.monitor
+        for k in range(3000):  # the ATO asks for nothing; the plant ends the run
+            stamp = k * PERIOD_NS
+            assert stack.spin_until(
+                lambda s=stamp: monitor.last_stamp_ns >= s or stack.exited('plant'), 120.0)
+            if stack.exited('plant'):
+                break
+            publish_stamped(controller, ['traction'], [0.0], stamp)
+            stack.spin_until(lambda s=stamp: monitor.last_stamp_ns > s or stack.exited('plant'),
+                             30.0)
+        assert stack.processes['plant'].wait(timeout=60) == 3
+        log = stack.log_tail('plant')
+        assert 'the emergency brake held for 20.' in log, log
+        assert 'over the limit emergency_brake_limit_s 20 s' in log
+        assert 'held until the failure is isolated' in log
+        assert monitor.complete_samples()[-1][1].speeds[0] == 0.0
+
+
+BIASED = """name: biased
+description: a two-leg line with balise groups; the odometer starts 200 m behind the train
+source: suite (test)
+train: {preset: crh3_luo_xu}
+line:
+  name: mini
+  length_m: 8000
+  stations:
+    - {name: A, position_m: 0}
+    - {name: M, position_m: 3000, dwell_s: 20}
+    - {name: B, position_m: 6000}
+  speed_limits: [{start_m: 0, speed_kmh: 160}]
+  balise_groups: [{position_m: 0}, {position_m: 1500}, {position_m: 2800}, {position_m: 4500},
+                  {position_m: 5800}]
+planning: {max_acceleration_mps2: 0.4, service_deceleration_mps2: 0.5, max_jerk_mps3: 0.1}
+supervision: {location_accuracy_m: 5, odometry_accuracy: 0.05, speed_accuracy_mps: 0.556,
+              speed_accuracy_share: 0.02}
+run: {controller_rate_hz: 10, settle_time_s: 10}
+plant: {sensors: {position: {bias: -200}}}
+"""
+
+
+def test_an_odometer_200_m_behind_neither_breaks_the_profile_nor_strands_the_train(
+        tmp_path, domain_id):
+    """Issue 29 items 3 and 4 through the graph: the profile failed at 0.2 s on a measured
+    position before the line; and an odometer that never placed the train in the stop zone
+    kept the authority from moving on. Now the profile plans on, the ATP (relocated at the
+    balise groups) stops the overrunning train before each EOA, and the authority moves on
+    after the dwell."""
+    path = tmp_path / 'biased.yaml'
+    path.write_text(BIASED)
+    scenario = load_scenario(str(path))
+    run = RunSupervision.for_scenario(scenario)
+    config = StackConfig(scenario=str(path), domain_id=domain_id, log_dir=tmp_path / 'logs',
+                         end_time_s=320.0)
+    with Stack(config) as stack:
+        stack.start()
+        assert stack.spin_until(lambda: stack.exited('plant') or stack.exited('profile'),
+                                600.0)
+        stack.spin_for(0.5)
+        codes = stack.stop()
+        assert codes == {'plant': 0, 'profile': 0, 'controller': 0}, stack.log_tail('profile')
+        samples = stack.monitor.complete_samples()
+        legs = [(int(v['supervised_leg']), stamp) for stamp, _, v in plant_status(stack.monitor)]
+        assert any(leg == 1 for leg, _ in legs)  # the authority moved on
+        on_first_leg = max(stamp for leg, stamp in legs if leg == 0)
+        assert max(s.positions[0] for t, s in samples if t <= on_first_leg) < \
+            run.legs[0].end_of_authority_m
+        assert max(s.positions[0] for _, s in samples) < run.legs[1].end_of_authority_m
+        # not stranded at M: on its way to B
+        assert samples[-1][1].positions[0] > run.legs[0].supervised_location_m

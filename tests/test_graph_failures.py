@@ -13,6 +13,7 @@ from sensor_msgs.msg import JointState
 
 from ato_bringup.runner import RunFailed, run_lockstep
 from ato_bringup.stack import EXECUTABLES, Stack, StackConfig, executable_path
+from ato_common.commands import ros_command
 from ato_common.conventions import status_in_namespace
 from ato_ros.messages import to_time
 
@@ -140,7 +141,8 @@ def test_help_prints_usage_and_every_parameter_and_starts_nothing(name):
     done = subprocess.run([executable_path(package, executable), '--help'],
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
-    assert done.stdout.startswith(f'usage: ros2 run {package} {executable}')
+    # the command that works here: ros2 run with a full ROS 2, ato run with the wheels
+    assert done.stdout.startswith(f'usage: {ros_command(f"run {package} {executable}")}')
     module = __import__(f'{package}.node', fromlist=['node'])
     params = getattr(module, 'PARAMS', None) or module.NODE_PARAMS + tuple(module.gain_params())
     for param in params:

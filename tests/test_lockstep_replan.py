@@ -11,6 +11,8 @@ stands, and the train then stops at the station before its end of authority."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from plant_driver import ControllerStandIn, plant_status
@@ -177,8 +179,8 @@ def test_after_a_watchdog_brake_to_standstill_the_reference_resumes_and_the_trai
         monitor = stack.monitor
         controller = ControllerStandIn(stack)
         # a faulty ATO: too little traction for 60 s (the train falls behind the reference),
-        # then every command stamped 1000 s ahead of its step, until the watchdog's emergency
-        # brake has stopped the train
+        # then every command invalid (NaN), until the watchdog's emergency brake has stopped
+        # the train
         k = 0
         for k in range(600):
             controller.answer(k * PERIOD_NS, [1e5], names)
@@ -187,8 +189,8 @@ def test_after_a_watchdog_brake_to_standstill_the_reference_resumes_and_the_trai
         for k in range(600, 3000):
             stamp = k * PERIOD_NS
             assert stack.spin_until(lambda s=stamp: monitor.last_stamp_ns == s, 60.0)
-            msg = JointState(name=list(names), effort=[1e5])
-            msg.header.stamp = to_time(stamp + 1000 * 10**9)
+            msg = JointState(name=list(names), effort=[math.nan])
+            msg.header.stamp = to_time(stamp)
             controller.publisher.publish(msg)
             assert stack.spin_until(lambda s=stamp: monitor.last_stamp_ns > s, 30.0)
             if monitor.samples[stamp + PERIOD_NS].speeds[0] <= 0.0:

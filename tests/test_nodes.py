@@ -85,6 +85,23 @@ def test_an_unknown_controller_at_start_is_refused_with_the_valid_names(domain_i
     assert re.search(r'valid: (.*, )?luo_xu, (.*, )?pid', result.stderr)
 
 
+@pytest.mark.parametrize('arguments, message', [
+    (['gains:=best'], "gains 'best' is not valid; valid: published, tuned"),
+    (['gains:=tuned', 'controller:=liu_li', 'scenario:=liu_li_2020'],
+     'no tuned gains of liu_li for the train crh380al_liu_li'),
+])
+def test_a_configuration_of_gains_that_cannot_be_had_is_refused_at_start(domain_id, arguments,
+                                                                          message):
+    command = [executable_path(*EXECUTABLES['controller']), '--ros-args']
+    for argument in arguments:
+        command += ['-p', argument]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=60,
+                            env=dict(os.environ, ROS_DOMAIN_ID=str(domain_id)))
+    assert result.returncode == 2
+    assert message in result.stderr
+    assert 'Traceback' not in result.stderr
+
+
 @pytest.mark.parametrize('name, parameter', [('controller', 'rate_hz'),
                                              ('plant', 'control_rate_hz')])
 def test_an_out_of_range_parameter_at_start_is_refused_naming_it(domain_id, name, parameter):

@@ -23,7 +23,7 @@ setup(
     tests_require=['pytest', 'numpy'],
     entry_points={
         'console_scripts': [
-            'train_plant_node = train_plant_node.node:main'
+            'train_plant_node = train_plant_node.entry:main'
         ],
     },
 )

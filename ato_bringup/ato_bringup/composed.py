@@ -33,13 +33,14 @@ from __future__ import annotations
 
 import sys
 
-from ato_ros.lifecycle import help_requested, node_usage, run_nodes
+from ato_ros.interrupts import quiet_until_running
 
 NODES = ('train_plant_node', 'profile_node', 'ato_controller_node')
 
 
 def usage() -> str:
     from ato_controller_node import node as controller
+    from ato_ros.lifecycle import node_usage
     from profile_node import node as profile
     from train_plant_node import node as plant
     parts = [__doc__.strip().split('\n\n')[0], '',
@@ -56,10 +57,12 @@ def usage() -> str:
 
 
 def main(args=None) -> int:
+    quiet_until_running()  # a stop while importing ends the process cleanly
     from rclpy.utilities import remove_ros_args
 
     from ato_common.validation import ConfigError
     from ato_controller_node.node import AtoControllerNode
+    from ato_ros.lifecycle import help_requested, run_nodes
     from profile_node.node import ProfileNode
     from train_plant_node.node import TrainPlantNode
     argv = remove_ros_args(args if args is not None else sys.argv)[1:]

@@ -11,6 +11,7 @@ from typing import Callable
 
 import numpy as np
 
+from ato_bringup.processes import describe_exit
 from ato_bringup.stack import Monitor, Sample, Stack, StackConfig
 from ato_common.metrics import RunMetrics, compute_metrics
 from ato_common.run_events import PLATFORM_TOLERANCE_M, RunEvents, run_events, stations_of
@@ -117,84 +118,143 @@ def prepare(config: StackConfig) -> tuple[Scenario, float]:
     return scenario, config.end_time_s
 
 
+@dataclass
+class RunClock:
+    """The run's simulated time as the monitor sees it: the newest state's stamp in lockstep;
+    in real time (stamps on the wall clock) the time since the first state's stamp."""
+
+    monitor: object
+    lockstep: bool
+    origin_ns: int | None = None
+
+    def stamp_ns(self) -> int:
+        return self.monitor.last_stamp_ns
+
+    def now_s(self) -> float:
+        last = self.monitor.last_stamp_ns
+        if last < 0:
+            return 0.0
+        if self.lockstep:
+            return last / NS_PER_S
+        if self.origin_ns is None:
+            self.origin_ns = self.monitor.arrivals[0][1] if self.monitor.arrivals else last
+        return (last - self.origin_ns) / NS_PER_S
+
+
+def _watch(stack: Stack, clock: RunClock, end_time_s: float, timeout_s: float,
+           pending: list, bar) -> tuple[list, list, float]:
+    """Spin the monitor until the plant ends with 0: (the actions' results, the CPU snapshots
+    at the steady window's ends, the wall time); RunFailed naming the first process that ends
+    otherwise (the plant killed included) with the simulated time reached."""
+    started = last_report = time.monotonic()
+    window = [w * end_time_s for w in STEADY_WINDOW]
+    results: list = []
+    cpu: list[tuple[int, dict[str, float]]] = []  # (stamp ns, snapshot) at the window's ends
+    while True:
+        ended = stack.ended()  # every process the run started is watched
+        if ended is not None:
+            name, code = ended
+            raise RunFailed(f'{name} exited with {describe_exit(code)} at simulated '
+                            f'{clock.now_s():.1f} s of {end_time_s:.1f} s: the run is stopped. '
+                            f'Its log ({stack.logs[name]}) ends:\n{stack.log_tail(name)}')
+        if stack.exited(stack.plant_process):
+            return results, cpu, time.monotonic() - started
+        if time.monotonic() - started > timeout_s:
+            raise RunFailed(f'the run did not end within {timeout_s:.0f} s of wall time '
+                            f'(simulated {clock.now_s():.1f} s of {end_time_s:.1f} s); last '
+                            'reports:\n' + last_reports(stack))
+        stack.executor.spin_once(timeout_sec=0.05)
+        t = clock.now_s()
+        if len(cpu) < 2 and t >= window[len(cpu)]:
+            cpu.append((clock.stamp_ns(), cpu_snapshot(stack)))
+        while pending and t >= pending[0][0]:
+            results.append(pending.pop(0)[1](stack))
+        if bar is not None and time.monotonic() - last_report > 0.5:
+            last_report = time.monotonic()
+            bar.update(min(t, end_time_s) - bar.n)
+
+
 def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], object]] | None = None,
                  timeout_s: float = 600.0, progress: bool = False,
                  stop_tolerance_m: float = PLATFORM_TOLERANCE_M) -> RunOutcome:
-    """Run to the scenario's end. ``actions`` maps a simulated time to a callable run on the
-    stack once the run has passed it (e.g. a parameter change); its result is kept. The
-    outcome's ``events`` are the ATP interventions and watchdog brakes the plant reported, and
-    the missed journey windows and stopping errors beyond ``stop_tolerance_m`` measured."""
+    """Run to the scenario's end, in lockstep or (``config.lockstep`` false) in real time.
+    ``actions`` maps a simulated time to a callable run on the stack once the run has passed it
+    (e.g. a parameter change); its result is kept. The outcome's ``events`` are the ATP
+    interventions and watchdog brakes the plant reported, and the missed journey windows and
+    stopping errors beyond ``stop_tolerance_m`` measured. Any process that ends before the
+    plant's end (the plant killed included) ends the run with RunFailed naming it, its exit and
+    the simulated time reached."""
     scenario, end_time_s = prepare(config)
-    plan = cached_plan(scenario)
     pending = sorted((actions or {}).items())
-    results = []
-    window = [w * end_time_s for w in STEADY_WINDOW]
-    cpu: list[tuple[int, dict[str, float]]] = []  # (stamp ns, snapshot) at the window's ends
     with Stack(config) as stack:
         stack.start()
         started = time.monotonic()
-        last_report = started
         monitor = stack.monitor
+        clock = RunClock(monitor, config.lockstep)
         bar = progress_bar(end_time_s) if progress else None
-        while not stack.exited(stack.plant_process):
-            if time.monotonic() - started > timeout_s:
-                raise RunFailed(f'the run did not end within {timeout_s:.0f} s of wall time '
-                                f'(simulated {max(monitor.last_stamp_ns, 0) / NS_PER_S:.1f} s '
-                                f'of {end_time_s:.1f} s); last reports:\n'
-                                + last_reports(stack))
-            ended = stack.ended()
-            if ended is not None:  # every process the run started is watched
-                name, code = ended
-                raise RunFailed(f'{name} exited with code {code} at simulated '
-                                f'{max(monitor.last_stamp_ns, 0) / NS_PER_S:.1f} s of '
-                                f'{end_time_s:.1f} s: the run is stopped. Its log '
-                                f'({stack.logs[name]}) ends:\n{stack.log_tail(name)}')
-            stack.executor.spin_once(timeout_sec=0.05)
-            t = max(monitor.last_stamp_ns, 0) / NS_PER_S
-            if len(cpu) < 2 and t >= window[len(cpu)]:
-                cpu.append((monitor.last_stamp_ns, cpu_snapshot(stack)))
-            while pending and t >= pending[0][0]:
-                results.append(pending.pop(0)[1](stack))
-            if bar is not None and time.monotonic() - last_report > 0.5:
-                last_report = time.monotonic()
-                bar.update(min(t, end_time_s) - bar.n)
-        if bar is not None:
-            bar.update(end_time_s - bar.n)
-            bar.close()
-        wall = time.monotonic() - started
+        try:
+            results, cpu, wall = _watch(stack, clock, end_time_s, timeout_s, pending, bar)
+            if bar is not None:  # the plant reached its end
+                bar.update(end_time_s - bar.n)
+        finally:
+            if bar is not None:
+                bar.close()
         stack.spin_for(0.3)  # the last messages in flight
         codes = stack.stop()
         codes[stack.plant_process] = stack.processes[stack.plant_process].returncode
-        bad = {k: v for k, v in codes.items() if v != 0}
+        bad = {k: describe_exit(v) for k, v in codes.items() if v != 0}
         if bad:
             raise RunFailed(f'processes exited with errors {bad}:\n' +
                             '\n'.join(stack.log_tail(k) for k in bad))
-        samples = complete_record(monitor, expected_steps(config, scenario), config.record_to)
+        # in real time the stamps are the wall clock's: no step's stamp is known beforehand
+        expected = expected_steps(config, scenario) if config.lockstep else []
+        samples = complete_record(monitor, expected, config.record_to)
         diagnostics = list(monitor.diagnostics)
         arrivals = list(monitor.arrivals)
         counts = dict(monitor.counts)
         startup = monitor.arrivals[0][0] - started if monitor.arrivals else float('nan')
         teardown = started + wall - monitor.arrivals[-1][0] if monitor.arrivals else float('nan')
+    if not samples:
+        raise RunFailed('the monitor received no state')
     window_cpu, window_steps = {}, 0
     if len(cpu) == 2:
         (s0, c0), (s1, c1) = cpu
         window_cpu = {name: c1[name] - c0[name] for name in c1 if name in c0}
         window_steps = round((s1 - s0) / (NS_PER_S / scenario.run.controller_rate_hz))
-    if not samples:
-        raise RunFailed('the monitor received no state')
+    metrics, laws, events = judged(scenario, config, samples, diagnostics, stop_tolerance_m)
+    return RunOutcome(scenario, config, samples, diagnostics, wall, codes, metrics, laws, results,
+                      arrivals, counts, events, startup, teardown, window_cpu, window_steps)
+
+
+def judged(scenario: Scenario, config: StackConfig, samples: list[tuple[int, Sample]],
+           diagnostics: list, stop_tolerance_m: float) -> tuple[RunMetrics, list[str], RunEvents]:
+    """The run's metrics, laws and events from what the monitor saw. In lockstep each state is
+    paired with the reference the profile streamed for its stamp; in real time (stamps on the
+    wall clock, the reference's not the state's) the state is judged at its run time (from the
+    first state) against the planned curve."""
+    plan = cached_plan(scenario)
     times = [k / NS_PER_S for k, _ in samples]
+    if config.lockstep:
+        references = [(s.ref_position, s.ref_speed) for _, s in samples]
+    else:
+        origin_ns = samples[0][0]
+        times = [(k - origin_ns) / NS_PER_S for k, _ in samples]
+        points = [plan.trajectory.at(t) for t in times]
+        references = [(point.position, point.speed) for point in points]
+        diagnostics = [(k - origin_ns, *rest) for k, *rest in diagnostics]
     # A state carries the force applied up to it; the force held after sample k is in k+1.
     applied = [sum(s.forces) for _, s in samples]
     metrics = compute_metrics(times, [s.positions[0] for _, s in samples],
                               [s.speeds[0] for _, s in samples], applied[1:] + applied[-1:],
-                              [s.ref_position for _, s in samples],
-                              [s.ref_speed for _, s in samples], stop_samples(plan))
+                              [r[0] for r in references], [r[1] for r in references],
+                              stop_samples(plan))
     laws = sorted({s.law for _, s in samples if s.law} or laws_in(diagnostics))
+    if not laws and config.controller_command:
+        laws = [f'external ({config.controller_command})']
     events = run_events(scenario, metrics, stations_of(plan), times,
                         [s.positions[0] for _, s in samples], diagnostics=diagnostics,
                         tolerance_m=stop_tolerance_m)
-    return RunOutcome(scenario, config, samples, diagnostics, wall, codes, metrics, laws, results,
-                      arrivals, counts, events, startup, teardown, window_cpu, window_steps)
+    return metrics, laws, events
 
 
 def expected_steps(config: StackConfig, scenario: Scenario) -> list[int]:

@@ -16,6 +16,7 @@ the loop little.
 from __future__ import annotations
 
 import os
+import shlex
 import signal
 import subprocess
 import time
@@ -25,7 +26,6 @@ from typing import Callable
 
 import rclpy
 import yaml
-from ament_index_python.packages import get_package_prefix
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
@@ -35,7 +35,10 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
+from ato_bringup.processes import executable_path
 from ato_common.conventions import normalised_namespace, stack_remaps, status_in_namespace
+from ato_common.scenario import load_scenario
+from ato_common.validation import ConfigError
 from ato_ros import wire
 from ato_ros.lifecycle import make_executor
 from ato_ros.messages import (
@@ -48,6 +51,7 @@ from ato_ros.messages import (
     topic,
 )
 from ato_ros.middleware import with_middleware_defaults
+from ato_simulation.applies import plant_model_for
 
 EXECUTABLES = {
     'plant': ('train_plant_node', 'train_plant_node'),
@@ -72,13 +76,6 @@ second (10 s instead of 1 s measured, interleaved: the monitor 0.113 -> 0.086 ms
 0.315 -> 0.289 ms of CPU per step on 2 cores, 2026-12-02). What a run's summary and
 report need of them is published at once (a safety reaction, a rejected command, a failure, a
 law switch) and at the end; the counters are cumulative."""
-
-
-def executable_path(package: str, executable: str) -> str:
-    path = Path(get_package_prefix(package)) / 'lib' / package / executable
-    if not os.access(path, os.X_OK):
-        raise FileNotFoundError(f'{path} is not an executable: build ros_ws first (make setup)')
-    return str(path)
 
 
 def ros_args(params: dict[str, object], namespace: str = '') -> list[str]:
@@ -282,8 +279,26 @@ class StackConfig:
     record_to: Path | None = None  # bag folder: run the recorder too
     namespace: str = ''  # push the stack into it, with its own /clock ('' : the root)
     composed: bool = False  # the three loop nodes in one process (ato_stack) instead of three
-    monitor: str = 'full'  # what the run monitor watches: 'full' (FULL) or 'lean' (LEAN)
+    # what the run monitor watches: 'full' (FULL) or 'lean' (LEAN); '': no monitor (the caller
+    # subscribes to what it needs on Stack.node)
+    monitor: str = 'full'
     diagnostics_period_s: float = 1.0  # of the plant and the controller, s of simulated time
+    # an ATO node of the user's instead of the suite's controller: its command line (shell
+    # words), started with ``--ros-args -p scenario:=<scenario>`` and the stack's remappings
+    # appended (and ATO_SCENARIO in its environment); '' : the suite's controller
+    controller_command: str = ''
+    # the plant model; '' : the scenario's (``ato_simulation.applies.plant_model_for``: the
+    # multi-car plant for a train described car by car); plant_params may name one too
+    model: str = ''
+
+
+def default_model(scenario: str) -> dict[str, str]:
+    """``{'model': <the scenario's plant model>}``, or nothing for a scenario that does not
+    load (the plant then exits naming what is wrong with it)."""
+    try:
+        return {'model': plant_model_for(load_scenario(scenario))}
+    except ConfigError:
+        return {}
 
 
 class Stack:
@@ -302,10 +317,11 @@ class Stack:
         self.namespace = normalised_namespace(config.namespace)
         rclpy.init(context=self.context, domain_id=config.domain_id)
         self.node = Node('ato_run_monitor', namespace=self.namespace, context=self.context)
-        if config.monitor not in MONITORS:
-            raise ValueError(f'monitor {config.monitor!r}: one of {", ".join(MONITORS)}')
-        watch, batch = MONITORS[config.monitor]
-        self.monitor = Monitor(self.node, self.namespace, watch, batch)
+        if config.monitor and config.monitor not in MONITORS:
+            raise ValueError(f'monitor {config.monitor!r}: one of {", ".join(MONITORS)}, or '
+                             "'' for none")
+        self.monitor = Monitor(self.node, self.namespace, *MONITORS[config.monitor]) \
+            if config.monitor else None
         # The process that runs the plant (and so ends the run at end_time_s).
         self.plant_process = 'loop' if config.composed else 'plant'
         self.parameter_clients: dict[str, object] = {}
@@ -322,12 +338,13 @@ class Stack:
         # by the stamps of /clock and of the messages in lockstep: they need no use_sim_time
         # (which would cost each a /clock subscription taking every step).
         recorder = int(c.record_to is not None)
-        watch = self.monitor.watch
+        watch = self.monitor.watch if self.monitor else ()
         # every monitor reads /diagnostics (FULL and LEAN): each node's first status too
         common['wait_for_diagnostics_readers'] = int('diagnostics' in watch)
         common['wait_for_recorders'] = recorder
+        model = {'model': c.model} if c.model else default_model(c.scenario)
         return {
-            'plant': {**common, 'end_time_s': float(c.end_time_s),
+            'plant': {**common, 'end_time_s': float(c.end_time_s), **model,
                       'wait_for_subscribers': 1,  # the monitor's truth
                       'diagnostics_period_s': float(c.diagnostics_period_s), **c.plant_params},
             # the controller's and the monitor's reference, watched or batched: none missed
@@ -355,7 +372,23 @@ class Stack:
                                 *(['--sim-time', '--background'] if self.config.lockstep
                                   else [])])
         for name in order:
-            self.start_process(name, params[name])
+            if name == 'controller' and self.config.controller_command:
+                self.start_external_controller()
+            else:
+                self.start_process(name, params[name])
+
+    def start_external_controller(self, scenario: str | None = None) -> subprocess.Popen:
+        """The user's ATO node (``StackConfig.controller_command``) as the process
+        ``controller``: told the scenario (default the stack's) as the suite's nodes are (a
+        ``scenario`` parameter, and ATO_SCENARIO in its environment), in the stack's
+        namespace."""
+        words = shlex.split(self.config.controller_command)
+        if not words:
+            raise ValueError('the controller command is empty')
+        scenario = scenario or self.config.scenario
+        args = ros_args({'scenario': scenario}, self.namespace)
+        return self.start_process('controller', {}, command=[*words, *args],
+                                  env={'ATO_SCENARIO': scenario})
 
     def start_composed(self, params: dict[str, dict]) -> subprocess.Popen:
         """The three loop nodes in one process (``ato_stack``), each with its own parameters
@@ -378,18 +411,22 @@ class Stack:
         return ['--custom-data', f'suite_commit={commit_description()}']
 
     def start_process(self, name: str, params: dict, args: list[str] = (),
-                      extra_ros_args: list[str] = (), kind: str | None = None
+                      extra_ros_args: list[str] = (), kind: str | None = None,
+                      command: list[str] | None = None, env: dict[str, str] | None = None
                       ) -> subprocess.Popen:
-        """Start the executable of ``kind`` (``EXECUTABLES``; default ``name``) as the process
-        ``name`` of the stack, its log in ``<log_dir>/<name>.log``."""
-        package, executable = EXECUTABLES[kind or name]
+        """Start the executable of ``kind`` (``EXECUTABLES``; default ``name``), or the
+        ``command`` given, as the process ``name`` of the stack, its log in
+        ``<log_dir>/<name>.log``; ``env``: variables added to the stack's environment."""
+        if command is None:
+            package, executable = EXECUTABLES[kind or name]
+            command = [executable_path(package, executable), *args,
+                       *ros_args(params, self.namespace), *extra_ros_args]
         self.config.log_dir.mkdir(parents=True, exist_ok=True)
         log = self.config.log_dir / f'{name}.log'
         self.logs[name] = log
         with open(log, 'ab') as out:
-            process = subprocess.Popen([executable_path(package, executable), *args,
-                                        *ros_args(params, self.namespace), *extra_ros_args],
-                                       stdout=out, stderr=subprocess.STDOUT, env=self.env,
+            process = subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT,
+                                       env={**self.env, **(env or {})},
                                        stdin=subprocess.DEVNULL)
         self.processes[name] = process
         return process
@@ -505,7 +542,7 @@ class Stack:
                     process.kill()
                     process.wait()
         self.executor.shutdown()
-        if self.monitor.batch_node is not None:
+        if self.monitor is not None and self.monitor.batch_node is not None:
             self.monitor.batch_node.destroy_node()
         self.node.destroy_node()
         if self.context.ok():

@@ -3,21 +3,39 @@
     python -m ato_campaigns.campaign [FILE] [--scheduler tcp://HOST:8786] [--workers N]
                                           [--serial] [--out runs/campaigns]
                                           [--results-page PAGE]
+    python -m ato_campaigns.campaign --campaign FILE --draw N --law LABEL [--scenario S]
+                                          [--save RUN.npz] [--out runs/campaigns]
 
-FILE defaults to the default campaign of ``make campaign`` (ato_bringup/campaigns/default.yaml).
-The campaign file, the engine and the rows: ato_campaigns.engine; the report (markdown
-and plots in ``<out>/<name>/``): ato_campaigns.report; how to run one on a cluster:
-docs/guide/campaigns.md.
+FILE defaults to the default campaign of ``make campaign`` (ato_campaigns/campaigns/default.yaml;
+``--campaign FILE`` is the same as FILE). The campaign file, the engine and the rows:
+ato_campaigns.engine; the report (markdown, plots and its statistics as CSV and JSON in
+``<out>/<name>/``): ato_campaigns.report; how to run one on a cluster: docs/guide/campaigns.md.
+
+With ``--draw`` and ``--law`` the command makes one row of the campaign again, offline, in this
+process, as the campaign made it (ato_campaigns.engine.rerun), prints it (and whether it equals
+the row stored in ``<out>``), and with ``--save`` writes the run's arrays (numpy .npz).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import math
 import sys
 import time
 from pathlib import Path
 
-from ato_campaigns.engine import DEFAULT_OUT, load_campaign, rows_folder, run_campaign
+import numpy as np
+
+from ato_campaigns.engine import (
+    DEFAULT_OUT,
+    METRICS,
+    load_campaign,
+    read_rows,
+    rerun,
+    rows_folder,
+    run_campaign,
+)
 from ato_campaigns.provenance import results_page_provenance
 from ato_campaigns.report import write_report
 from ato_common.validation import ConfigError
@@ -27,11 +45,12 @@ DEFAULT_CAMPAIGN = Path(__file__).resolve().with_name('campaigns') / 'default.ya
 DEFAULT_RESULTS_PAGE = Path('docs/results/campaign.md')
 
 
-def main(argv=None) -> int:
+def parse_args(argv: list[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('campaign', nargs='?', type=Path, default=DEFAULT_CAMPAIGN,
+    parser.add_argument('file', nargs='?', type=Path, default=None,
                         help=f'the campaign file (default: {DEFAULT_CAMPAIGN.name}, the '
                         'default campaign of make campaign)')
+    parser.add_argument('--campaign', type=Path, default=None, help='the campaign file (as FILE)')
     parser.add_argument('--out', type=Path, default=DEFAULT_OUT)
     parser.add_argument('--scheduler', default=None,
                         help='address of a running Dask scheduler (tcp://HOST:8786); default: '
@@ -45,16 +64,42 @@ def main(argv=None) -> int:
     parser.add_argument('--readme', type=Path, default=None,
                         help='also write the summary between the campaign markers of this '
                         'README (make campaign: README.md)')
-    argv = sys.argv[1:] if argv is None else list(argv)
+    rerunning = parser.add_argument_group('one row again (offline, in this process)')
+    rerunning.add_argument('--draw', type=int, default=None, help='the draw index of the row')
+    rerunning.add_argument('--law', default=None, help="the row's law label")
+    rerunning.add_argument('--scenario', default=None,
+                           help='the scenario of the row (a campaign of several scenarios)')
+    rerunning.add_argument('--save', type=Path, default=None, metavar='RUN.npz',
+                           help="also write the run's arrays to this file (numpy .npz)")
     args = parser.parse_args(argv)
+    if args.file is not None and args.campaign is not None:
+        parser.error('give the campaign file once: FILE or --campaign FILE')
+    args.campaign = args.campaign or args.file or DEFAULT_CAMPAIGN
+    if (args.draw is None) != (args.law is None):
+        parser.error('--draw and --law go together: the row to make again')
+    if args.draw is None and (args.save is not None or args.scenario is not None):
+        parser.error('--save and --scenario are for one row again: give --draw and --law')
+    return args
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = parse_args(argv)
     path = args.campaign
     if path.resolve().is_relative_to(Path.cwd()):
         path = path.resolve().relative_to(Path.cwd())  # as the report names it
     try:
         campaign = load_campaign(path)
+        if args.draw is not None:
+            return rerun_row(campaign, args)
+        return run_all(campaign, args, argv)
     except ConfigError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
+
+
+def run_all(campaign, args: argparse.Namespace, argv: list[str]) -> int:
+    """The campaign, what is missing of it, and its report."""
     measured = (results_page_provenance(args.results_page)
                 if args.results_page is not None else None)
     started = time.monotonic()
@@ -76,6 +121,53 @@ def main(argv=None) -> int:
                           args.results_page, measured, args.readme)
     print(f'wrote {report}')
     return 0
+
+
+def rerun_row(campaign, args: argparse.Namespace) -> int:
+    """One row again: print it, say whether it equals the stored one, save the arrays."""
+    row, run = rerun(campaign, args.law, args.draw, args.scenario)
+    shown = {k: row[k] for k in ('scenario', 'law', 'draw', 'status', 'reason', 'events')}
+    shown.update({k: row[k] for k in METRICS if k in row})
+    shown['drawn'] = {k[2:]: v for k, v in row.items() if k.startswith('p_')}
+    print(json.dumps({k: None if isinstance(v, float) and math.isnan(v) else v
+                      for k, v in shown.items()}, indent=1, default=str))
+    stored = read_rows(rows_folder(args.out, campaign.name), campaign.fingerprint)
+    if not stored.empty:
+        mine = stored[(stored['scenario'] == row['scenario']) & (stored['law'] == row['law'])
+                      & (stored['draw'] == row['draw'])]
+        if not mine.empty:
+            print(same_as_stored(row, mine.iloc[0].to_dict()), file=sys.stderr)
+    if args.save is not None:
+        save_run(run, args.save)
+        print(f"wrote the run's arrays to {args.save}", file=sys.stderr)
+    return 0
+
+
+def same_as_stored(row: dict, stored: dict) -> str:
+    """Whether a row made again equals the stored one in its status and metrics."""
+    differ = [k for k in ('status', *METRICS) if k in row and k in stored and not (
+        row[k] == stored[k] or (isinstance(row[k], float) and isinstance(stored[k], float)
+                                and math.isnan(row[k]) and math.isnan(stored[k])))]
+    if not differ:
+        return 'the same status and metrics as the stored row'
+    return 'differs from the stored row in ' + ', '.join(
+        f'{k} ({stored[k]} stored, {row[k]} now)' for k in differ)
+
+
+def save_run(run, path: Path) -> Path:
+    """An OfflineRun's arrays as a numpy .npz file: the lead car's and every car's truth, the
+    applied forces, the references, the saturated steps, the ATP's interventions and each
+    estimate a law reported (``estimate_<name>``)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    keys = sorted({k for e in run.estimates for k in e})
+    np.savez_compressed(
+        path, times_s=run.times_s, positions_m=run.positions, speeds_mps=run.speeds,
+        forces_n=run.forces, ref_positions_m=run.ref_positions, ref_speeds_mps=run.ref_speeds,
+        ref_accelerations_mps2=run.ref_accelerations, car_positions_m=run.car_positions,
+        car_speeds_mps=run.car_speeds, actuator_forces_n=run.actuator_forces,
+        saturated=run.saturated, atp_times_s=np.array(run.atp_times_s),
+        laws=np.array(run.laws), **{f'estimate_{k}': run.estimate(k) for k in keys})
+    return path
 
 
 if __name__ == '__main__':

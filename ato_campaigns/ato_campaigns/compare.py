@@ -7,6 +7,10 @@ The comparison is a campaign of one nominal draw (ato_campaigns.engine): the pla
 the controller's nominal model, on a Dask LocalCluster of ``--jobs`` workers; the robustness
 of the laws under uncertainty is ``make campaign`` (docs/guide/campaigns.md). ``--scenario``
 takes a built-in scenario's name or a scenario file (``make compare SCENARIO=my_line.yaml``).
+Every law also runs on the nominal plant with the smallest actuator a campaign draws (the
+default uncertainty's least lag and dead time of the traction and brake force, ACTUATOR_DRAW):
+the row ``nominal with actuator`` shows what the actuator alone does to the law (a run over a
+window, at a faster rate, runs on the nominal plant only).
 
 A law applies to a scenario when its ``fits`` accepts the scenario's train and plant and the
 plant's sensors do not fail a measurement the law requires (a law without speed measurement
@@ -37,8 +41,10 @@ Columns (errors are reference minus truth of the lead car at each control instan
 - step p99 [us]: 99th percentile of the host's step time (law, saturation, bumpless), measured
   while the runs share the cores, so it is an upper figure; ``make bench`` measures it alone.
 
-Ranking (``best`` per scenario): among the whole-scenario runs at the scenario's control rate
-with status ``ok`` whose stop error is at most STOP_ERROR_LIMIT_M, the lowest RMS speed error.
+Ranking (``best`` per scenario, and ``best_with_actuator`` on the other plant): among the
+whole-scenario runs at the scenario's control rate with status ``ok`` (a clean run that finished
+on time: ato_common.run_events) whose stop error is at most STOP_ERROR_LIMIT_M, the lowest RMS
+speed error.
 """
 
 from __future__ import annotations
@@ -58,7 +64,7 @@ from typing import Callable
 
 import numpy as np
 
-from ato_campaigns.engine import events_of, execute, unfinished
+from ato_campaigns.engine import execute, finite, judged, motion
 from ato_campaigns.provenance import results_page_provenance, write_results_page
 from ato_campaigns.run_process import RunDied, RunFailed, RunTimeout, limited
 from ato_common import uncertainty
@@ -84,6 +90,19 @@ DEFAULT_TIMEOUT_S = 1800.0
 MAX_STEPS = 1_500_000
 
 
+#: the plants a law runs on: the controller's nominal model, and the same with the smallest
+#: actuator of a campaign (ACTUATOR_DRAW)
+NOMINAL, WITH_ACTUATOR = 'nominal', 'nominal with actuator'
+PLANTS = (NOMINAL, WITH_ACTUATOR)
+#: the draw of each plant: every uncertain parameter at its nominal value, and for the
+#: actuator row the lag and the dead time at the least the default uncertainty draws
+NOMINAL_DRAW = uncertainty.draw(uncertainty.NOMINAL, 0, 0)
+ACTUATOR_PARAMETERS = ('actuator_time_constant_s', 'actuator_dead_time_s')
+ACTUATOR_DRAW = dict(NOMINAL_DRAW, **{name: uncertainty.DEFAULTS[name].smallest
+                                      for name in ACTUATOR_PARAMETERS})
+DRAWS = {NOMINAL: NOMINAL_DRAW, WITH_ACTUATOR: ACTUATOR_DRAW}
+
+
 @dataclass(frozen=True)
 class Job:
     scenario: str
@@ -91,12 +110,14 @@ class Job:
     model: str
     rate_hz: float
     end_time_s: float | None = None  # None: the whole scenario
+    plant: str = NOMINAL  # one of PLANTS
 
 
-def plan_jobs(scenarios: list[str], laws: list[str] | None = None
-              ) -> tuple[list[Job], list[dict]]:
+def plan_jobs(scenarios: list[str], laws: list[str] | None = None,
+              plants: tuple[str, ...] = (NOMINAL,)) -> tuple[list[Job], list[dict]]:
     """The runs to make, and the (scenario, law) pairs that do not apply, with the reason
-    (``laws``: only these; default every registered law)."""
+    (``laws``: only these; default every registered law). A law runs on each of ``plants``
+    (the comparison: PLANTS), but over a window (a faster rate) on the nominal plant only."""
     jobs, skipped = [], []
     for name in scenarios:
         scenario = load_scenario(name)
@@ -108,12 +129,15 @@ def plan_jobs(scenarios: list[str], laws: list[str] | None = None
                 skipped.append({'scenario': name, 'law': law, 'reason': reason})
                 continue
             end = MAX_STEPS / rate if duration * rate > MAX_STEPS else None
-            jobs.append(Job(name, law, model, rate, end))
+            jobs += [Job(name, law, model, rate, end, plant)
+                     for plant in (plants if end is None else (NOMINAL,))]
     return jobs, skipped
 
 
-#: the one draw of the comparison: every uncertain parameter at its nominal value
-NOMINAL_DRAW = uncertainty.draw(uncertainty.NOMINAL, 0, 0)
+def actuator_text() -> str:
+    """The actuator of the ``nominal with actuator`` row, for the tables."""
+    return (f'first-order lag {ACTUATOR_DRAW["actuator_time_constant_s"]:g} s and dead time '
+            f'{ACTUATOR_DRAW["actuator_dead_time_s"]:g} s of the traction and brake force')
 
 
 def scenario_label(name: str) -> str:
@@ -140,7 +164,7 @@ def _thin(values: np.ndarray, step: int) -> list:
 def job_fields(job: Job) -> dict:
     """What every result of ``job`` holds, whatever became of the run."""
     return {'scenario': job.scenario, 'law': job.law, 'model': job.model,
-            'rate_hz': job.rate_hz, 'end_time_s': job.end_time_s}
+            'rate_hz': job.rate_hz, 'end_time_s': job.end_time_s, 'plant': job.plant}
 
 
 def run_job(job: Job) -> dict:
@@ -152,42 +176,13 @@ def run_job(job: Job) -> dict:
     try:
         scenario = load_scenario(job.scenario)
         run = run_offline(scenario, job.law, model=job.model, controller_rate_hz=job.rate_hz,
-                          end_time_s=job.end_time_s, uncertainty=NOMINAL_DRAW)
+                          end_time_s=job.end_time_s, uncertainty=DRAWS[job.plant])
     except Exception as error:  # noqa: BLE001 -- any failure of a law is a result to show
         result.update(status='error', reason=f'{type(error).__name__}: {error}',
                       detail=traceback.format_exc(limit=3), wall_s=time.perf_counter() - started)
         return result
     result['wall_s'] = time.perf_counter() - started
-    dt = 1.0 / job.rate_hz
-    finite = all(np.all(np.isfinite(a)) for a in (run.positions, run.speeds, run.forces))
-    held = [f for f in run.faults if f]
-    status, reason = 'ok', ''
-    if not finite:
-        status, reason = 'diverged', 'non-finite state or force'
-    else:
-        metrics = run.metrics()
-        stop_error = max((abs(e) for e in metrics.stop_errors_m.values()), default=math.nan)
-        jerk = float(np.max(np.abs(np.diff(run.forces)))) / (scenario.train.mass_kg * dt) \
-            if run.forces.size > 1 else 0.0
-        result.update(
-            rms_speed_error_kmh=metrics.rms_speed_error_kmh,
-            max_speed_error_kmh=metrics.max_speed_error_kmh,
-            rms_position_error_m=metrics.rms_position_error_m,
-            stop_error_m=stop_error, stop_errors_m=metrics.stop_errors_m,
-            traction_energy_kwh=metrics.traction_energy_kwh, max_jerk_mps3=jerk,
-            step_p50_us=float(np.percentile(run.step_times_s, 50) * 1e6),
-            step_p99_us=float(np.percentile(run.step_times_s, 99) * 1e6),
-            events=events_of(run, metrics))
-        # diverged as in a campaign: the train did not finish its journey (a large error alone
-        # is the law's behaviour, shown by the metrics)
-        why = unfinished(run)
-        if why:
-            status, reason = 'diverged', f'did not finish: {why}'
-    if held:
-        if status == 'ok':
-            status = 'faults'
-        reason = '; '.join(filter(None, [reason, f'{len(held)} steps held: {held[0]}']))
-    result.update(status=status, reason=reason)
+    result.update(figures(run, 1.0 / job.rate_hz))
     step = max(1, run.times_s.size // PLOT_POINTS)
     keys = sorted({k for e in run.estimates for k in e if 'hat' in k})
     result['curves'] = {
@@ -196,6 +191,25 @@ def run_job(job: Job) -> dict:
         'ref_position_m': _thin(run.ref_positions, step), 'force_n': _thin(run.forces, step),
         'estimates': {k: _thin(run.estimate(k), step) for k in keys}}
     return result
+
+
+def figures(run, dt: float) -> dict:
+    """A run's figures in the comparison and its status and reason, judged as a campaign's
+    (``ato_campaigns.engine.judged``: ``ok`` only for a clean run that finished on time)."""
+    if not finite(run):
+        return {'status': 'diverged', 'reason': 'non-finite state or force'}
+    metrics = run.metrics()
+    stop_error = max((abs(e) for e in metrics.stop_errors_m.values()), default=math.nan)
+    jerk = float(np.max(np.abs(motion(run.speeds, dt)[1])))
+    return dict(
+        judged(run, metrics),
+        rms_speed_error_kmh=metrics.rms_speed_error_kmh,
+        max_speed_error_kmh=metrics.max_speed_error_kmh,
+        rms_position_error_m=metrics.rms_position_error_m,
+        stop_error_m=stop_error, stop_errors_m=metrics.stop_errors_m,
+        traction_energy_kwh=metrics.traction_energy_kwh, max_jerk_mps3=jerk,
+        step_p50_us=float(np.percentile(run.step_times_s, 50) * 1e6),
+        step_p99_us=float(np.percentile(run.step_times_s, 99) * 1e6))
 
 
 def _limited(job: Job, run: Callable[[Job], dict], timeout_s: float | None) -> dict:
@@ -248,11 +262,12 @@ def run_all(jobs: list[Job], processes: int, timeout_s: float | None = None,
     return results
 
 
-def best_law(results: list[dict]) -> str | None:
-    """The ranking: lowest RMS speed error among the runs of the whole scenario at its control
-    rate (a law sampled faster is not compared with the others) with status ok and a stop
-    error within STOP_ERROR_LIMIT_M."""
-    eligible = [r for r in results if r['status'] == 'ok' and r.get('end_time_s') is None
+def best_law(results: list[dict], plant: str = NOMINAL) -> str | None:
+    """The ranking on ``plant``: lowest RMS speed error among the runs of the whole scenario at
+    its control rate (a law sampled faster is not compared with the others) with status ok
+    and a stop error within STOP_ERROR_LIMIT_M."""
+    eligible = [r for r in results if r.get('plant', NOMINAL) == plant and r['status'] == 'ok'
+                and r.get('end_time_s') is None
                 and r.get('rate_hz') == r.get('scenario_rate_hz')
                 and not r['stop_error_m'] > STOP_ERROR_LIMIT_M]
     if not eligible:
@@ -266,6 +281,22 @@ def _number(result: dict, key: str, fmt: str) -> str:
         else format(value, fmt)
 
 
+def _row(r: dict) -> str:
+    """One run's line of a scenario's table."""
+    status = r['status'] + (f' ({r["reason"]})' if r.get('reason') else '')
+    run = f'{r["model"]}, {r.get("rate_hz", 0):g} Hz'
+    if r.get('end_time_s') is not None:
+        run += f', first {r["end_time_s"]:g} s'
+    return (f'| {r["law"]} | {r.get("plant", NOMINAL)} | {run} | {status.replace("|", "/")} | '
+            f'{_number(r, "rms_speed_error_kmh", ".4f")} | '
+            f'{_number(r, "max_speed_error_kmh", ".3f")} | '
+            f'{_number(r, "rms_position_error_m", ".3f")} | '
+            f'{_number(r, "stop_error_m", ".3f")} | '
+            f'{_number(r, "traction_energy_kwh", ".0f")} | '
+            f'{_number(r, "max_jerk_mps3", ".3f")} | {_number(r, "step_p99_us", ".0f")} | '
+            f'{r.get("events") or "-"} |')
+
+
 def markdown(results: list[dict], skipped: list[dict], scenarios: list[str], stamp: str,
              command: str, plots: bool = True) -> str:
     """The comparison as markdown: the tables, and links to the plots beside it (``plots``;
@@ -275,44 +306,37 @@ def markdown(results: list[dict], skipped: list[dict], scenarios: list[str], sta
              f'`{command}`, {stamp}, offline closed loop (ato_simulation.loop), '
              f'{os.cpu_count()} cores, load average {load} at the end (step times grow with '
              'it).', '',
-             'Columns: RMS/max speed error (km/h), RMS position error (m), worst stop error '
-             '|x - station| (m), traction energy (kWh), max jerk max|dF|/(M dt) (m/s^3), host '
-             'step time p99 (us, measured while the runs share the cores), events (ATP '
-             'interventions, missed journey windows and stop errors beyond the platform '
-             'tolerance, each with its first occurrence; ato_common.run_events). Best: lowest RMS '
-             f'speed error among the `ok` runs over the whole scenario at its control rate with a '
-             f'stop error <= {STOP_ERROR_LIMIT_M} m (a law that needs a faster rate is listed, not '
-             'ranked).', '']
+             f'Plants: `{NOMINAL}` (the controller\'s model: no uncertainty, no actuator '
+             f'dynamics) and `{WITH_ACTUATOR}` (the same with the smallest actuator a campaign '
+             f'draws: {actuator_text()}; what the actuator alone does). Status: `ok` only for a '
+             'clean run that finished on time, else the most serious of what went wrong '
+             '(ato_common.run_events). Columns: RMS/max speed error (km/h), RMS position error '
+             '(m), worst stop error |x - station| (m), traction energy (kWh), max jerk '
+             'from the second difference of the speed (m/s^3), host step time p99 (us, '
+             'measured while the runs share the cores), events (ATP interventions, missed '
+             'journey windows and stop errors beyond the platform tolerance, each with its '
+             'first occurrence). Best, on each plant: '
+             'lowest RMS speed error among the `ok` runs over the whole scenario at its control '
+             f'rate with a stop error <= {STOP_ERROR_LIMIT_M} m (a law that needs a faster rate '
+             'is listed, not ranked).', '']
     for name in scenarios:
-        rows = sorted((r for r in results if r['scenario'] == name), key=lambda r: r['law'])
-        best = best_law(rows)
-        lines += [f'## {scenario_label(name)}', '', f'Best: **{best or "none"}**', '',
-                  '| law | plant, rate | status | RMS speed err | max speed err | RMS pos err | '
-                  'stop err | energy | max jerk | step p99 | events |',
-                  '|---|---|---|---|---|---|---|---|---|---|---|']
-        for r in rows:
-            status = r['status'] + (f' ({r["reason"]})' if r.get('reason') else '')
-            run = f'{r["model"]}, {r.get("rate_hz", 0):g} Hz'
-            if r.get('end_time_s') is not None:
-                run += f', first {r["end_time_s"]:g} s'
-            lines.append(
-                f'| {r["law"]} | {run} | {status.replace("|", "/")} | '
-                f'{_number(r, "rms_speed_error_kmh", ".4f")} | '
-                f'{_number(r, "max_speed_error_kmh", ".3f")} | '
-                f'{_number(r, "rms_position_error_m", ".3f")} | '
-                f'{_number(r, "stop_error_m", ".3f")} | '
-                f'{_number(r, "traction_energy_kwh", ".0f")} | '
-                f'{_number(r, "max_jerk_mps3", ".3f")} | {_number(r, "step_p99_us", ".0f")} | '
-                f'{r.get("events") or "-"} |')
+        rows = sorted((r for r in results if r['scenario'] == name),
+                      key=lambda r: (r['law'], PLANTS.index(r.get('plant', NOMINAL))))
+        best = ', '.join(f'{plant}: **{best_law(rows, plant) or "none"}**' for plant in PLANTS)
+        lines += [f'## {scenario_label(name)}', '', f'Best: {best}', '',
+                  '| law | plant | model, rate | status | RMS speed err | max speed err | '
+                  'RMS pos err | stop err | energy | max jerk | step p99 | events |',
+                  '|---|---|---|---|---|---|---|---|---|---|---|---|']
+        lines += [_row(r) for r in rows]
         for s in skipped:
             if s['scenario'] == name:
-                lines.append(f'| {s["law"]} | - | not applicable ({s["reason"]}) '
+                lines.append(f'| {s["law"]} | - | - | not applicable ({s["reason"]}) '
                              '| - | - | - | - | - | - | - | - |')
         lines.append('')
         if plots:
             links = ', '.join(f'[{kind}]({scenario_label(name)}_{kind}.png)'
                               for kind in ('tracking', 'errors', 'commands', 'estimates'))
-            lines += [f'Plots: {links}', '']
+            lines += [f'Plots (the nominal plant): {links}', '']
     return '\n'.join(lines)
 
 
@@ -321,7 +345,7 @@ def plot_scenario(name: str, results: list[dict], folder: Path) -> list[Path]:
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
     runs = [r for r in sorted(results, key=lambda r: r['law'])
-            if r['scenario'] == name and 'curves' in r]
+            if r['scenario'] == name and 'curves' in r and r.get('plant', NOMINAL) == NOMINAL]
     label = scenario_label(name)
     paths = []
 
@@ -415,7 +439,7 @@ def main(argv=None) -> int:
     scenarios = args.scenario or builtin_scenarios()
     measured = (results_page_provenance(args.results_page)
                 if args.results_page is not None else None)
-    jobs, skipped = plan_jobs(scenarios, args.law)
+    jobs, skipped = plan_jobs(scenarios, args.law, PLANTS)
     print(f'{len(jobs)} runs ({len(skipped)} law/scenario pairs not applicable) on '
           f'{args.jobs} processes', file=sys.stderr)
     results = run_all(jobs, args.jobs, args.timeout_s or None)
@@ -431,12 +455,14 @@ def main(argv=None) -> int:
         write_results_page(args.results_page, 'Comparison of the control laws', command,
                            f'{body}\n\nThe plots of each scenario are written beside '
                            f'`{args.out}/compare.md` when the command runs.', measured)
-    best = {scenario_label(name): best_law([r for r in results if r['scenario'] == name])
-            for name in scenarios}
+    best, with_actuator = ({scenario_label(name): best_law(
+        [r for r in results if r['scenario'] == name], plant) for name in scenarios}
+        for plant in PLANTS)
     summary = [{k: v for k, v in r.items() if k not in ('curves', 'detail')} for r in results]
     (args.out / 'compare.json').write_text(json.dumps(
-        {'generated': stamp, 'best': best, 'results': summary, 'not_applicable': skipped},
-        indent=1))
+        {'generated': stamp, 'best': best, 'best_with_actuator': with_actuator,
+         'actuator': {name: ACTUATOR_DRAW[name] for name in ACTUATOR_PARAMETERS},
+         'results': summary, 'not_applicable': skipped}, indent=1))
     for name in scenarios:
         plot_scenario(name, results, args.out)
     failed = [r for r in results if r['status'] != 'ok']

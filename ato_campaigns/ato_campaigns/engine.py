@@ -22,12 +22,21 @@ cluster: a LocalCluster of one single-threaded worker per core, or with ``--sche
 ``scheduler-address`` configuration, e.g. DASK_SCHEDULER_ADDRESS) a running cluster whose
 workers run this project's environment; nothing else changes. ``--serial`` runs them in this
 process, in order. Each finished run is written at once as a row of the Parquet dataset
-``<out>/<name>/rows/``; a campaign started again with the same file runs only the rows that are
-missing (a row of an earlier version of the file, with another fingerprint, does not count).
-A run that raises is a row with status ``error`` and its reason; one that does not finish its
-journey (``unfinished``: its state turns non-finite, or its train is not standing at a stop that
-the reference stood at) ``diverged``; one that exceeds ``timeout_s`` ``timeout``: the campaign
-goes on. A large speed or stop error alone is not a status: the metrics show it.
+``<out>/<name>/rows/`` (ato_campaigns.dataset: every file says in its metadata what its rows
+stand on); a campaign started again with the same file runs only the rows that are missing. A
+changed file (another seed, number of draws, law list, uncertainty or window: another
+fingerprint) is refused in the folder of the earlier version, never mixed with its rows.
+``rerun`` makes one row again, offline, in this process.
+
+A row's status (``ato_common.run_events.STATUSES``) is ``ok`` only for a clean run whose train
+finished its journey on time (no ATP intervention, every stop within the platform tolerance, no
+missed time window, no held command, no late arrival); otherwise it names the most serious of
+what went wrong and its reason lists each: ``error`` (the run raised), ``timeout`` (past
+``timeout_s``), ``diverged`` (its state turned non-finite), ``did not finish`` (its train did not
+stand at a stop the reference stood at, or at its last stop by the run's limit past the
+timetable: ``ato_simulation.plans.JourneyEnd``), ``ATP intervention``, ``watchdog brake``,
+``faults``, ``stop error``, ``late`` (an arrival ``LATE_AFTER_S`` or more after the timetable's),
+``missed time window``. The campaign goes on whatever a run does.
 """
 
 from __future__ import annotations
@@ -47,9 +56,25 @@ from typing import Any, Callable, Iterable, Mapping
 import numpy as np
 import yaml
 
+from ato_campaigns.dataset import (
+    check_folder,
+    compact,
+    read_rows,
+    rows_folder,
+    write_row,
+)
 from ato_campaigns.run_process import RunDied, RunFailed, RunTimeout, limited
 from ato_common import uncertainty
-from ato_common.run_events import run_events, stations_of
+from ato_common.run_events import (
+    JOURNEY,
+    LATE_AFTER_S,
+    STATUSES,
+    RunEvents,
+    late_arrivals,
+    run_events,
+    run_status,
+    stations_of,
+)
 from ato_common.scenario import Scenario, load_scenario
 from ato_common.validation import ConfigError, Fields
 from ato_controller_node.laws import LAWS
@@ -63,13 +88,14 @@ DEFAULT_TIMEOUT_S = 600.0
 STOP_ERROR_LIMIT_M = 0.5
 #: a train at most this fast stands still (m/s; RunSupervision.STANDSTILL_MPS)
 STANDSTILL_MPS = 0.01
-#: the key of a row: which run it is
-KEY = ('scenario', 'law', 'draw')
-STATUSES = ('ok', 'diverged', 'error', 'timeout')
-#: the per-run metrics every row has (NaN when the run did not produce them)
+#: the per-run metrics every row has (NaN when the run did not produce them); the stop errors
+#: signed as position minus stop: ``overshoot_m`` the largest beyond a stop, ``undershoot_m``
+#: the largest short of one (0 when none), ``arrival_delay_s`` the latest arrival against the
+#: timetable (negative: every stop early)
 METRICS = ('rms_speed_error_kmh', 'max_speed_error_kmh', 'rms_position_error_m',
-           'max_position_error_m', 'stop_error_m', 'arrival_error_s', 'traction_energy_kwh',
-           'max_jerk_mps3', 'max_acceleration_mps2', 'saturated_fraction', 'atp_interventions',
+           'max_position_error_m', 'stop_error_m', 'overshoot_m', 'undershoot_m',
+           'arrival_error_s', 'arrival_delay_s', 'traction_energy_kwh', 'max_jerk_mps3',
+           'max_acceleration_mps2', 'saturated_fraction', 'atp_interventions',
            'watchdog_events')
 
 
@@ -106,15 +132,21 @@ class Campaign:
     #: ``uncertainty:`` section, else uncertainty.DEFAULTS
     specs: Mapping[str, Mapping[str, uncertainty.Distribution]] = field(default_factory=dict)
 
+    def identity(self) -> dict[str, Any]:
+        """What the rows depend on (JSON): the seed, the number of draws, the scenarios, the
+        laws, the uncertainty and the window."""
+        return json.loads(json.dumps({
+            'seed': self.seed, 'draws': self.draws, 'scenarios': list(self.scenarios),
+            'laws': [[e.label, e.law, dict(e.settings), e.gradient] for e in self.laws],
+            'spec': {scenario: {k: repr(v) for k, v in sorted(spec.items())}
+                     for scenario, spec in sorted(self.specs.items())},
+            'end_time_s': self.end_time_s}, sort_keys=True, default=str))
+
     @property
     def fingerprint(self) -> str:
-        """What the rows depend on: a row with another fingerprint is from another campaign."""
-        text = json.dumps({'seed': self.seed, 'scenarios': self.scenarios,
-                           'laws': [(e.label, e.law, dict(e.settings), e.gradient)
-                                    for e in self.laws],
-                           'spec': {scenario: {k: repr(v) for k, v in sorted(spec.items())}
-                                    for scenario, spec in sorted(self.specs.items())},
-                           'end_time_s': self.end_time_s}, sort_keys=True, default=str)
+        """The hash of ``identity``: a row with another fingerprint is from another campaign
+        (another seed, number of draws, law list, uncertainty or window)."""
+        text = json.dumps(self.identity(), sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
     def tasks(self) -> list[dict]:
@@ -150,8 +182,8 @@ def _parse(data: Any, origin: str, base: Path) -> Campaign:
     name = f.text('name')
     if not all(c.isalnum() or c in '-_.' for c in name):
         raise ConfigError(f'name: only letters, digits, - _ . (a folder name), got {name!r}')
-    seed = int(f.number('seed', 0.0, minimum=0.0, maximum=2**31 - 1))
-    draws = int(f.number('draws', 1.0, minimum=1.0, maximum=1e6))
+    seed = _whole(f, 'seed', 0, 2**31 - 1)
+    draws = _whole(f, 'draws', 1, 10**6, default=1)
     timeout = f.number('timeout_s', DEFAULT_TIMEOUT_S, minimum=0.0)
     end = f.number('end_time_s', 0.0, minimum=0.0)
     raw_scenarios = f.raw('scenarios', required=True)
@@ -203,6 +235,14 @@ def _parse(data: Any, origin: str, base: Path) -> Campaign:
                     timeout or None, end or None, rates, models, specs)
 
 
+def _whole(f: Fields, key: str, minimum: int, maximum: int, default: int = 0) -> int:
+    """A whole number field (``draws: 2.5`` is refused, naming the field)."""
+    value = f.number(key, float(default), minimum=float(minimum), maximum=float(maximum))
+    if not value.is_integer():
+        raise ConfigError(f'{key}: must be a whole number, got {value:g}')
+    return int(value)
+
+
 def _law_entry(item: Any, i: int) -> LawEntry:
     """``name`` or ``{law: name, settings: {gain: value}, label: text, gradient: hidden}``."""
     if isinstance(item, str):
@@ -252,20 +292,22 @@ def base_row(task: Mapping) -> dict:
     row['settings'] = json.dumps(task['settings'], sort_keys=True)
     row.update({f'p_{k}': v for k, v in task['values'].items()})
     row.update({m: math.nan for m in METRICS})
-    row.update(status='ok', reason='', stop_errors_m='{}', events='', wall_s=math.nan)
+    row.update(status='', reason='', stop_errors_m='{}', events='', wall_s=math.nan)
     return row
 
 
 def run_task(task: Mapping, runner: Callable[[Mapping], dict] | None = None) -> dict:
     """One run of a campaign as a row; never raises (a failure is the row's status). On a Dask
-    worker the run goes to the worker's run process (ato_campaigns.run_process)."""
+    worker the run goes to the worker's run process (ato_campaigns.run_process). ``runner``
+    (default :func:`offline_metrics`) gives the row's metrics and its status."""
     row = base_row(task)
     started = time.perf_counter()
     try:
-        row.update(limited(partial(runner or offline_metrics, task), task['timeout_s']))
-        why = row.pop('unfinished', '')
-        if why:
-            row.update(status='diverged', reason=f'did not finish: {why}')
+        result = limited(partial(runner or offline_metrics, task), task['timeout_s'])
+        if result.get('status') not in STATUSES:
+            result = dict(result, status='error',
+                          reason=f'the run gave no valid status: {result.get("status")!r}')
+        row.update(result)
     except RunTimeout:
         row.update(status='timeout', reason=f'exceeded the wall-time limit of '
                                             f'{task["timeout_s"]:g} s (timeout_s)')
@@ -294,25 +336,41 @@ def task_scenario(name_or_path: str) -> Scenario:
     return scenario
 
 
-def offline_metrics(task: Mapping) -> dict:
-    """The offline closed loop of one task and its metrics (ato_simulation.loop)."""
+def offline_run(task: Mapping):
+    """The offline closed loop of one task (ato_simulation.loop): an OfflineRun."""
     from ato_simulation.loop import run_offline
     scenario = task_scenario(task['scenario'])
     settings = {task['law_name']: task['settings']} if task['settings'] else None
-    run = run_offline(scenario, task['law_name'], settings, model=task['model'],
-                      controller_rate_hz=task['rate_hz'], end_time_s=task['end_time_s'],
-                      uncertainty=task['values'])
-    return run_metrics(run, 1.0 / task['rate_hz'])
+    return run_offline(scenario, task['law_name'], settings, model=task['model'],
+                       controller_rate_hz=task['rate_hz'], end_time_s=task['end_time_s'],
+                       uncertainty=task['values'])
+
+
+def offline_metrics(task: Mapping) -> dict:
+    """The offline closed loop of one task, its metrics and its status."""
+    return run_metrics(offline_run(task), 1.0 / task['rate_hz'])
+
+
+def finite(run) -> bool:
+    return all(np.all(np.isfinite(a)) for a in (run.positions, run.speeds, run.forces))
+
+
+def motion(speeds: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """What the passengers feel of a run sampled every ``dt``: its acceleration and its jerk,
+    by differences of the lead car's speed (a brake that holds a train at rest moves nobody,
+    so neither is read from the forces)."""
+    acc = np.diff(speeds) / dt if speeds.size > 1 else np.zeros(1)
+    jerk = np.diff(acc) / dt if acc.size > 1 else np.zeros(1)
+    return acc, jerk
 
 
 def run_metrics(run, dt: float) -> dict:
-    """The per-run metrics of an OfflineRun (METRICS); status diverged if it is not finite."""
-    if not all(np.all(np.isfinite(a)) for a in (run.positions, run.speeds, run.forces)):
+    """The per-run metrics of an OfflineRun (METRICS) and its status and reason (``judged``);
+    status diverged if it is not finite."""
+    if not finite(run):
         return {'status': 'diverged', 'reason': 'non-finite state or force'}
     m = run.metrics()
-    v = run.speeds
-    acc = np.diff(v) / dt if v.size > 1 else np.zeros(1)
-    jerk = np.diff(acc) / dt if acc.size > 1 else np.zeros(1)
+    acc, jerk = motion(run.speeds, dt)
     arrival = []
     for stop in run.plan.stops:
         if stop.arrival_s > run.times_s[-1]:
@@ -325,12 +383,14 @@ def run_metrics(run, dt: float) -> dict:
                            else math.nan)  # not reached within the run: the stop error says it
     stop_errors = m.stop_errors_m
     return {
-        'unfinished': unfinished(run),
+        **judged(run, m),
         'rms_speed_error_kmh': m.rms_speed_error_kmh,
         'max_speed_error_kmh': m.max_speed_error_kmh,
         'rms_position_error_m': m.rms_position_error_m,
         'max_position_error_m': m.max_position_error_m,
         'stop_error_m': max((abs(e) for e in stop_errors.values()), default=math.nan),
+        'overshoot_m': max((max(e, 0.0) for e in stop_errors.values()), default=math.nan),
+        'undershoot_m': max((max(-e, 0.0) for e in stop_errors.values()), default=math.nan),
         'stop_errors_m': json.dumps(stop_errors),
         'arrival_error_s': (math.nan if not arrival or any(map(math.isnan, arrival))
                             else max(arrival, key=abs)),
@@ -340,17 +400,34 @@ def run_metrics(run, dt: float) -> dict:
         'saturated_fraction': float(np.mean(run.saturated)) if run.saturated.size else 0.0,
         'atp_interventions': float(run.atp_interventions),
         'watchdog_events': float(run.watchdog_events),
-        # what went wrong, with the first occurrence of each kind (ato_common.run_events)
-        'events': events_of(run, m),
     }
 
 
-def events_of(run, metrics) -> str:
-    """What went wrong in an OfflineRun, each kind with its first occurrence (ATP
-    interventions, missed windows, stopping errors beyond the platform tolerance;
-    ``ato_common.run_events``), in brief."""
-    return run_events(run.scenario, metrics, stations_of(run.plan), run.times_s, run.positions,
-                      atp_times_s=run.atp_times_s).brief()
+def judged(run, metrics) -> dict:
+    """What went wrong in a finite OfflineRun (``ato_common.run_events``): its ``status`` and
+    ``reason`` (``run_status``: did not finish, each kind of event with its first occurrence,
+    held commands, late arrivals), its ``events`` in brief, and ``arrival_delay_s``, its
+    latest arrival against the timetable (the run's first plan; NaN if it stood at no stop).
+    A run over a window of its scenario (a stated end before its plan's) is judged on what
+    the window holds: the stops departed within it, the timing points reached in it."""
+    end = run.times_s[-1]
+    window = run.journey is None and end < run.final_plan.trajectory.end_time
+    stations = [s for s in stations_of(run.plan) if not (window and s[2] > end)]
+    events = run_events(run.scenario, metrics, stations, run.times_s, run.positions,
+                        atp_times_s=run.atp_times_s)
+    if window:
+        kept = tuple(e for e in events.events if not (e.kind == JOURNEY and math.isnan(e.time_s)))
+        events = RunEvents(kept, dict(events.counts, **{JOURNEY: sum(
+            e.kind == JOURNEY for e in kept)}), events.tolerance_m)
+    why = unfinished(run)
+    timetable = [(s.station.name, s.station.position_m, s.arrival_s) for s in run.plan.stops
+                 if s.station.position_m > run.positions[0] + 1.0]  # not the start
+    delays = late_arrivals(timetable, run.times_s, run.positions, run.speeds,
+                           run.scenario.train.length_m, late_after_s=-math.inf)
+    late = [] if why else [(name, d) for name, d in delays if d >= LATE_AFTER_S]
+    status, reason = run_status(events, why, late, [f for f in run.faults if f])
+    return {'status': status, 'reason': reason, 'events': events.brief(),
+            'arrival_delay_s': max((d for _, d in delays), default=math.nan)}
 
 
 def unfinished(run) -> str:
@@ -375,55 +452,6 @@ def unfinished(run) -> str:
                     f'{run.speeds[-1] * 3.6:.1f} km/h, not standing within its length '
                     f'({reach:g} m) of {stop.station.name} at {x:g} m')
     return ''
-
-
-# --- the rows on disk ---------------------------------------------------------------------------
-
-def rows_folder(out: Path, name: str) -> Path:
-    return out / name / 'rows'
-
-
-def write_row(folder: Path, row: dict) -> Path:
-    """One finished row as a Parquet file of the dataset, written atomically (a temporary name,
-    then a rename): an interrupted campaign leaves whole rows only."""
-    import pandas as pd
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f'part-{row["draw"]:06d}-{uuid.uuid4().hex}.parquet'
-    tmp = path.with_suffix('.tmp')
-    pd.DataFrame([row]).to_parquet(tmp, index=False)
-    os.replace(tmp, path)
-    return path
-
-
-def read_rows(folder: Path, fingerprint: str | None = None):
-    """The dataset as a DataFrame (empty if none); only the rows of ``fingerprint`` if given,
-    one per key and fingerprint (the latest written if a row was written twice)."""
-    import pandas as pd
-    files = sorted(folder.glob('*.parquet'), key=lambda p: (p.stat().st_mtime_ns, p.name)) \
-        if folder.is_dir() else []
-    if not files:
-        return pd.DataFrame()
-    table = pd.concat([pd.read_parquet(p) for p in files], ignore_index=True)
-    if fingerprint is not None:
-        table = table[table['fingerprint'] == fingerprint]
-    return table.drop_duplicates([*KEY, 'fingerprint'], keep='last').sort_values(
-        ['scenario', 'law', 'draw']).reset_index(drop=True)
-
-
-def compact(folder: Path) -> None:
-    """Merge the files of the dataset into one (after a complete campaign; the rows of other
-    fingerprints are kept)."""
-    files = sorted(folder.glob('part-*.parquet'))
-    if len(files) < 2:
-        return
-    table = read_rows(folder)
-    merged = folder / f'rows-{uuid.uuid4().hex}.parquet'
-    tmp = merged.with_suffix('.tmp')
-    table.to_parquet(tmp, index=False)
-    os.replace(tmp, merged)
-    for p in folder.glob('*.parquet'):
-        if p != merged:
-            p.unlink()
 
 
 # --- the engine ---------------------------------------------------------------------------------
@@ -521,19 +549,49 @@ def _lost_row(task: Mapping, reason: str) -> dict:
     return dict(base_row(task), status='error', reason=reason)
 
 
+def data_description(campaign: Campaign) -> dict[str, Any]:
+    """What a campaign's rows stand on, for every Parquet file's metadata: the campaign, its
+    identity and fingerprint, the seed, the uncertainty of each scenario (in words too), the
+    run's end rule, the tuning artefact its laws' gains came from (empty: every law with its
+    default or given settings) and the commit of the code."""
+    from ato_campaigns.provenance import commit_description
+    from ato_simulation import plans
+    window = campaign.end_time_s is not None
+    return {
+        'campaign': campaign.name, 'origin': campaign.origin,
+        'fingerprint': campaign.fingerprint, 'identity': campaign.identity(),
+        'seed': campaign.seed, 'draws': campaign.draws,
+        'uncertainty': {scenario: {name: spec[name].describe() for name in spec}
+                        for scenario, spec in campaign.specs.items()},
+        'run_end': {
+            'rule': 'window' if window else 'journey',
+            'text': (f'the first {campaign.end_time_s:g} s of the scenario' if window else
+                     'the planned end (the timetable\'s end plus the settle time) if the train '
+                     'then stands at its last stop, else once it has stood there for the '
+                     'settle time, at most the limit past the timetable'),
+            'end_time_s': campaign.end_time_s,
+            'late_limit_share': plans.LATE_LIMIT_SHARE,
+            'late_limit_min_s': plans.LATE_LIMIT_MIN_S, 'late_after_s': LATE_AFTER_S},
+        'tuning_artefact': '',
+        'commit': commit_description()}
+
+
 def run_campaign(campaign: Campaign, out: Path = DEFAULT_OUT, *, serial: bool = False,
                  scheduler: str | None = None, workers: int | None = None, client=None,
                  runner: Callable | None = None, progress: bool = True):
-    """Run what is missing of ``campaign`` and return every row (a DataFrame)."""
+    """Run what is missing of ``campaign`` and return every row (a DataFrame). A folder that
+    holds the rows of another version of the campaign is refused (FolderConflict)."""
     from tqdm import tqdm
     folder = rows_folder(out, campaign.name)
+    check_folder(folder, campaign.fingerprint, campaign.identity())
+    description = data_description(campaign)
     pending_tasks = missing(campaign, folder)
     total = len(campaign.tasks())
     bar = tqdm(total=total, initial=total - len(pending_tasks), unit='run', disable=not progress,
                desc=campaign.name, dynamic_ncols=True, file=sys.stderr)
 
     def finished(row: dict) -> None:
-        write_row(folder, row)
+        write_row(folder, row, description)
         bar.set_postfix_str(f'{row["law"]} draw {row["draw"]}: {row["status"]}', refresh=False)
         bar.update(1)
 
@@ -545,5 +603,39 @@ def run_campaign(campaign: Campaign, out: Path = DEFAULT_OUT, *, serial: bool = 
         bar.close()
     rows = read_rows(folder, campaign.fingerprint)
     if len(rows) == total:
-        compact(folder)
+        compact(folder, description)
     return rows
+
+
+def rerun(campaign: Campaign, law: str, draw: int, scenario: str | None = None):
+    """One row of ``campaign`` made again offline, in this process, exactly as the campaign
+    made it (the same task: draw, settings, rate, window), without its time limit: (the row,
+    the OfflineRun). ``scenario``: a campaign of several scenarios needs it (a name or a file
+    as the campaign gives it)."""
+    key = _scenario_of(campaign, scenario)
+    entry = next((e for e in campaign.laws if e.label == law), None)
+    if entry is None:
+        raise ConfigError(f"--law: '{law}' is not a law of the campaign; its laws: "
+                          f"{', '.join(e.label for e in campaign.laws)}")
+    if not 0 <= draw < campaign.draws:
+        raise ConfigError(f'--draw: the campaign has draws 0 to {campaign.draws - 1}, '
+                          f'not {draw}')
+    task = task_of(campaign, key, entry, draw)
+    row = base_row(task)
+    started = time.perf_counter()
+    run = offline_run(task)
+    row.update(run_metrics(run, 1.0 / task['rate_hz']), wall_s=time.perf_counter() - started)
+    return row, run
+
+
+def _scenario_of(campaign: Campaign, scenario: str | None) -> str:
+    if scenario is None:
+        if len(campaign.scenarios) > 1:
+            raise ConfigError('--scenario: the campaign has several scenarios: '
+                              + ', '.join(campaign.scenarios))
+        return campaign.scenarios[0]
+    for key in campaign.scenarios:
+        if scenario in (key, Path(key).name, Path(key).stem):
+            return key
+    raise ConfigError(f"--scenario: '{scenario}' is not a scenario of the campaign; its "
+                      f"scenarios: {', '.join(campaign.scenarios)}")

@@ -23,9 +23,10 @@ What is modelled (all in SI, positions along the line, the front of the train):
 
 Simplified against SUBSET-026: the gradient is the one at the front of the train (not the
 lowest under the whole train); no speed-dependent brake build-up, no correction factors Kdry/Kwet
-or Kv/Kr/Kt (the deceleration tables are taken as already corrected), no speed measurement
-accuracy, no guidance curve. ``permitted_speed(position)`` is the minimum of the MRSP and the
-permitted curves of every target: the speed an ATO target must stay below.
+or Kv/Kr/Kt (the deceleration tables are taken as already corrected), no guidance curve (the
+odometry's confidence interval and speed accuracy are the plant's ATP's, which looks these
+curves up at the max safe front end). ``permitted_speed(position)`` is the minimum of the MRSP
+and the permitted curves of every target: the speed an ATO target must stay below.
 
 Deviation from SUBSET-026, on the safe side: the EBD of a zero-speed target ends at the EOA,
 not at the SvL (3.13.8.3). An emergency brake triggered on the EBI therefore stops the train
@@ -42,9 +43,8 @@ before the EOA), at most ``release_speed_max_mps``.
 
 Stops (:class:`RunSupervision`): the authority of a leg ends at its stop; it moves on to the
 next leg only once the train has stood still at the stop (from ``STOP_WINDOW_M`` before the
-stopping point to the SvL) and the station's dwell time has passed since, the train staying
-within that zone. Until then the braking curves to the
-stop, its EOA and its SvL are supervised, wherever the train is.
+stopping point to the SvL) without a break for the station's dwell time. Until then the braking
+curves to the stop, its EOA and its SvL are supervised, wherever the train is.
 """
 
 from __future__ import annotations
@@ -92,6 +92,18 @@ class SupervisionSettings:
     eoa_beyond_stop_m: float = 50.0       # stopping point -> end of authority
     overlap_m: float = 50.0               # EOA -> supervised location
     release_speed_max_mps: float = 40.0 / 3.6  # the highest release speed (V_release)
+    # The on-board odometry's declared accuracy (SUBSET-026 3.6.4, SUBSET-041 5.3.1): its
+    # confidence interval is location_accuracy_m + odometry_accuracy times the distance run
+    # since the last relevant balise group, on each side of the estimated front end; the
+    # speed's is speed_accuracy_mps + speed_accuracy_share times the estimated speed. Zero
+    # (the default): the odometry declares itself exact.
+    # The train's highest acceleration by its own traction on level track (its starting effort
+    # over its mass), train data the ATP anticipates a control cycle with (0: none given).
+    traction_acceleration_mps2: float = 0.0
+    location_accuracy_m: float = 0.0
+    odometry_accuracy: float = 0.0
+    speed_accuracy_mps: float = 0.0
+    speed_accuracy_share: float = 0.0
 
 
 def constant_deceleration(value: float) -> Callable[[float], float]:
@@ -349,6 +361,16 @@ class SpeedSupervision:
         lowest = min(range(len(speeds)), key=speeds.__getitem__)
         return self.targets[lowest] if speeds[lowest] < self.mrsp(position_m) else None
 
+    def ceiling(self, name: str) -> tuple[list[float], list[float]]:
+        """The ceiling of a named limit section by section, (starts, speeds): the MRSP plus
+        the name's dV (``ebi``, ``sbi``, ``warning``), the MRSP itself (``permitted``,
+        ``indication``). A train whose front may lie anywhere in an interval is bound by the
+        lowest ceiling over it (SUBSET-026 3.6.4: the max safe front end for the start of a
+        restriction, the min safe front end for its end)."""
+        dv = {'ebi': DV_EBI_KMH, 'sbi': DV_SBI_KMH, 'warning': DV_WARNING_KMH}.get(name)
+        return (list(self.mrsp.starts),
+                [v + (ceiling_margin(v, dv) if dv else 0.0) for v in self.mrsp.values])
+
     def permitted_speed(self, position_m: float) -> float:
         """min(MRSP, the permitted curves of every target), m/s; 0 beyond the SvL."""
         return self.curve('permitted', position_m)
@@ -416,12 +438,12 @@ _RUNS: dict[str, 'RunSupervision'] = {}
 
 class RunSupervision:
     """One movement authority per leg of a run (station to station). The leg in force is the
-    supervised train's state (``TrainSimulation`` keeps it): it moves on to the next leg only
-    once the train has stood still at the leg's stop (``at_stop``: from ``STOP_WINDOW_M``
-    before the stopping point to the SvL, at most ``STANDSTILL_MPS``) and the stop's dwell
-    time has passed since, the train staying within that zone. Look-ups without a leg take
-    ``leg_at``: the leg of a train that stopped at every earlier station (for plans and
-    figures, not for supervising a train)."""
+    supervised train's state (the plant's ATP, ``train_plant_node.atp``, keeps it): it moves on
+    to the next leg only once the train has stood still at the leg's stop (``at_stop``: from
+    ``STOP_WINDOW_M`` before the stopping point to the SvL, at most ``STANDSTILL_MPS``) without
+    a break for the stop's dwell time. Look-ups without a leg take ``leg_at``: the leg of a
+    train that stopped at every earlier station (for plans and figures, not for supervising a
+    train)."""
 
     STOP_WINDOW_M = 0.5
     STANDSTILL_MPS = 0.01

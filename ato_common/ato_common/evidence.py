@@ -11,13 +11,24 @@ nothing and the tests run as usual.
 from __future__ import annotations
 
 import json
+import math
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Mapping
 
 #: the environment variable that names the file the claims are appended to (JSON lines)
 LOG_VARIABLE = 'ATO_REPRODUCTION_LOG'
-VERDICTS = ('reproduced', 'partly reproduced', 'not reproduced')
+#: a row that tests what the suite adds to a paper (an option of its own, actuator limits the
+#: paper does not have, a sampled law the paper runs in continuous time): it says nothing about
+#: the paper's claims either way
+SUITE_EXTENSION = "suite extension, outside the paper's claims"
+#: a row whose figures differ from the paper's by more than COMPARABLE_FACTOR either way: the
+#: set-ups differ too much (a reconstructed law, another trajectory) for a verdict
+NOT_COMPARABLE = 'not comparable'
+COMPARABLE_FACTOR = 10.0
+VERDICTS = ('reproduced', 'partly reproduced', 'not reproduced', SUITE_EXTENSION,
+            NOT_COMPARABLE)
 
 
 @dataclass(frozen=True)
@@ -44,6 +55,21 @@ class Claim:
                 raise ValueError(f'a claim needs a {name}')
         if self.verdict != 'reproduced' and not self.reason.strip():
             raise ValueError(f'a claim {self.verdict} needs its reason')
+
+
+def incomparable(paper: Mapping[str, float], suite: Mapping[str, float],
+                 factor: float = COMPARABLE_FACTOR) -> dict[str, float]:
+    """The figures of ``suite`` that differ from ``paper``'s of the same name by more than
+    ``factor`` either way, with the ratio suite / paper (a sign change or a zero: inf)."""
+    far = {}
+    for name, value in suite.items():
+        if name not in paper:
+            continue
+        reference = paper[name]
+        ratio = value / reference if reference != 0.0 and value / reference > 0.0 else math.inf
+        if not 1.0 / factor <= ratio <= factor:
+            far[name] = ratio
+    return far
 
 
 def record(claim: Claim) -> Claim:

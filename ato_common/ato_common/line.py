@@ -76,6 +76,9 @@ class Line:
     grade_sine: PiecewiseConstant      # sin(track angle), positive uphill in the running direction
     curves: tuple[Curve, ...] = ()
     tunnels: tuple[Tunnel, ...] = ()
+    #: where the line's balise groups lie, m, increasing: the fixed points at which an on-board
+    #: odometry relocates the train (SUBSET-026 3.6.4, the last relevant balise group)
+    balise_groups_m: tuple[float, ...] = ()
 
     def line_force_per_kg(self, position: float, gravity: float = units.STANDARD_GRAVITY) -> float:
         """Specific force of the line opposing motion at a position, m/s^2 (negative downhill).
@@ -98,6 +101,19 @@ def _ascending(starts: list[float], where: str) -> None:
     for previous, current in zip(starts, starts[1:]):
         if current <= previous:
             raise ConfigError(f'{where}: start_m must increase, got {previous:g} then {current:g}')
+
+
+def _balise_groups(f: Fields, length: float, where: str) -> tuple[float, ...]:
+    """``balise_groups: [{position_m: ...}, ...]``: on the line, strictly increasing."""
+    positions: list[float] = []
+    for item in f.items('balise_groups'):
+        position = item.number('position_m', minimum=0.0, maximum=length)
+        item.reject_unknown()
+        if positions and position <= positions[-1]:
+            raise ConfigError(f'{item.where}.position_m: positions must increase, got '
+                              f'{positions[-1]:g} then {position:g}')
+        positions.append(position)
+    return tuple(positions)
 
 
 def parse_line(data, where: str = 'line') -> Line:
@@ -159,6 +175,8 @@ def parse_line(data, where: str = 'line') -> Line:
                    if item.has('cross_section_m2') else None)
         tunnels.append(Tunnel(start, tunnel_length, section))
         item.reject_unknown()
+    balise_groups = _balise_groups(f, length, where)
     f.reject_unknown()
     return Line(name, length, tuple(stations), PiecewiseConstant(limit_starts, limits),
-                PiecewiseConstant(grade_starts, grades), tuple(curves), tuple(tunnels))
+                PiecewiseConstant(grade_starts, grades), tuple(curves), tuple(tunnels),
+                balise_groups)

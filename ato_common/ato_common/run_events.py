@@ -3,6 +3,12 @@ command-watchdog brakes (the plant's diagnostics, or the plant's ATP rule replay
 of an offline run), journey timing points outside their time windows and stopping errors beyond
 the platform tolerance (the measured positions). Each kind with its count and first occurrence;
 a run without any is clean. No ROS here: the lockstep runner and the offline command share it.
+
+A run's status (:func:`run_status`, the campaigns' and the comparison's) is ``ok`` only for a
+clean run whose train finished its journey on time; otherwise it names the most serious of what
+went wrong (:data:`STATUSES`, most serious first) and its reason lists every one. Lateness is
+measured against the timetable (:func:`late_arrivals`): a train that arrives at a stop
+``LATE_AFTER_S`` or more after the timetable's arrival there is late, however well it stops.
 """
 
 from __future__ import annotations
@@ -12,6 +18,9 @@ import sys
 from dataclasses import dataclass, field
 from typing import Iterable, Sequence
 
+import numpy as np
+
+from ato_common.braking_curves import RunSupervision
 from ato_common.metrics import RunMetrics
 from ato_common.scenario import Scenario
 
@@ -21,11 +30,29 @@ PLATFORM_TOLERANCE_M = 0.5
 #: the plant's diagnostic status (train_plant_node.node)
 PLANT_STATUS = 'train_plant_node: simulation'
 NORMAL_WATCHDOG = 'normal'
+#: a train at most this fast stands still, m/s (the supervision's standstill)
+STANDSTILL_MPS = RunSupervision.STANDSTILL_MPS
 
 ATP, WATCHDOG, JOURNEY, STOP = ('ATP interventions', 'watchdog brakes', 'missed journey windows',
                                 'stop errors')
 KINDS = (ATP, WATCHDOG, JOURNEY, STOP)
 LABELS = {ATP: ATP, WATCHDOG: WATCHDOG, JOURNEY: 'missed time windows', STOP: STOP}
+
+#: an arrival this much after the timetable's or later is late, s. A suite setting: well beyond
+#: how far a tracking law's arrival scatters around its reference's, well within the railways'
+#: punctuality threshold of a minute (Network Rail's "On Time": within 59 s of the timetable),
+#: which a late train of a 15-minute journey can reach with no control error at all
+LATE_AFTER_S = 10.0
+#: a run's statuses, the most serious first: the run could not be made (``error``, ``timeout``),
+#: its state turned non-finite (``diverged``), its train did not finish its journey, then each
+#: kind of what went wrong; ``ok`` only for a clean run that finished on time
+STATUSES = ('error', 'timeout', 'diverged', 'did not finish', 'ATP intervention',
+            'watchdog brake', 'faults', 'stop error', 'late', 'missed time window', 'ok')
+#: the status a kind of event gives a run
+STATUS_OF_KIND = {ATP: 'ATP intervention', WATCHDOG: 'watchdog brake', STOP: 'stop error',
+                  JOURNEY: 'missed time window'}
+#: the statuses of runs that were made and measured (every status but error and timeout)
+MEASURED = STATUSES[2:]
 
 
 @dataclass(frozen=True)
@@ -56,14 +83,14 @@ class RunEvents:
         first occurrence ('1 ATP interventions (first at 103.4 s)')."""
         if self.clean:
             return 'clean'
-        parts = []
-        for kind in KINDS:
-            if self.count(kind):
-                first = self.first(kind)
-                when = '' if first is None or math.isnan(first.time_s) else \
-                    f' (first at {first.time_s:.1f} s)'
-                parts.append(f'{self.count(kind)} {LABELS[kind]}{when}')
-        return '; '.join(parts)
+        return '; '.join(self.brief_of(kind) for kind in KINDS if self.count(kind))
+
+    def brief_of(self, kind: str) -> str:
+        """One kind's count and first occurrence ('2 stop errors (first at 412.6 s)')."""
+        first = self.first(kind)
+        when = '' if first is None or math.isnan(first.time_s) else \
+            f' (first at {first.time_s:.1f} s)'
+        return f'{self.count(kind)} {LABELS[kind]}{when}'
 
     def format(self) -> str:
         """Summary lines: one per kind, with its count and its first occurrence."""
@@ -245,6 +272,61 @@ def run_events(scenario: Scenario, metrics: RunMetrics, stations, times_s, posit
         safety = merge(plant_atp_events(atp_times_s), RunEvents((), {WATCHDOG: 0}))
     return merge(safety, journey_events(scenario, times_s, positions, tolerance_m),
                  stop_events(metrics, stations, tolerance_m), tolerance_m=tolerance_m)
+
+
+def arrival_times(stops: Sequence[tuple[str, float, float]], times_s, positions, speeds,
+                  reach_m: float) -> dict[str, float | None]:
+    """When the train arrived at each stop ((name, position, planned arrival)): the start of
+    its last standstill (at most STANDSTILL_MPS) within ``reach_m`` of the stop; None for a
+    stop it never stood at. The lead car's true positions and speeds."""
+    t = np.asarray(times_s, dtype=float)
+    x = np.asarray(positions, dtype=float)
+    standing = np.abs(np.asarray(speeds, dtype=float)) <= STANDSTILL_MPS
+    arrived: dict[str, float | None] = {}
+    for name, position_m, _ in stops:
+        there = np.flatnonzero(standing & (np.abs(x - position_m) <= reach_m))
+        if not there.size:
+            arrived[name] = None
+            continue
+        gaps = np.flatnonzero(np.diff(there) > 1)  # where one standstill ends, another begins
+        arrived[name] = float(t[there[gaps[-1] + 1] if gaps.size else there[0]])
+    return arrived
+
+
+def late_arrivals(stops: Sequence[tuple[str, float, float]], times_s, positions, speeds,
+                  reach_m: float, late_after_s: float = LATE_AFTER_S
+                  ) -> list[tuple[str, float]]:
+    """(stop, delay) of each stop of the timetable (``stops``: (name, position, arrival)) that
+    the train arrived at ``late_after_s`` or more after its timetabled arrival
+    (:func:`arrival_times`)."""
+    arrived = arrival_times(stops, times_s, positions, speeds, reach_m)
+    return [(name, arrived[name] - planned) for name, _, planned in stops
+            if arrived[name] is not None and arrived[name] - planned >= late_after_s]
+
+
+def run_status(events: RunEvents, unfinished: str = '', late: Sequence[tuple[str, float]] = (),
+               held: Sequence[str] = ()) -> tuple[str, str]:
+    """(status, reason) of a run that was made, with finite states: ``ok`` and '' for a clean
+    run that finished on time; else the most serious of what went wrong (STATUSES) and, in
+    that order, each thing: ``unfinished`` (why the train did not finish its journey), the
+    events, ``held`` (the reasons the host held the command, one per step) and ``late``
+    (:func:`late_arrivals`)."""
+    found = []
+    if unfinished:
+        found.append(('did not finish', f'did not finish: {unfinished}'))
+    for kind in KINDS:
+        if events.count(kind):
+            found.append((STATUS_OF_KIND[kind], events.brief_of(kind)))
+    if held:
+        found.append(('faults', f'{len(held)} steps held: {held[0]}'))
+    if late:
+        found.append(('late', 'late: ' + ', '.join(f'{name} {delay:.1f} s' for name, delay
+                                                   in late)
+                      + f' after the timetable (late from {LATE_AFTER_S:g} s)'))
+    if not found:
+        return 'ok', ''
+    found.sort(key=lambda item: STATUSES.index(item[0]))
+    return found[0][0], '; '.join(text for _, text in found)
 
 
 def exit_code(events: RunEvents, fail_on_events: bool = True) -> int:

@@ -203,8 +203,12 @@ def _capped(line: Line, speed: float) -> Line:
     """The line's static limits capped at the train's maximum speed (part of the MRSP)."""
     limits = line.speed_limit_mps
     capped = PiecewiseConstant(limits.starts, [min(v, speed) for v in limits.values])
-    return Line(line.name, line.length_m, line.stations, capped, line.grade_sine, line.curves,
-                line.tunnels)
+    return replace(line, speed_limit_mps=capped)
+
+
+#: the odometry's declared accuracy in ``supervision:`` and the largest value each may take
+ODOMETRY_ACCURACY_BOUNDS = {'location_accuracy_m': 1000.0, 'odometry_accuracy': 0.5,
+                            'speed_accuracy_mps': 10.0, 'speed_accuracy_share': 0.5}
 
 
 def _parse_supervision(f: Fields, train: TrainParameters,
@@ -232,9 +236,12 @@ def _parse_supervision(f: Fields, train: TrainParameters,
                 'overlap_m'):
         default = times.get(key, getattr(defaults, key))
         values[key] = s.number(key, default, minimum=0.0, maximum=1000.0)
+    for key, most in ODOMETRY_ACCURACY_BOUNDS.items():
+        values[key] = s.number(key, 0.0, minimum=0.0, maximum=most)
     s.reject_unknown()
     return SupervisionSettings(defaults.emergency_deceleration, defaults.service_deceleration,
-                               **values)
+                               traction_acceleration_mps2=train.traction.max_traction_force_n
+                               / train.mass_kg, **values)
 
 
 def _journey_gives_times(journey: ttobench.TTOBenchJourney | None) -> bool:

@@ -73,7 +73,10 @@ class TractionCharacteristic:
 # 0.15, the adhesion a brake design may demand at most in European practice (EN 14531-1 and the
 # TSI LOC&PAS compute brake performance with no more than 0.15); wet: 0.10, the lower end of the
 # 0.10-0.20 usually found on a wet rail (lower, contaminated rails, the autumn case, are not
-# modelled). docs/guide/plant.md gives the bound and where it applies.
+# modelled). docs/guide/plant.md gives the bound and where it applies. These are what a brake
+# design may count on (the braking model's bound, known on board); the adhesion the rail actually
+# offers in a run is the plant's truth, drawn by a campaign (``ato_common.uncertainty``'s
+# ``adhesion``, dry 0.30 / wet 0.15 after EN 15595), and is higher by design margin.
 ADHESION_COEFFICIENT = {'dry': 0.15, 'wet': 0.10}
 RAIL_CONDITIONS = tuple(ADHESION_COEFFICIENT)
 

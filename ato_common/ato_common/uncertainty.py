@@ -74,6 +74,17 @@ class Distribution:
         weights = np.asarray(self.weights or [1.0] * len(self.values), dtype=float)
         return float(self.values[int(rng.choice(len(self.values), p=weights / weights.sum()))])
 
+    @property
+    def smallest(self) -> float:
+        """The smallest value a draw can take (-inf for a normal distribution)."""
+        if self.dist in ('fixed', 'uniform'):
+            return self.a
+        if self.dist == 'truncated_normal':
+            return self.low
+        if self.dist == 'choice':
+            return min(self.values)
+        return -math.inf if self.dist == 'normal' else 0.0
+
     def describe(self) -> str:
         if self.dist == 'fixed':
             return f'{self.a:g}'
@@ -184,7 +195,8 @@ PARAMETERS: dict[str, Parameter] = {p.name: p for p in (
     Parameter('adhesion', '1', 0.3, 0.02, 0.5,
               Distribution('choice', values=(0.30, 0.15), weights=(0.8, 0.2)),
               'wheel-rail adhesion coefficient mu: caps the true traction and brake force at '
-              'mu M g (dry rail 0.3, wet 0.15)',
+              'mu M g (dry rail 0.3, wet 0.15); the truth of the run, not the braking '
+              "model's design bound (trains.ADHESION_COEFFICIENT, dry 0.15 / wet 0.10)",
               'EN 15595:2018 (wheel slide protection): dry rail 0.25-0.35, wet 0.1-0.2, low '
               'adhesion below 0.05; the default is dry with a 20 % chance of wet rail'),
     Parameter('speed_noise_mps', 'm/s', 0.0, 0.0, 2.0,
@@ -300,6 +312,9 @@ def _any_distribution(value: Any, where: str, param: Parameter) -> Distribution:
                          bounded('low'), bounded('high'))
         if not d.high > d.low:
             raise ConfigError(f'{where}: high ({d.high:g}) must be above low ({d.low:g})')
+        if not d.low <= d.a <= d.high:  # its draws would pile up at one bound
+            raise ConfigError(f'{where}.mean: {d.a:g} must lie within [low, high] = '
+                              f'[{d.low:g}, {d.high:g}]')
     elif dist == 'lognormal':
         d = Distribution(dist, f.number('median', minimum=0.0, exclusive_minimum=True),
                          f.number('sigma', minimum=0.0, maximum=2.0))

@@ -93,6 +93,39 @@ def davis_adaptation_gains_per_tonne_to_si(
     return (gamma_a * scale[0] ** 2, gamma_b * scale[1] ** 2, gamma_c * scale[2] ** 2)
 
 
+def mass_adaptation_gain_per_tonne_to_si(gamma: float) -> float:
+    """The gain gamma of a mass estimate's gradient law m' = -gamma psi e (e.g. Luo & Xu (16):
+    m_hat' = -gamma (theta_hat^T phi + varphi) z2) with the mass in tonnes -> the same law with
+    the mass in kg (psi an acceleration and e a speed, both in SI, in either reading).
+
+    Derivation. m = 1000 m_t, so m' = 1000 m_t' = -1000 gamma_t psi e: gamma = 1000 gamma_t.
+    The Lyapunov term rho m_t^2 / (2 gamma) = m_tilde^2 / (2 m gamma) of Luo & Xu (17) is then
+    the same number in both (10^6 m_tilde_t^2 / (2 10^3 m_t 10^3 gamma_t)). Luo & Xu's
+    gamma = 1e5 (m in t) becomes 1e8 kg s^2/m^2.
+    """
+    return gamma * tonnes_to_kg(1.0)
+
+
+def luo_xu_adaptation_gains_to_si(gamma: float, gamma_c0: float, gamma_cv: float,
+                                  gamma_ca: float) -> tuple[float, float, float, float]:
+    """Luo & Xu's Table 1 adaptation gains (gamma of m_hat, Gamma = diag(gamma_c0, gamma_cv,
+    gamma_ca) of theta_hat, law (16)) -> (gamma [kg s^2/m^2], Gamma_11 [1/s^2], Gamma_22
+    [1/m^2], Gamma_33 [s^2/m^4]) in SI.
+
+    One reading for every gain: each gain acts on its estimate in the unit Table 1 gives that
+    estimate, m in t and the resistance coefficients per tonne with V in km/h (N/t,
+    N/(t km/h), N/(t (km/h)^2)); the errors z, the accelerations and time are SI (the paper's
+    states and target curve are in m and m/s). Then gamma by
+    :func:`mass_adaptation_gain_per_tonne_to_si` (x 1000) and Gamma by
+    :func:`davis_adaptation_gains_per_tonne_to_si` (D Gamma D): every term of the Lyapunov
+    function (17) is the same number in SI as in Table 1's units, so the adaptive loop is the
+    paper's. Table 1's gamma = 1e5, Gamma = diag(1e4, 1, 0.01) become 1e8 and
+    diag(1e-2, 1.296e-5, 1.6796e-6).
+    """
+    return (mass_adaptation_gain_per_tonne_to_si(gamma),
+            *davis_adaptation_gains_per_tonne_to_si(gamma_c0, gamma_cv, gamma_ca))
+
+
 def curvature_term_to_curve_radius_m(curvature_d: float, coefficient: float = 0.004,
                                      gravity: float = STANDARD_GRAVITY) -> float:
     """A curvature term written as a specific force ``coefficient * D`` [m/s^2] (Tan, Jiang &
@@ -130,9 +163,9 @@ def adaptation_gain_to_si(gamma: float, theta: tuple[int, int, int],
     """One diagonal entry gamma of a gradient adaptive law theta' = -gamma w e, given in a
     coherent unit system (mass, length and time units in kg, m and s) -> the same law in SI.
 
-    Derivation. The law fixes the gain's unit: [gamma] = [theta] / ([w] [e] [t]). A quantity of
-    dimension M^a L^b T^c is ``mass_unit_kg^a length_unit_m^b time_unit_s^c`` times its number
-    in SI, so with f(q) that factor, theta_SI = f(theta) theta_u, w_SI = f(w) w_u,
+    Derivation. The law fixes the gain's unit: ``[gamma] = [theta] / ([w] [e] [t])``. A
+    quantity of dimension M^a L^b T^c is ``mass_unit_kg^a length_unit_m^b time_unit_s^c`` times
+    its number in SI, so with f(q) that factor, theta_SI = f(theta) theta_u, w_SI = f(w) w_u,
     e_SI = f(e) e_u and t_SI = f(T) t_u give
 
         theta_SI' = f(theta)/f(T) theta_u' = -f(theta)/f(T) gamma_u w_u e_u

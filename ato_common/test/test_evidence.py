@@ -48,3 +48,23 @@ def test_a_damaged_log_is_an_error_naming_the_line(tmp_path):
     log.write_text(json.dumps(dict(claim().__dict__)) + '\n{"paper": "x"}\n')
     with pytest.raises(ValueError, match=r'claims.jsonl:2: not a recorded claim'):
         read_claims(log)
+
+
+def test_a_suite_extension_and_a_row_not_comparable_are_verdicts_with_a_reason():
+    from ato_common.evidence import NOT_COMPARABLE, SUITE_EXTENSION
+    assert SUITE_EXTENSION == "suite extension, outside the paper's claims"
+    with pytest.raises(ValueError, match='needs its reason'):
+        claim(verdict=SUITE_EXTENSION)
+    assert claim(verdict=NOT_COMPARABLE, reason='56x').verdict == 'not comparable'
+
+
+def test_figures_more_than_ten_times_apart_are_not_comparable():
+    from ato_common.evidence import incomparable
+    paper = {'s - s_hat': 5.31e-05, 'v - v_d': 0.0366, 'energy': 1.0}
+    suite = {'s - s_hat': 1.47e-04, 'v - v_d': 6.53e-04, 'energy': -1.0, 'other': 5.0}
+    far = incomparable(paper, suite)
+    assert set(far) == {'v - v_d', 'energy'}
+    assert far['v - v_d'] == pytest.approx(6.53e-04 / 0.0366)
+    assert far['energy'] == float('inf')   # a sign change
+    assert incomparable({'x': 1.0}, {'x': 9.9}) == {}
+    assert incomparable({'x': 1.0}, {'x': 0.11}) == {}

@@ -64,6 +64,9 @@ def test_each_distribution_samples_inside_its_bounds_with_its_moments():
      'uncertainty.wind_mps.std', 'must be > 0'),
     ({'wind_mps': {'dist': 'normal', 'mean': 0, 'std': 10}}, 'uncertainty.wind_mps',
      'truncated_normal'),
+    # a mean outside the kept interval piles the draws up at one bound
+    ({'wind_mps': {'dist': 'truncated_normal', 'mean': 12, 'std': 3, 'low': -10, 'high': 10}},
+     'uncertainty.wind_mps.mean', '12 must lie within [low, high] = [-10, 10]'),
     ({'adhesion': {'dist': 'choice', 'values': [0.3, 0.1], 'weights': [1]}},
      'uncertainty.adhesion.weights', '2 numbers'),
     ({'adhesion': {'dist': 'beta'}}, 'uncertainty.adhesion.dist', "'beta' is not valid"),

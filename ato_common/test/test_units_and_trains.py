@@ -144,3 +144,13 @@ def test_every_preset_documents_its_sources_and_has_consistent_limits():
         assert t.max_traction_force_n > 0 and t.max_traction_power_w > 0, name
         # the train can climb its own starting effort: force above resistance at low speed
         assert t.max_traction_at(10.0) > train.davis.force(10.0), name
+
+
+@pytest.mark.parametrize('name', sorted(TRAIN_PRESETS))
+def test_every_preset_cites_its_design_maximum_speed(name):
+    """``TrainParameters.max_speed_mps`` bounds every limit the supervision applies: a preset
+    states it (finite) and says where it comes from, as docs/extending.md asks."""
+    train = train_preset(name)
+    assert math.isfinite(train.max_speed_mps) and train.max_speed_mps > 0.0
+    assert train.sources.get('max_speed_mps', '').strip(), (
+        f"{name}: sources['max_speed_mps'] must say where the design maximum speed comes from")

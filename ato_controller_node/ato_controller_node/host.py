@@ -2,6 +2,12 @@
 actuator limits, guard against missing or non-finite input and output, the check that the law
 fits the train and the running plant, and the split over actuators.
 
+The ATO envelope (:mod:`ato_controller_node.envelope`, ``envelope=True``, the default): the
+saturation-aware anti-windup of the position error (the integral of the speed error), the same
+for every law: the law is given a reference position shifted by the envelope, which winds it
+from what the limits took away. Off (``envelope=False``) every law runs on the reference
+itself.
+
 Bumpless transfer: on a switch the new law is reset from the current state and told the last
 command; whatever step remains between the last command and the new law's first output is
 carried as an offset that decays with ``bumpless_time_constant_s``.
@@ -20,12 +26,15 @@ from typing import Any, Mapping
 
 from ato_common.knowledge import TrainKnowledge
 from ato_common.types import ReferencePoint, TrainState
+from ato_controller_node.envelope import Envelope, EnvelopeSettings
 from ato_controller_node.laws import LAWS, law_class
 from ato_controller_node.laws.base import ControlLaw, Measurement, validated_settings
 
 #: the estimate under which a law that observes the speed reports it (m/s); used for the
 #: traction limit when the speed is not measured
 SPEED_ESTIMATE_KEY = 'speed_hat_mps'
+#: the estimate under which the host reports the envelope's shift of the position reference, m
+ENVELOPE_SHIFT_KEY = 'envelope_shift_m'
 
 
 class LawRejected(ValueError):
@@ -48,10 +57,14 @@ class StepResult:
 class ControllerHost:
     def __init__(self, train: TrainKnowledge, dt: float, law: str,
                  settings: Mapping[str, Mapping[str, Any]] | None = None,
-                 bumpless_time_constant_s: float = 3.0):
+                 bumpless_time_constant_s: float = 3.0, envelope: bool = True,
+                 envelope_settings: Mapping[str, Any] | None = None):
         self.train = train
         self.dt = dt
         self.bumpless_time_constant_s = bumpless_time_constant_s
+        #: the ATO envelope (None: off), the same for every law
+        self.envelope = Envelope(validated_settings(EnvelopeSettings, envelope_settings or {})) \
+            if envelope else None
         self._settings = {name: validated_settings(cls.Settings, (settings or {}).get(name, {}))
                           for name, cls in LAWS.items()}
         self.measured_cars: int | None = None  # cars the plant measures, once seen
@@ -66,6 +79,8 @@ class ControllerHost:
         self._actuators = len(train.actuator_names)  # the knowledge is frozen
         self._fit = (None, None, None, None)  # (law, knowledge, cars, law.fits' reason) checked
         self._decay = (None, None, 1.0)   # (dt, time constant, the offset's decay per step)
+        # (law, its settings, law.feedback_gains()) asked
+        self._gains: tuple[Any, Any, Any] = (None, None, None)
 
     def measurement(self, time_s: float, state: TrainState) -> Measurement:
         """The law's measurement of a measured ``state`` at run time ``time_s``, with the
@@ -115,6 +130,14 @@ class ControllerHost:
             self._fit = (law, self.train, self.measured_cars, reason)
         return reason
 
+    def _feedback_gains(self, law: ControlLaw):
+        """``law.feedback_gains()``, asked again only when the law or its settings change."""
+        cached_law, settings, gains = self._gains
+        if cached_law is not law or settings is not law.settings:
+            gains = law.feedback_gains()
+            self._gains = (law, law.settings, gains)
+        return gains
+
     def _offset_decay(self) -> float:
         """exp(-dt / bumpless_time_constant_s), computed again when either changes (the node
         sets the time constant at run time)."""
@@ -141,10 +164,11 @@ class ControllerHost:
             self.faults += 1
             return self._held(law, f'{missing}; holding the last command', reference,
                               measurement)
+        envelope = self.envelope
+        given = envelope.reference(reference, measurement.position) if envelope else reference
         if not self.started:
-            law.reset(measurement, reference,
-                      self.last_force_n if self._has_commanded else None)
-        output = law.step(measurement, reference)
+            law.reset(measurement, given, self.last_force_n if self._has_commanded else None)
+        output = law.step(measurement, given)
         n = self._actuators
         law_forces = output.forces_n
         if law_forces is not None and len(law_forces) != n:
@@ -170,13 +194,21 @@ class ControllerHost:
         lowest, highest = self.train.actuator_limits_at(self._speed_for_limits(
             measurement, reference, output.estimates))
         forces = tuple([min(max(f, lowest), highest) for f in wanted_each])
-        total, wanted = sum(forces), sum(wanted_each)
+        total = sum(forces)
+        unlimited = output.unlimited_force_n
+        # a law that limits its own shares wanted more than their sum: that is the wish
+        wanted = sum(wanted_each) if unlimited is None else unlimited + offset
         law.after_saturation(wanted - offset, total - offset,
                              tuple([f - offset_each for f in forces]), applied_n=total)
         self.last_force_n, self.last_forces_n = total, forces
         self._has_commanded = True
-        return self._result(total, forces, wanted, law, dict(output.estimates), reference,
-                            measurement, '')
+        estimates = dict(output.estimates)
+        if envelope:
+            envelope.update(wanted - total, reference.speed, self.dt,
+                            self.train.nominal_mass_kg, self._feedback_gains(law),
+                            reference.speed - measurement.speed)
+            estimates[ENVELOPE_SHIFT_KEY] = envelope.shift_m
+        return self._result(total, forces, wanted, law, estimates, reference, measurement, '')
 
     @staticmethod
     def _missing_input(law: ControlLaw, measurement: Measurement,

@@ -10,7 +10,11 @@ diagnostics, and the plant's watchdog brakes.
 Parameters: ``controller`` selects the law and may change at run time (``ros2 param set
 /ato_controller_node controller luo_xu``; bumpless); an unknown name or a law that does not fit
 the train is rejected with the reason and the running law stays. Every law's gains are
-parameters ``<law>.<gain>`` with ranges, defaults from the papers.
+parameters ``<law>.<gain>`` with ranges; their defaults are the configuration ``gains``
+(``ato_controller_node.gains``): ``published`` (the papers' values) or ``tuned`` (the suite's
+tuning artefacts for the scenario's train; a law without one cannot be selected then, and
+says so). ``envelope`` turns the host's ATO envelope (anti-windup of the position error, the
+same for every law) on or off, ``envelope.*`` are its settings.
 
 Graph: ``wait_for_subscribers`` holds back only the first command; an observer that goes away
 later does not stop the loop. A state stamped before the last step (lockstep) is a restarted
@@ -36,6 +40,8 @@ from ato_common.knowledge import knowledge_of
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import Command, Reference, ReferencePoint, seconds
 from ato_common.validation import ConfigError
+from ato_controller_node.envelope import EnvelopeSettings
+from ato_controller_node.gains import GAINS, GainsUnavailable, settings_for
 from ato_controller_node.host import ControllerHost, LawRejected
 from ato_controller_node.laws import LAWS
 from ato_controller_node.laws.base import setting_fields, validated_settings
@@ -76,6 +82,11 @@ NODE_PARAMS = (
           maximum=60.0, read_only=False),
     Param('bumpless_time_constant_s', 3.0, 'decay time of the command step on a law switch, s',
           minimum=0.01, maximum=600.0, read_only=False),
+    Param('gains', GAINS[0], "the laws' configuration: the defaults of every <law>.<gain> "
+          '(published: the papers\' values; tuned: the suite\'s tuning artefacts for the '
+          "scenario's train)", choices=GAINS),
+    Param('envelope', True, 'the ATO envelope of the host: anti-windup of the position error '
+          'under saturation, the same for every law (false: off for every law)'),
     Param('diagnostics_period_s', 1.0, 'period of the diagnostics, s of (simulated) time',
           minimum=0.01, maximum=3600.0, read_only=False),
 )
@@ -97,24 +108,45 @@ def reference_now(reference: Reference, now_ns: int) -> ReferencePoint:
                           base.speed + dt * (a + dt * j / 2.0), a + dt * j, j)
 
 
-def gain_params() -> list[Param]:
+def _setting_params(prefix: str, settings_type, defaults, read_only: bool) -> list[Param]:
+    params = []
+    for f in setting_fields(settings_type):
+        meta = f.metadata
+        is_bool = isinstance(f.default, bool)
+        default = defaults.get(f.name, f.default)
+        params.append(Param(
+            f'{prefix}.{f.name}', default if is_bool else float(default),
+            f"{meta['description']} [{meta['units']}]",
+            minimum=None if is_bool else meta['minimum'],
+            maximum=None if is_bool else meta['maximum'], read_only=read_only))
+    return params
+
+
+def gain_params(defaults=None) -> list[Param]:
+    """One parameter per setting of every law, its default from ``defaults`` (law -> {setting:
+    value}, e.g. a configuration's), else the law's own; and the envelope's settings."""
     params = []
     for law_name, law in LAWS.items():
-        for f in setting_fields(law.Settings):
-            meta = f.metadata
-            is_bool = isinstance(f.default, bool)
-            params.append(Param(
-                f'{law_name}.{f.name}', f.default,
-                f"{meta['description']} [{meta['units']}]",
-                minimum=None if is_bool else meta['minimum'],
-                maximum=None if is_bool else meta['maximum'], read_only=False))
-    return params
+        params += _setting_params(law_name, law.Settings, (defaults or {}).get(law_name, {}),
+                                  read_only=False)
+    return params + _setting_params('envelope', EnvelopeSettings, {}, read_only=True)
+
+
+def configuration(gains: str, train: str) -> tuple[dict[str, dict], dict[str, str]]:
+    """(the settings of every law in configuration ``gains``, {law without them: why})."""
+    values, missing = {}, {}
+    for law in LAWS:
+        try:
+            values[law] = settings_for(law, gains, train)
+        except GainsUnavailable as error:
+            missing[law] = str(error)
+    return values, missing
 
 
 class AtoControllerNode(RunNodeHooks, Node):
     def __init__(self):
         super().__init__('ato_controller_node')
-        self.params = ParameterTable(self, NODE_PARAMS + tuple(gain_params()))
+        self.params = ParameterTable(self, NODE_PARAMS)
         p = self.params
         scenario = load_scenario(p['scenario'])  # not kept: its plant section is the truth
         self.identity = scenario_identity(scenario)  # name and hash only: no truth in it
@@ -122,13 +154,21 @@ class AtoControllerNode(RunNodeHooks, Node):
         self.dt = 1.0 / self.rate_hz
         self.lockstep = p['lockstep']
         self.knowledge = knowledge_of(scenario)  # all the controller knows of the train
+        # the laws' gains: parameters whose defaults are the configuration's
+        configured, self.untuned = configuration(p['gains'], scenario.train.name)
+        self.gain_table = ParameterTable(self, gain_params(configured))
         settings = {law: {f.name: p[f'{law}.{f.name}'] for f in setting_fields(cls.Settings)}
                     for law, cls in LAWS.items()}
+        self.envelope_settings = {f.name: p[f'envelope.{f.name}']
+                                  for f in setting_fields(EnvelopeSettings)}
         try:
+            if p['controller'] in self.untuned:
+                raise ConfigError(self.untuned[p['controller']])
             self.host = self.make_host(p['controller'], settings)
         except (LawRejected, ValueError) as error:
             raise ConfigError(str(error)) from None
-        self.params.extra_checks.append(self.check_changes)
+        for table in (self.params, self.gain_table):
+            table.extra_checks.append(self.check_changes)
         self.add_post_set_parameters_callback(self.apply_changes)
 
         self.states: dict[int, object] = {}
@@ -174,7 +214,9 @@ class AtoControllerNode(RunNodeHooks, Node):
         if settings is None:  # the current gains of every law
             settings = {name: dataclasses.asdict(self.host.settings(name)) for name in LAWS}
         return ControllerHost(self.knowledge, self.dt, law, settings,
-                              self.params['bumpless_time_constant_s'])
+                              self.params['bumpless_time_constant_s'],
+                              envelope=self.params['envelope'],
+                              envelope_settings=self.envelope_settings)
 
     # --- parameters: validate, then apply ---------------------------------------------------
     def _gain_changes(self, changes: dict) -> dict[str, dict]:
@@ -187,11 +229,15 @@ class AtoControllerNode(RunNodeHooks, Node):
 
     def check_changes(self, changes: dict) -> str | None:
         if 'controller' in changes:
+            if changes['controller'] in self.untuned:
+                return self.untuned[changes['controller']]
             try:
                 self.host.check(changes['controller'])
             except LawRejected as error:
                 return str(error)
         for law, values in self._gain_changes(changes).items():
+            if law not in LAWS:
+                continue  # envelope.*: fixed at start-up (the table refuses a change)
             try:
                 validated_settings(LAWS[law].Settings, values, self.host.settings(law))
             except ValueError as error:
@@ -201,7 +247,8 @@ class AtoControllerNode(RunNodeHooks, Node):
     def apply_changes(self, parameters) -> None:
         changes = {p.name: p.value for p in parameters}
         for law, values in self._gain_changes(changes).items():
-            self.host.update_settings(law, values)
+            if law in LAWS:
+                self.host.update_settings(law, values)
         if 'bumpless_time_constant_s' in changes:
             self.host.bumpless_time_constant_s = changes['bumpless_time_constant_s']
         if 'controller' in changes and changes['controller'] != self.host.law.name:
@@ -350,7 +397,8 @@ class AtoControllerNode(RunNodeHooks, Node):
     def publish_diagnostics(self, stamp_ns: int) -> None:
         r = self.last_result
         fault = r.fault or self.input_fault
-        values = {'law': r.law, 'rate_hz': self.rate_hz, 'speed_error_mps': r.speed_error_mps,
+        values = {'law': r.law, 'rate_hz': self.rate_hz, 'gains': self.params['gains'],
+                  'envelope': self.params['envelope'], 'speed_error_mps': r.speed_error_mps,
                   'position_error_m': r.position_error_m, 'command_n': r.total_force_n,
                   'wanted_n': r.wanted_force_n, 'saturated': r.saturated,
                   'faults': self.host.faults, 'restarts': self.restarts,

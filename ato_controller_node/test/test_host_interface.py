@@ -12,7 +12,13 @@ from ato_common.types import ReferencePoint
 from ato_controller_node import host as host_module
 from ato_controller_node.host import ControllerHost, LawRejected
 from ato_controller_node.laws import LAWS
-from ato_controller_node.laws.base import ControlLaw, LawOutput, Measurement, TrainKnowledge
+from ato_controller_node.laws.base import (
+    ControlLaw,
+    FeedbackGains,
+    LawOutput,
+    Measurement,
+    TrainKnowledge,
+)
 
 
 @dataclass(frozen=True)
@@ -33,6 +39,9 @@ class _PerActuatorProbe(ControlLaw):
 
     def reset(self, measurement, reference, last_force_n):
         self.reported = None
+
+    def feedback_gains(self):
+        return FeedbackGains(0.0, 1.0)
 
     def step(self, measurement, reference):
         return LawOutput(sum(self.wanted), {}, self.wanted)

@@ -66,3 +66,25 @@ def test_fits_refuses_a_too_slow_rate_and_a_single_mass_train(train):
     point = knowledge_of(load_scenario('short_line'))
     assert 'actuators' in MaoRigidLaw(point, 0.1).fits(point)
     assert math.isfinite(MaoRigidLaw(train, 0.01).step(_measure(0.0), _reference(0.0)).force_n)
+
+
+def test_its_own_clamping_freezes_the_adaptation_and_counts_as_saturated(train):
+    """split_by_mass limits the shares inside step(): the law must give the host its unlimited
+    force, so that the host counts the step as saturated and the freeze compares the force the
+    unit wanted with the one it gets (not the clamped shares with themselves)."""
+    from ato_controller_node.host import ControllerHost
+    host = ControllerHost(train, 0.1, 'mao_multibody_rigid')
+    law = host.law
+    before = list(law.theta_hat)
+    # far too slow while the reference accelerates hard: the unit wants more than both cars give
+    result = host.step(_measure(20.0), _reference(40.0, 2.0))
+    lowest, highest = train.actuator_limits_at(20.0)
+    assert result.forces_n == (highest, highest)
+    assert result.wanted_force_n > 2.0 * highest
+    assert result.saturated                                  # honest: the wish was cut
+    host.step(_measure(20.0, 0.1), _reference(40.0, 2.0))
+    assert law.theta_hat == before                           # frozen on its own clamping
+    # within the limits it adapts as before
+    host.step(_measure(39.9, 0.2), _reference(40.0, 0.01))
+    assert not host.step(_measure(39.9, 0.3), _reference(40.0, 0.01)).saturated
+    assert law.theta_hat != before

@@ -62,11 +62,10 @@ def test_the_citation_pattern_matches_the_forms_the_modules_use():
 def test_every_law_declares_its_paper_and_the_note_exists():
     undeclared = [name for name, law in LAWS.items() if 'paper' not in vars(law)]
     assert not undeclared, f'laws that do not set ControlLaw.paper themselves: {undeclared}'
-    assert LAWS['pid'].paper is None
+    assert LAWS['pid'].paper is None  # the baseline is the suite's own
     missing = {law.name: str(_note(law).relative_to(ROOT)) for law in laws_with_papers()
                if not _note(law).is_file()}
     assert not missing, f'laws whose note is missing: {missing}'
-    assert len(laws_with_papers()) == len(LAWS) - 1
 
 
 @pytest.mark.parametrize('name', sorted(law.name for law in laws_with_papers()))

@@ -176,7 +176,10 @@ def test_switching_selects_the_model_with_the_smallest_index(train):
 
 
 def test_weighted_weights_are_a_convex_combination_above_the_floor(train):
-    law = WeightedMultipleModelLaw(train, DT)
+    # with fixed models: the recursion concentrates on one of them (with the default adapting
+    # models, on the one that learns the train best, more slowly)
+    law = WeightedMultipleModelLaw(train, DT, WeightedMultipleModelLaw.Settings(
+        adaptive_models=False))
     law.reset(Measurement(0.0, 100.0, 20.0), ReferencePoint(0.0, 100.0, 20.0, 0.0), None)
     assert law.weights == pytest.approx(np.full(5, 0.2))   # equal initial weights
     drive(law, 400)

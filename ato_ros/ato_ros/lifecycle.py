@@ -10,12 +10,14 @@ import os
 import signal
 import sys
 import textwrap
+import time
 from typing import Callable, Iterable, Sequence
 
 import rclpy
 import rclpy.exceptions
 import rclpy.signals
 
+from ato_common.commands import ros_command
 from ato_ros.publishing import shared_step_recorders
 
 
@@ -47,6 +49,13 @@ def freeze_startup_objects() -> None:
 # context takes longer than this (a rare middleware hang), every thread's Python stack is written
 # to stderr and the process exits with code 1, instead of waiting for its supervisor's SIGKILL.
 TEARDOWN_LIMIT_S = 5.0
+# A node told to stop (SIGINT, SIGTERM) is gone within this much wall time: a launch escalates
+# SIGINT to SIGTERM after 5 s (``sigterm_timeout``) and logs it as an error. Closing the outputs
+# (the plant's wait for its last messages' acknowledgement, ``final_delivery_timeout_s``) takes
+# its part first; the teardown gets what is left, at least ``LEAST_TEARDOWN_S`` (a teardown
+# takes a few tenths of a second).
+STOP_BUDGET_S = 4.0
+LEAST_TEARDOWN_S = 1.0
 
 
 class RunNodeHooks:
@@ -72,13 +81,25 @@ class RunNodeHooks:
         """Nothing to close by default."""
 
 
-def tear_down(executor, node: RunNodeHooks | Sequence[RunNodeHooks]) -> None:
+def teardown_limit_s(stopped_at: float | None) -> float:
+    """The time the teardown may take: ``TEARDOWN_LIMIT_S`` for a node that ended by itself,
+    what is left of ``STOP_BUDGET_S`` (at least ``LEAST_TEARDOWN_S``) for one told to stop at
+    ``stopped_at`` (``time.monotonic()``)."""
+    if stopped_at is None:
+        return TEARDOWN_LIMIT_S
+    left = STOP_BUDGET_S - (time.monotonic() - stopped_at)
+    return min(TEARDOWN_LIMIT_S, max(LEAST_TEARDOWN_S, left))
+
+
+def tear_down(executor, node: RunNodeHooks | Sequence[RunNodeHooks],
+              limit_s: float | None = None) -> None:
     """Shut the executor down (it lets go of every entity while the context is still valid),
-    then destroy the node (or each of the nodes), within ``TEARDOWN_LIMIT_S``: past it,
-    faulthandler writes every thread's stack to stderr and the process exits with code 1. The
-    caller shuts rclpy down."""
-    faulthandler.dump_traceback_later(TEARDOWN_LIMIT_S, exit=True)
-    executor.shutdown(timeout_sec=TEARDOWN_LIMIT_S)
+    then destroy the node (or each of the nodes), within ``limit_s`` (default
+    ``TEARDOWN_LIMIT_S``): past it, faulthandler writes every thread's stack to stderr and the
+    process exits with code 1. The caller shuts rclpy down."""
+    limit_s = TEARDOWN_LIMIT_S if limit_s is None else limit_s
+    faulthandler.dump_traceback_later(limit_s, exit=True)
+    executor.shutdown(timeout_sec=limit_s)
     for each in (node if isinstance(node, (list, tuple)) else (node,)):
         each.destroy_node()
 
@@ -94,7 +115,8 @@ def node_usage(package: str, executable: str, doc: str | None, params: Iterable)
     """``--help`` of a node: how to start it, the first paragraph of its module docstring and
     every declared parameter (:class:`ato_ros.params.Param`) with its type, default, range or
     valid values, whether it may change at run time, and its description."""
-    lines = [f'usage: ros2 run {package} {executable} [-h] [--ros-args -p NAME:=VALUE ...]', '']
+    lines = [f'usage: {ros_command(f"run {package} {executable}")} [-h] '
+             '[--ros-args -p NAME:=VALUE ...]', '']
     summary = (doc or '').strip().split('\n\n')[0]
     lines += [textwrap.fill(' '.join(summary.split()), 100), '', 'parameters:']
     for p in params:
@@ -120,7 +142,8 @@ def run_node(make_node: Callable[[], RunNodeHooks], args=None,
     object is a TypeError naming its class.
 
     Teardown order: the node's own outputs first (``node.close_outputs()``, e.g. the recorder's
-    file, with no time limit), then, within ``TEARDOWN_LIMIT_S``, the executor (it lets go of
+    file, with no time limit), then, within ``TEARDOWN_LIMIT_S`` (a node told to stop: what is
+    left of ``STOP_BUDGET_S``, :func:`teardown_limit_s`), the executor (it lets go of
     every entity while the context is still valid), the node, the context.
 
     ``usage``: the text ``-h``/``--help`` prints (then the node exits 0 without starting)."""
@@ -163,10 +186,11 @@ def run_nodes(makers: Sequence[Callable[[], RunNodeHooks]], args=None,
         return 0
     faulthandler.enable()  # a fatal signal or SIGABRT writes every thread's stack to stderr
     rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    stop = {'requested': False}
+    stop: dict[str, float | None] = {'at': None}  # when a stop was asked for
 
     def on_signal(signum, frame):
-        stop['requested'] = True
+        if stop['at'] is None:
+            stop['at'] = time.monotonic()
 
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
@@ -177,13 +201,15 @@ def run_nodes(makers: Sequence[Callable[[], RunNodeHooks]], args=None,
         executor = make_executor()
         for node in nodes:
             executor.add_node(node)
-        while rclpy.ok() and not stop['requested'] and not any(n.finished for n in nodes):
+        while rclpy.ok() and stop['at'] is None and not any(n.finished for n in nodes):
             executor.spin_once(timeout_sec=0.05)
+        stopped_at = stop['at']
+        reason = '' if stopped_at is None else ' on signal'
         for node in nodes:
-            node.get_logger().info('shutting down' + (' on signal' if stop['requested'] else ''))
+            node.get_logger().info('shutting down' + reason)
         for node in nodes:
             node.close_outputs()
-        tear_down(executor, nodes)
+        tear_down(executor, nodes, teardown_limit_s(stopped_at))
         return next((int(n.exit_code) for n in nodes if n.exit_code), 0)
     finally:
         if rclpy.ok():

@@ -35,19 +35,27 @@ def failed_measurement(law: str, scenario: Scenario, model: str) -> str:
 FASTER_RATES_HZ = (200.0, 1000.0, 10000.0)
 
 
-def applicable_rate(law: str, scenario: Scenario) -> tuple[float | None, str]:
+def measured_cars(scenario: Scenario, model: str) -> int:
+    """The cars whose measurements a plant of ``model`` publishes for ``scenario``."""
+    return len(scenario.train.cars) if model == 'multi_car' else 1
+
+
+def applicable_rate(law: str, scenario: Scenario, model: str | None = None,
+                    rate_hz: float | None = None) -> tuple[float | None, str]:
     """(control rate, '') at which ``law`` runs on ``scenario``: the scenario's, else the first
-    of FASTER_RATES_HZ its sampled-time design accepts; (None, reason) if it does not apply."""
+    of FASTER_RATES_HZ its sampled-time design accepts; (None, reason) if it does not apply.
+    ``model``: the plant model the law is given (default the scenario's, ``plant_model_for``);
+    ``rate_hz``: a rate asked for, the only one tried."""
     knowledge = knowledge_of(scenario)
-    model = plant_model_for(scenario)
-    cars = len(scenario.train.cars) if model == 'multi_car' else 1
-    rate = scenario.run.controller_rate_hz
+    model = model or plant_model_for(scenario)
+    cars = measured_cars(scenario, model)
+    rate = rate_hz or scenario.run.controller_rate_hz
     failed = failed_measurement(law, scenario, model)
     if failed:
         return None, failed
     reason = LAWS[law](knowledge, 1.0 / rate).fits(knowledge, cars)
-    if not reason:
-        return rate, ''
+    if not reason or rate_hz:
+        return (None, reason) if reason else (rate, '')
     for faster in FASTER_RATES_HZ:
         if faster > rate and not LAWS[law](knowledge, 1.0 / faster).fits(knowledge, cars):
             return faster, ''

@@ -97,7 +97,8 @@ def test_no_train_brakes_beyond_its_bound_in_the_plant_planner_and_supervision(t
         sim.advance(PERIOD_NS)
     sim.command_missed()
     assert sim.emergency_brake
-    assert sim.emergency_brake_share(sim.time_s) * len(sim.actuator_names) == pytest.approx(
+    share = sim.actuators.emergency_brake_share(sim.time_s)
+    assert share * len(sim.actuator_names) == pytest.approx(
         -traction.max_emergency_brake_force_n, rel=1e-12)
     deceleration, lost = braking_deceleration_measured(sim)
     assert 0.0 < deceleration <= bound * (1 + 1e-9), (deceleration, bound)

@@ -22,7 +22,7 @@ import time
 import numpy as np
 import pytest
 
-from ato_common.evidence import Claim, record
+from ato_common.evidence import NOT_COMPARABLE, Claim, incomparable, record
 from ato_common.plant_setup import parse_plant_setup
 from ato_common.scenario import load_scenario
 from ato_simulation.loop import run_offline
@@ -102,15 +102,26 @@ def test_errors_reach_the_order_of_table_3_value_10(run):
     assert measured['v - v_hat'] > 1e-4
     assert run.estimate('resistance_hat_mps2')[-1] > 0.05
     above = [k for k, v in measured.items() if v > PAPER[k]]
+    # figures more than 10x apart (either way) say nothing about the paper's: the equations
+    # are reconstructions and the trip is cut and built, not the paper's GA-optimised one
+    far = incomparable(PAPER, measured)
+    if far:
+        verdict = NOT_COMPARABLE
+        reason = ('; '.join(f'{k} {ratio:.2g}x the paper\'s' for k, ratio in far.items())
+                  + ': more than 10x apart, a reconstructed law on a cut and rebuilt trip')
+    elif above:
+        verdict, reason = 'partly reproduced', (
+            f'of the same order, but {", ".join(above)} above the paper\'s (a cut of the trip; '
+            'the equations are reconstructions)')
+    else:
+        verdict, reason = 'reproduced', ''
     record(Claim(
         'liu_li', 'Table 3 (Value 10) / Table 4 (fast): RMS observer and tracking errors',
         ', '.join(f'{k} {v:.3g}' for k, v in PAPER.items()),
         ', '.join(f'{k} {v:.3g}' for k, v in measured.items()),
         f'liu_li_2020 [REC], speed sensor failed (position only), the reconstructed varying '
         f'resistance and fast disturbance, {RATE_HZ:g} Hz, the first {CUT_S:g} s of the trip',
-        'partly reproduced' if above else 'reproduced',
-        (f'of the same order, but {", ".join(above)} above the paper\'s (a cut of the trip; '
-         'the equations are reconstructions)') if above else ''))
+        verdict, reason))
 
 
 def perfect_tracking_energy_kwh(run):

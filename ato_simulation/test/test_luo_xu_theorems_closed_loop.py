@@ -30,7 +30,8 @@ def luo_xu_crh3(varying: bool, name: str = 'luo_xu_crh3'):
 def run_law(scenario, law, settings=None, rate_hz=None):
     """(times, |z1|, distance of theta_hat to S's centre in units of its radius, mass_hat, run);
     the settings' defaults are the paper's gains, exactly in SI."""
-    run = run_offline(scenario, law, settings={law: settings or {}}, controller_rate_hz=rate_hz)
+    run = run_offline(scenario, law, settings={law: settings or {}}, controller_rate_hz=rate_hz,
+                      envelope=False)
     probe = LuoXuProjectionLaw(TrainKnowledge.of(scenario.train), 0.1)
     thetas = zip(run.estimate('c0_hat_mps2'), run.estimate('cv_hat_per_s'),
                  run.estimate('ca_hat_per_m'))
@@ -38,8 +39,10 @@ def run_law(scenario, law, settings=None, rate_hz=None):
     return run.times_s, np.abs(run.estimate('z1_m')), distance, run.estimate('mass_hat_kg'), run
 
 
-PAPER_SETUP = ("the paper's Gamma = diag(1e4, 1, 0.01) exactly in SI, gamma = 1e5, implicit "
-               "integration of (16)/(24), augmented error under the traction limit")
+PAPER_SETUP = ("the law as printed (varphi as printed), Table 1's gamma = 1e5 and "
+               "Gamma = diag(1e4, 1, 0.01) exactly in SI (gamma 1e8 kg s^2/m^2 with m in kg), "
+               "implicit integration of (16)/(24), augmented error under the traction limit, "
+               "the host's ATO envelope off")
 
 
 def test_theorem1_on_luo_xu_crh3_error_converges_and_estimates_stay_bounded():
@@ -47,7 +50,7 @@ def test_theorem1_on_luo_xu_crh3_error_converges_and_estimates_stay_bounded():
     times, z1, distance, mass, run = run_law(scenario, 'luo_xu')
     nominal = scenario.train.mass_kg
     last = z1[times > times[-1] - 300.0].max()
-    # measured: max |z1| 0.85 cm (grades are unmodelled), 0.83 cm over the last 300 s
+    # measured: max |z1| 1.9 cm (grades are unmodelled), 1.5 cm over the last 300 s
     assert z1.max() < 0.03
     assert last < 0.02
     assert 0.7 * nominal <= mass.min() and mass.max() <= 1.5 * nominal
@@ -72,10 +75,11 @@ def test_paper_gains_at_10_hz_need_the_implicit_step_and_the_augmented_error():
     z1_euler = run_law(scenario, 'luo_xu', {'forward_euler': True})[1]
     z1_frozen = run_law(scenario, 'luo_xu', {'freeze_under_saturation': True})[1]
     assert z1_ok.max() < 0.03
-    assert z1_euler.max() > 10.0 and z1_frozen.max() > 10.0   # measured 6.9e2 m and 4.7e2 m
+    assert z1_euler.max() > 10.0 and z1_frozen.max() > 10.0   # measured 7e4 m and 7e3 m
     record(Claim(
         'luo_xu', "Table 1's gains run the law at the node's rate",
-        'Gamma = diag(1e4, 1, 0.01), gamma = 1e5 (continuous time, no limits)',
+        'Gamma = diag(1e4, 1, 0.01), gamma = 1e5, the printed varphi (continuous time, no '
+        'limits)',
         f'max |z1| {z1_ok.max() * 100:.2f} cm; forward Euler {z1_euler.max():.0f} m; freezing '
         f'under saturation {z1_frozen.max():.0f} m',
         'luo_xu_crh3, 10 Hz, constant Davis, the paper\'s gains exactly in SI',
@@ -87,7 +91,7 @@ def test_theorem2_under_eq34_keeps_estimates_in_S_and_error_in_a_small_residual_
     times, z1, distance, mass, _ = run_law(luo_xu_crh3(varying=True), 'luo_xu_projection')
     last = z1[times > times[-1] - 300.0].max()
     assert distance.max() <= 1.0 + 1e-9
-    # residual set: measured max |z1| 6.2 cm, 1.1 cm over the last 300 s
+    # residual set: measured max |z1| 12.7 cm, 0.7 cm over the last 300 s
     assert z1.max() < 0.15
     assert last < 0.03
     record(Claim(
@@ -103,20 +107,20 @@ def test_theorem2_under_eq34_keeps_estimates_in_S_and_error_in_a_small_residual_
 def test_section43_on_the_level_line_unprojected_estimates_leave_S_projected_stay():
     """Section 4.3's argument on the paper's own set-up: a level line (its model has no grades),
     the printed varphi, the paper's gains, the mass estimate starting 20 % above the truth. The
-    unprojected estimates (Theorem 1's law) leave S far behind; Theorem 2's stay in S. The same
-    unprojected run with constant resistance drifts as far, and at 100 Hz as at 10 Hz: what
-    drives the drift is the mass error traded against theta along a reference that excites
-    one direction at a time, not the variation (34), and not the sampling."""
-    settings = {'printed_varphi': True, 'initial_mass_ratio': 1.2}
+    unprojected estimates (Theorem 1's law) leave S; Theorem 2's stay in S. The same unprojected
+    run with constant resistance drifts as far, and at 100 Hz far less: what drives the drift
+    is the 10 Hz sampling of the fast mass adaptation (gamma = 1e8 kg s^2/m^2 in SI, a loop at
+    about 2 rad/s damped by c2 alone), not the variation (34)."""
+    settings = {'initial_mass_ratio': 1.2}
     varying, constant = (luo_xu_crh3(v, 'luo_xu_crh3_flat') for v in (True, False))
     times, z1_p, dist_p, mass_p, _ = run_law(varying, 'luo_xu_projection', settings)
     _, z1_u, dist_u, _, _ = run_law(varying, 'luo_xu', settings)
     dist_c = run_law(constant, 'luo_xu', settings)[2]
     dist_fast = run_law(varying, 'luo_xu', settings, rate_hz=100.0)[2]
     assert dist_p.max() <= 1.0 + 1e-9
-    assert dist_u.max() > 10.0                       # measured 72x the radius of S
+    assert dist_u.max() > 2.0                        # measured 3.7x the radius of S
     assert 0.8 < dist_c.max() / dist_u.max() < 1.25   # the same without (34)
-    assert 0.9 < dist_fast.max() / dist_u.max() < 1.1  # the same at 100 Hz
+    assert dist_fast.max() / dist_u.max() < 0.5       # far less at 100 Hz (measured 1.2x)
     last = times > times[-1] - 300.0
     record(Claim(
         'luo_xu', 'Section 4.3: without the projection the estimates drift under (34); with it '
@@ -129,5 +133,5 @@ def test_section43_on_the_level_line_unprojected_estimates_leave_S_projected_sta
         "luo_xu_crh3_flat (level, as the paper's model), eq (34), printed varphi, m_hat(0) = "
         f'1.2 m, 10 Hz, {PAPER_SETUP}',
         'partly reproduced', 'the unprojected estimates leave S and the projected ones stay in '
-        'it, but the unprojected ones drift as far with constant resistance: the mass error '
-        'traded against theta drives the drift, not the variation (34)'))
+        'it, but the unprojected ones drift as far with constant resistance and far less at '
+        '100 Hz: the sampling of the fast mass law drives the drift, not the variation (34)'))

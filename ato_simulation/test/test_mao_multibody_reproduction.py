@@ -17,7 +17,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from ato_common.evidence import Claim, record
+from ato_common.evidence import SUITE_EXTENSION, Claim, record
 from ato_common.knowledge import knowledge_of
 from ato_common.scenario import load_scenario
 from ato_controller_node.laws.mao_multibody import true_parameters
@@ -148,8 +148,9 @@ def test_internal_force_drifts_without_regulation_and_is_held_with_it():
         f'({internal["paper"] / 1000:.0f} kN); regulated {x5["regulated"][-1]:.2e} m '
         f'({internal["regulated"] / 1000:.0f} kN), returning at {slope["regulated"]:.1e} m/s',
         f'mao_4car, 10 kHz, limits lifted, first {end:g} s from rest, kappa 1 1/s',
-        'partly reproduced',
-        'the paper\'s design leaves this mode unregulated (it drifts with the history of '
+        SUITE_EXTENSION,
+        'the regulation is the suite\'s option; the paper\'s design leaves this mode '
+        'unregulated (it drifts with the history of '
         'v1 - v3); the regulation bounds it but only as fast as the adaptive loops track, '
         'whose transient errors (~3e-3 m/s) exceed kappa times the deviation'))
 
@@ -175,8 +176,9 @@ def test_under_the_preset_limits_the_regulation_does_not_prevent_divergence():
         'regulation of the internal force', 'no actuator limits in the paper',
         f'peak speed error within {end:g} s: {peaks["paper"]:.2f} m/s (paper\'s design), '
         f'{peaks["regulated"]:.2f} m/s (regulated, kappa 5 1/s)',
-        f'mao_4car with its limits, 10 kHz, first {end:g} s from rest', 'not reproduced',
-        'car 3 saturates at about 4.5 s during the adaptive transient (the loops\' errors of '
+        f'mao_4car with its limits, 10 kHz, first {end:g} s from rest', SUITE_EXTENSION,
+        'the paper has no actuator limits; car 3 saturates at about 4.5 s during the adaptive '
+        'transient (the loops\' errors of '
         '~3e-3 m/s dominate the regulation), the adaptation freezes and the feedback '
         'linearisation, which cancels the coupler dynamics, no longer holds: at onboard '
         'limits use mao_multibody_rigid'))
@@ -197,8 +199,9 @@ def test_sampled_at_1_khz_the_same_law_goes_unstable():
         'continuous time (not discussed)',
         f'at 1 kHz the forces reach the actuator limit and the speed error '
         f'{np.abs(slow_errors).max():.3f} m/s within 1 s',
-        'mao_4car with its limits, 1 kHz', 'not reproduced',
-        'the feedback linearisation cancels the coupler zero at -k1/d1 = -1e4 1/s: it needs '
+        'mao_4car with its limits, 1 kHz', SUITE_EXTENSION,
+        'the paper designs in continuous time; the feedback linearisation cancels the '
+        'coupler zero at -k1/d1 = -1e4 1/s: it needs '
         'periods under about 1e-4 s, so it cannot run at a controller node\'s rate'))
     # ...and the errors exceed the 10 kHz run's peak (6.6e-3 m/s) several times
     errors = slow.car_speeds[:, [0, 2]] - slow.ref_speeds[:, None]
@@ -241,7 +244,8 @@ def test_rigid_coupler_reduction_runs_at_onboard_rates_with_the_limits(rate_hz):
         + ', '.join(f'{k} {v:+.3f} m' for k, v in stops.items())
         + f'; couplers within {np.abs(extensions).max():.1e} m',
         f'mao_4car, the multi-car plant, the preset\'s actuator limits, the whole run, '
-        f'{rate_hz:g} Hz', 'partly reproduced',
-        'the paper\'s feedback linearisation needs 10 kHz; its singular-perturbation reduction '
+        f'{rate_hz:g} Hz', SUITE_EXTENSION,
+        'the reduction is the suite\'s law: the paper\'s feedback linearisation needs 10 kHz; '
+        'its singular-perturbation reduction '
         'tracks at onboard rates, with the couplers at quasi-static extension instead of '
         'regulated individually'))

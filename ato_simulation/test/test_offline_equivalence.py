@@ -24,7 +24,7 @@ from ato_controller_node.laws import LAWS
 from ato_simulation import loop as offline
 from ato_simulation.applies import applicable_rate, plant_model_for
 from ato_simulation.loop import OfflineRun, run_offline
-from ato_simulation.plans import run_end_time_s
+from ato_simulation.plans import JourneyEnd, late_readings, run_end_time_s, stop_samples
 from profile_node.planner import plan_reference
 from profile_node.replan import Replanner
 from train_plant_node.simulation import NORMAL, SensorSettings, TrainSimulation
@@ -37,7 +37,8 @@ def reference_run(scenario, controller='pid', settings=None, switches=None,
                   sensors=SensorSettings(), model='point_mass', end_time_s=None,
                   controller_rate_hz=None, uncertainty=None, **model_options) -> OfflineRun:
     """``run_offline`` before the optimisation, verbatim but for the names (with the
-    timetable's replanning, which came at the same time)."""
+    timetable's replanning, which came at the same time, and the journey's end, which came
+    later)."""
     plan = plan_reference(scenario)
     replanner = Replanner(scenario, plan)
     period_ns = nanoseconds(1.0 / (controller_rate_hz or scenario.run.controller_rate_hz))
@@ -53,7 +54,22 @@ def reference_run(scenario, controller='pid', settings=None, switches=None,
     saturated = []
     atp_times = []
     step = 0
-    while step <= steps:
+
+    def go_on() -> bool:
+        """At the last step: the journey's end (ato_simulation.plans.JourneyEnd) says whether
+        the run goes on, from the lead car's truth so far."""
+        nonlocal steps
+        journey = None if end_time_s is not None else JourneyEnd.of(scenario, plan,
+                                                                      replanner.plan)
+        if journey is None:
+            return False
+        left = journey.remaining_s(*([row[i] for row in rows] for i in range(3)))
+        more = min(steps + math.ceil(left * 1e9 / period_ns - 1e-6),
+                   int(journey.limit_s * 1e9 // period_ns))
+        steps, longer = max(steps, more), more > steps
+        return longer
+
+    while step <= steps or go_on():
         step += 1
         t = sim.time_s
         while pending and pending[0][0] <= t:
@@ -62,7 +78,8 @@ def reference_run(scenario, controller='pid', settings=None, switches=None,
         measured = sim.measured(truth)
         if replanner.active and replanner.update(t, measured.positions[0],
                                                  measured.speeds[0]) and end_time_s is None:
-            steps = max(steps, int(run_end_time_s(scenario, replanner.plan) * 1e9 // period_ns))
+            steps = max(steps, int(JourneyEnd.of(scenario, plan, replanner.plan).planned_s
+                                   * 1e9 // period_ns))
         reference = replanner.plan.trajectory.at(t)
         measurement = host.measurement(t, measured)
         result = host.step(measurement, reference)
@@ -83,10 +100,16 @@ def reference_run(scenario, controller='pid', settings=None, switches=None,
         if sim.atp_interventions > interventions:
             atp_times.append(sim.time_s)
     data = np.array(rows)
-    return OfflineRun(scenario, plan, *data.T, np.array(car_positions), np.array(car_speeds),
-                      np.array(actuator_forces), np.array(step_times), laws, estimates, faults,
-                      sim.atp_interventions, watchdog_events, np.array(saturated, dtype=bool),
-                      tuple(atp_times), tuple(p for _, p in replanner.history))
+    run = OfflineRun(scenario, plan, *data.T, np.array(car_positions), np.array(car_speeds),
+                     np.array(actuator_forces), np.array(step_times), laws, estimates, faults,
+                     sim.atp_interventions, watchdog_events, np.array(saturated, dtype=bool),
+                     tuple(atp_times), tuple(p for _, p in replanner.history),
+                     None if end_time_s is not None else JourneyEnd.of(scenario, plan,
+                                                                        replanner.plan))
+    if run.extended:
+        run.late_readings = late_readings(stop_samples(run.plan, run.replans), run.times_s,
+                                          run.positions, run.speeds, scenario.train.length_m)
+    return run
 
 
 ARRAYS = ('times_s', 'positions', 'speeds', 'forces', 'ref_positions', 'ref_speeds',

@@ -7,6 +7,7 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -15,12 +16,19 @@ from ato_common.run_events import (
     ATP,
     EVENTS_EXIT_CODE,
     JOURNEY,
+    LATE_AFTER_S,
     PLANT_STATUS,
+    STATUSES,
     STOP,
     WATCHDOG,
+    RunEvents,
+    arrival_times,
     exit_code,
     journey_events,
+    late_arrivals,
+    merge,
     plant_atp_events,
+    run_status,
     safety_events,
     stop_events,
 )
@@ -115,11 +123,16 @@ def test_journey_windows_missed_by_the_run_are_events(tmp_path):
 
 
 def test_the_offline_events_are_the_interventions_the_plant_made():
-    """A drive stuck at full traction from 60 to 200 s: the plant's ATP brakes, releases at the
-    permitted speed and brakes again; the offline run's events are exactly those."""
+    """A drive stuck at full traction from 60 to 200 s: the plant's ATP brakes and holds its
+    brake while the train interface reports the faulty drive, then releases it; the offline
+    run's events are exactly those."""
     run = run_offline_loop(parse_scenario(yaml.safe_load(STUCK), 'stuck.yaml'), 'pid',
                            end_time_s=300.0)
-    assert run.atp_interventions >= 2
+    assert run.atp_interventions == 1
+    # held to standstill until the fault ends at 200 s, then driven on
+    standing = (run.times_s > run.atp_times_s[0] + 60.0) & (run.times_s < 199.0)
+    assert standing.any() and np.all(run.speeds[standing] == 0.0)
+    assert run.speeds[-1] > 1.0
     assert len(run.atp_times_s) == run.atp_interventions
     assert list(run.atp_times_s) == sorted(run.atp_times_s)
     assert 60.0 < run.atp_times_s[0] < 200.0
@@ -170,3 +183,39 @@ def test_the_offline_command_runs_a_clean_file_and_refuses_bad_input(tmp_path, c
     with pytest.raises(SystemExit):
         run_offline.parse_args(['--stop-tolerance', 'nan'])
 
+
+
+def test_an_arrival_is_the_start_of_the_last_standstill_at_the_stop():
+    # stands 150 m short at 100 s (within its 200 m length), creeps on, stands at the stop
+    # from 130 s; never stands at C
+    times = [0.0, 90.0, 100.0, 110.0, 120.0, 130.0, 140.0, 150.0]
+    positions = [0.0, 9000.0, 9850.0, 9850.0, 9990.0, 10000.0, 10000.0, 15000.0]
+    speeds = [0.0, 20.0, 0.0, 0.0, 1.0, 0.0, 0.0, 30.0]
+    stops = [('B', 10000.0, 120.0), ('C', 20000.0, 300.0)]
+    assert arrival_times(stops, times, positions, speeds, 200.0) == {'B': 130.0, 'C': None}
+    # the timetable's arrival at B is 120 s: 10 s late is late, 9 s is not
+    assert late_arrivals(stops, times, positions, speeds, 200.0) == [('B', 10.0)]
+    assert late_arrivals([('B', 10000.0, 121.0)], times, positions, speeds, 200.0) == []
+    assert LATE_AFTER_S == 10.0
+
+
+def test_a_run_is_ok_only_when_clean_and_its_status_names_the_most_serious():
+    clean = merge(RunEvents((), {ATP: 0}), RunEvents((), {STOP: 0}))
+    assert run_status(clean) == ('ok', '')
+    atp = plant_atp_events([103.4, 150.0])
+    stops = stop_events(RunMetrics(10, 100.0, 0, 0, 0, 0, {'B': 0.8}, 1.0),
+                        [('B', 10000.0, 120.0)])
+    events = merge(atp, stops)
+    status, reason = run_status(events, late=[('B', 12.5)])
+    assert status == 'ATP intervention'
+    assert reason == ('2 ATP interventions (first at 103.4 s); 1 stop errors (first at '
+                      '120.0 s); late: B 12.5 s after the timetable (late from 10 s)')
+    assert run_status(stops, late=[('B', 12.5)])[0] == 'stop error'
+    assert run_status(clean, late=[('B', 12.5)])[0] == 'late'
+    assert run_status(clean, held=['nan force', 'nan force']) == (
+        'faults', '2 steps held: nan force')
+    status, reason = run_status(events, unfinished='stands 3 km short of C')
+    assert status == 'did not finish' and reason.startswith(
+        'did not finish: stands 3 km short of C; 2 ATP interventions')
+    assert STATUSES.index('did not finish') < STATUSES.index('ATP intervention') < \
+        STATUSES.index('stop error') < STATUSES.index('late') < STATUSES.index('ok')

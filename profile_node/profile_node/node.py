@@ -185,7 +185,10 @@ class ProfileNode(RunNodeHooks, Node):
             self.start_lockstep_plans()
             # Not spun (a node of its own, on no executor): the measured state is taken from
             # it only at check instants (module docstring), not paid for at every step.
+            # Not renamed by the process's remappings (``-r __node:=...`` renames every node
+            # of a process): a node of its own name, in this node's namespace.
             self.sampler = Node(f'{self.get_name()}_measured_sampler', context=self.context,
+                                namespace=self.get_namespace(), use_global_arguments=False,
                                 start_parameter_services=False)
             self.measured_sub = self.sampler.create_subscription(
                 JointTrajectory, self.resolve_topic_name(topic('state_measured').name),
@@ -395,6 +398,8 @@ class ProfileNode(RunNodeHooks, Node):
 
     def report_decision(self, kind: str, stamp_ns: int, position: float, plan: Plan,
                         start_s: float) -> None:
+        if self.replanner.note:  # an odometer's error placed the train outside the line
+            self.get_logger().warning(self.replanner.note)
         if kind == 'replanned':
             late = self.replanner.replans[-1][1]
             self.get_logger().warning(

@@ -16,6 +16,11 @@ emergency or watchdog brake) gets its leg planned again from where it stands
 (``planner.resume_plan``, issue 13 defect 6). ``Replanner.decide`` makes both decisions, for
 the real-time node (at each measurement) and for the lockstep schedule.
 
+A measured position is the odometer's, and an odometer can err: one that places the train
+outside the line (before its start, past its end) is taken as the nearest end of the line for
+both decisions (``on_line``), and ``Replanner.note`` says so (issue 29: a bias of -200 m made
+the planner fail on an empty stretch of line).
+
 Lockstep (``LockstepPlans``): the measured state is read only at check instants, the first
 control instant at or after each multiple of the check period, and a decision made from the
 state of check instant t_c applies to the references from t_c + ``LAG_PERIODS`` control periods
@@ -83,6 +88,17 @@ def replan_from(scenario: Scenario, plan: Plan, time_s: float, position_m: float
     return plan_timetable(resumed, time_s, (speed_mps, acceleration), targets)
 
 
+def on_line(scenario: Scenario, position_m: float) -> tuple[float, str]:
+    """A measured position on the line: itself, or the nearest end of the line with a note
+    naming the measured position (an odometer's error can place a train outside the line)."""
+    line = scenario.line
+    if 0.0 <= position_m <= line.length_m:
+        return position_m, ''
+    nearest = min(max(position_m, 0.0), line.length_m)
+    return nearest, (f'the measured position {position_m:.1f} m is outside the line '
+                     f'(0 to {line.length_m:g} m): taken as {nearest:g} m')
+
+
 class Replanner:
     """Holds the plan in force and replans it when the train is late (module docstring).
     ``update`` is called with each measurement; it returns the new plan when it replanned."""
@@ -96,6 +112,7 @@ class Replanner:
         self.resumes: list[tuple[float, float]] = []         # (time, position)
         # The timetable's legs, kept across replans (a replan's legs start at the train).
         self.timetable_legs = plan.legs
+        self.note = ''  # the last decision's measured position was outside the line: why
 
     @property
     def active(self) -> bool:
@@ -108,6 +125,7 @@ class Replanner:
         at the measured speed."""
         if not self.active or not (math.isfinite(position_m) and math.isfinite(speed_mps)):
             return None
+        position_m, self.note = on_line(self.scenario, position_m)
         if speed_mps < MOVING_MPS or time_s >= self.plan.stops[-1].arrival_s + self.threshold_s:
             return None
         stop = self.plan.next_stop(time_s)
@@ -138,6 +156,7 @@ class Replanner:
         if not (math.isfinite(position_m) and math.isfinite(speed_mps)) \
                 or abs(speed_mps) > RunSupervision.STANDSTILL_MPS:
             return None
+        position_m, self.note = on_line(self.scenario, position_m)
         if self.plan.trajectory.at(time_s).position - position_m <= RESUME_GAP_M:
             return None
         start_s = time_s if start_s is None else start_s

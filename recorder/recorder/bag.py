@@ -47,6 +47,7 @@ from mcap.records import Channel, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
+from ato_common.commands import ros_command
 from recorder.definitions import DefinitionNotFound, full_definition
 from recorder.rosbag2_format import (
     FormatError,
@@ -109,6 +110,12 @@ DEFAULT_FLUSH_PERIOD_S = 0.5
 DEFAULT_FLUSH_PERIOD_LOG_S = 0.5
 _TOPIC, _LOG_TIME = itemgetter(0), itemgetter(1)
 COMPRESSIONS = {'zstd': MCAPCompression.Zstd, 'lz4': MCAPCompression.Lz4, 'none': None}
+
+
+def recover_command(path) -> str:
+    """What to type to recover ``path``: ``ros2 run recorder recover ...``, or ``ato run ...``
+    where there is no ros2 (ato_common.commands)."""
+    return ros_command(f'run recorder recover {path}')
 
 
 class BagError(RuntimeError):
@@ -267,7 +274,7 @@ class BagWriter:
         reason = _sink_errors.first or _full_disk(self.folder) or _reason(error)
         return BagError(f'cannot write {self.path}: {reason}; the recording stopped. '
                         f'The file holds what was flushed before; it is not a closed bag (no '
-                        f'metadata.yaml): ros2 run recorder recover {self.folder}')
+                        f'metadata.yaml): {recover_command(self.folder)}')
 
     def write(self, topic: str, log_time_ns: int, data: bytes) -> None:
         """Add one message; BagError if the file cannot be written (a full disk)."""
@@ -339,7 +346,7 @@ class BagWriter:
             # the interpreter shuts down.
             self._writer = None
             raise BagError(f'{self.path} could not be finished after a write error: recover '
-                           f'what it holds with: ros2 run recorder recover {self.folder}')
+                           f'what it holds with: {recover_command(self.folder)}')
         self._writer = None
         _fsync(self.path)
         info = self.info()
@@ -438,7 +445,7 @@ def read_messages(path: Path, topics: list[str] | None = None) -> Iterator[BagMe
                 raise _explain(file, error) from None
             if summary is None:
                 raise BagError(f'{file} has no summary section: it was not closed (a killed '
-                               f'recording?); recover it with: ros2 run recorder recover {file}')
+                               f'recording?); recover it with: {recover_command(file)}')
             read = 0
             for schema, channel, message in reader.iter_messages(topics=topics):
                 read += 1
@@ -451,7 +458,7 @@ def read_messages(path: Path, topics: list[str] | None = None) -> Iterator[BagMe
             if read != expected:
                 raise BagError(f'{file} is damaged: {expected - read} of {expected} messages '
                                f'could not be read; recover what it holds with: '
-                               f'ros2 run recorder recover {file}')
+                               f'{recover_command(file)}')
     except BagError:
         raise
     except READ_ERRORS as error:
@@ -470,7 +477,7 @@ def _explain(file: Path, error: Exception) -> BagError:
     if not head.startswith(b'\x89MCAP'):
         return BagError(f'{file} is not an MCAP file (it does not start with the MCAP magic)')
     return BagError(f'{file} ({size} bytes) is truncated or corrupt: {type(error).__name__}: '
-                    f'{error}; recover what it holds with: ros2 run recorder recover {file}')
+                    f'{error}; recover what it holds with: {recover_command(file)}')
 
 
 def bag_info(path: Path) -> BagInfo:
@@ -484,7 +491,7 @@ def bag_info(path: Path) -> BagInfo:
         raise _explain(file, error) from None
     if summary is None or summary.statistics is None:
         raise BagError(f'{file} has no summary: it was not closed; recover it with: '
-                       f'ros2 run recorder recover {file}')
+                       f'{recover_command(file)}')
     stats = summary.statistics
     topics = {channel.topic: topic_of(file, channel, summary.schemas.get(channel.schema_id),
                                       stats.channel_message_counts.get(channel_id, 0))

@@ -33,7 +33,8 @@ GENERATED = ('*Generated from the code by `ato_tools.reference_pages` when the s
 
 
 def _cell(text) -> str:
-    return str(text).replace('|', '\\|').replace('\n', ' ')
+    """A table cell: pipes and square brackets escaped (``[FIX] [-]`` is no reference link)."""
+    return str(text).replace('|', '\\|').replace('[', '\\[').replace('\n', ' ')
 
 
 def law_names() -> list[str]:
@@ -133,14 +134,18 @@ def laws_page() -> str:
         module = inspect.getmodule(law)
         lines += ['', f'## {name}', '', f'`{law.__module__}.{law.__qualname__}`: '
                   f'{_first_paragraph(law.__doc__) or law.summary}', '',
-                  '| setting | default | range | units | description |', '|---|---|---|---|---|']
+                  '| setting | default | range | tuned over | units | description |',
+                  '|---|---|---|---|---|---|']
         for f in setting_fields(law.Settings):
             meta = f.metadata
             valid = '' if isinstance(f.default, bool) else \
                 f'{meta["minimum"]:g} .. {meta["maximum"]:g}'
             default = str(f.default).lower() if isinstance(f.default, bool) else f'{f.default:g}'
-            lines.append(f'| `{f.name}` | `{default}` | {valid} | {_cell(meta["units"])} | '
-                         f'{_cell(meta["description"])} |')
+            admissible = meta.get('admissible')
+            tuned = (f'{admissible[0]:g} .. {admissible[1]:g}'
+                     + (' (log)' if meta.get('scale') == 'log' else '')) if admissible else '-'
+            lines.append(f'| `{f.name}` | `{default}` | {valid} | {tuned} | '
+                         f'{_cell(meta["units"])} | {_cell(meta["description"])} |')
         if module is not None and module.__doc__:
             lines += ['', f'From the module `{module.__name__}`:', '', '```text',
                       inspect.cleandoc(module.__doc__), '```']
@@ -204,8 +209,73 @@ def trains_page() -> str:
     return '\n'.join(lines) + '\n'
 
 
+def _rclcpp_qos(qos) -> str:
+    """A QoS of ``conventions`` as rclcpp writes it."""
+    history = f'rclcpp::KeepLast({qos.depth})' if qos.depth else 'rclcpp::KeepAll()'
+    return (f'rclcpp::QoS({history}).{"reliable" if qos.reliable else "best_effort"}()'
+            f'.{"transient_local" if qos.transient_local else "durability_volatile"}()')
+
+
+def _contract_values() -> dict[str, object]:
+    """The figures the contract's clauses quote: the nodes' parameter defaults and the
+    harness's stop limit."""
+    from ato_bringup.conformance_cases import STOP_LIMIT_S
+    defaults = {p.name: p.default for p in (*PLANT_PARAMS, *NODE_PARAMS)}
+    names = ('resend_period_s', 'command_stamp_tolerance_s', 'stale_after_s',
+             'command_wait_limit_s', 'watchdog_periods', 'emergency_periods')
+    return {**{name: f'{defaults[name]:g}' for name in names}, 'stop_limit_s': f'{STOP_LIMIT_S:g}'}
+
+
+def contract_page() -> str:
+    from ato_common import contract
+    lines = [f'# The ATO node contract, version {contract.CONTRACT_VERSION}', '', GENERATED, '',
+             'What an ATO node of your own honours to drive the suite\'s plant in place of '
+             '`ato_controller_node`, in any language that speaks ROS 2: standard '
+             '`common_interfaces` messages only. `ato conformance --controller-command CMD` '
+             'checks a node against it case by case ([Your own ATO node]'
+             '(../guide/external-ato.md)). A change a conforming node could fail is a new major '
+             'version.', '', '## Topics', '',
+             '| | topic | type | QoS | rclcpp QoS | rate | what for |',
+             '|---|---|---|---|---|---|---|']
+    for role, topics in (('reads', contract.INPUTS), ('publishes', contract.OUTPUTS),
+                         ('may read', contract.OPTIONAL_INPUTS)):
+        for key, why in topics.items():
+            t = TOPICS[key]
+            lines.append(f'| {role} | `{t.name}` | `{t.type_name}` | {t.qos.describe()} | '
+                         f'`{_rclcpp_qos(t.qos)}` | {_cell(t.rate)} | {_cell(why)} |')
+    lines += ['', 'Names without a leading `/` are relative: in a namespace they are under it. '
+              'Subscribe to the per-step streams reliable and keep-all (or deep enough): a '
+              'lockstep step lost is a step the plant waits for.', '']
+    values = _contract_values()
+    for clause in contract.CLAUSES:
+        lines += [f'## {clause.title}', '', clause.text.format(**values), '']
+    lines += ['## The conformance cases', '',
+              '| case | clauses | what the harness does, and what passes |', '|---|---|---|']
+    titles = {c.key: c.title for c in contract.CLAUSES}
+    for name, case in contract.CASES.items():
+        clauses = ', '.join(f'[{titles[k]}](#{titles[k].lower().replace(" ", "-")})'
+                            for k in case.clauses)
+        lines.append(f'| `{name}`: {case.title} | {clauses} | {_cell(case.how)} |')
+    lines += ['', '## In C++ (rclcpp)', '',
+              'The same topics and QoS; the types from `common_interfaces`:', '', '```cpp',
+              '#include <sensor_msgs/msg/joint_state.hpp>          // ato/command',
+              '#include <std_msgs/msg/string.hpp>                  // train/identity',
+              '#include <trajectory_msgs/msg/joint_trajectory.hpp> // state, reference', '']
+    for key in (*contract.INPUTS, *contract.OUTPUTS):
+        t = TOPICS[key]
+        lines.append(f'const auto qos_{key} = {_rclcpp_qos(t.qos)};  // {t.name}')
+    lines += ['```', '',
+              'Declare a `std::string` parameter `scenario`; keep the states and the references '
+              'in maps keyed by `rclcpp::Time(msg.header.stamp).nanoseconds()`, step when a '
+              'stamp is in both, and set the command\'s `header.stamp` to the state\'s. A '
+              'minimal node in Python, written from this page alone: '
+              '`examples/external_ato/p_ato_node.py`.', '']
+    return '\n'.join(lines)
+
+
 #: page path in the site -> generator
 PAGES: dict[str, Callable[[], str]] = {
+    'reference/ato-contract.md': contract_page,
     'reference/topics.md': topics_page,
     'reference/parameters.md': parameters_page,
     'reference/laws.md': laws_page,

@@ -20,7 +20,13 @@ import xml.etree.ElementTree as ElementTree
 from pathlib import Path
 
 from ato_campaigns.provenance import REPOSITORY, results_page_provenance, write_results_page
-from ato_common.evidence import LOG_VARIABLE, read_claims
+from ato_common.evidence import (
+    COMPARABLE_FACTOR,
+    LOG_VARIABLE,
+    NOT_COMPARABLE,
+    SUITE_EXTENSION,
+    read_claims,
+)
 
 #: the test files that record claims, relative to the repository
 REPRODUCTION_TESTS = (
@@ -51,7 +57,13 @@ def page_body(claims: list[dict], failed: list[str]) -> str:
     lines = ['Each row is a claim of a paper as a reproduction test tried it in this run: the '
              "paper's figure, the figure the test measured, the set-up, and the verdict. The "
              'papers are summarised in the [paper notes](../papers/index.md); how each law was '
-             'implemented is in [Control laws](../guide/laws.md).', '']
+             'implemented is in [Control laws](../guide/laws.md).', '',
+             f'Verdicts: reproduced, partly reproduced or not reproduced for a claim of the '
+             f'paper; *{SUITE_EXTENSION}* for a row that tests what the suite adds (an option '
+             'of its own, actuator limits the paper does not have, a continuous-time design '
+             'sampled at an onboard rate), which neither confirms nor refutes the paper; '
+             f'*{NOT_COMPARABLE}* where the suite\'s figures differ from the paper\'s by more '
+             f'than {COMPARABLE_FACTOR:g}x (the set-ups differ too much for a verdict).', '']
     if failed:
         lines += ['**Tests that failed in this run (they recorded nothing):** '
                   + ', '.join(f'`{t}`' for t in failed), '']

@@ -13,7 +13,7 @@ from ato_common.scenario import builtin_scenarios
 from ato_common.trains import TRAIN_PRESETS
 from ato_controller_node.laws import LAWS
 from ato_controller_node.node import NODE_PARAMS, gain_params
-from ato_tools import reference_pages
+from ato_tools import api_pages, reference_pages
 from profile_node.node import PARAMS as PROFILE_PARAMS
 from train_plant_node.node import PARAMS as PLANT_PARAMS
 
@@ -44,8 +44,9 @@ def test_every_page_is_in_the_navigation_and_every_generated_page_too():
     config = yaml.safe_load((ROOT / 'mkdocs.yml').read_text())
     nav = _nav_pages(config['nav'])
     written = sorted(str(p.relative_to(ROOT / 'docs')) for p in (ROOT / 'docs').rglob('*.md'))
-    assert sorted(set(nav) - set(reference_pages.PAGES)) == written
-    assert set(reference_pages.PAGES) <= set(nav)
+    generated = set(reference_pages.PAGES) | set(api_pages.pages())
+    assert sorted(set(nav) - generated) == written
+    assert generated <= set(nav)
 
 
 def test_the_reference_pages_cover_the_code():
@@ -100,3 +101,14 @@ def test_every_file_the_docs_name_exists():
                                                           for t in tracked):
                     missing.append(f'{page.relative_to(ROOT)}:{number}: {path}')
     assert not missing, 'the docs name files that do not exist:\n' + '\n'.join(missing)
+
+
+def test_the_api_reference_has_a_page_per_package_naming_every_public_module():
+    from ato_tools.house import PACKAGES
+    pages = api_pages.pages()
+    assert sorted(pages) == sorted(f'reference/api/{p}.md' for p in PACKAGES)
+    common = pages['reference/api/ato_common.md']
+    assert '::: ato_common.scenario\n' in common and '::: ato_common.units\n' in common
+    assert '::: ato_controller_node.laws.pid\n' in pages['reference/api/ato_controller_node.md']
+    assert not any('._' in line for page in pages.values() for line in page.splitlines()
+                   if line.startswith(':::'))

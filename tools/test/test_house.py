@@ -60,3 +60,17 @@ def test_the_docs_build_fails_on_a_missing_anchor(tmp_path):
     done = _build(site)
     assert done.returncode != 0
     assert 'no_such_law' in done.stdout + done.stderr
+
+
+def test_the_root_license_is_the_one_every_package_declares():
+    """LICENSE is the Apache License 2.0 text, and every package.xml and setup.py says so."""
+    import xml.etree.ElementTree as ElementTree
+
+    from ato_tools.house import PACKAGES
+    text = (ROOT / 'LICENSE').read_text()
+    assert 'Apache License' in text and 'Version 2.0, January 2004' in text
+    assert 'END OF TERMS AND CONDITIONS' in text
+    for package in PACKAGES:
+        declared = ElementTree.parse(ROOT / package / 'package.xml').getroot().findtext('license')
+        assert declared == 'Apache-2.0', f'{package}/package.xml: license {declared!r}'
+        assert "license='Apache-2.0'" in (ROOT / package / 'setup.py').read_text(), package

@@ -98,6 +98,8 @@ ROS_EDGE = {
     'ato_ros.lifecycle', 'ato_ros.messages', 'ato_ros.params', 'ato_ros.publishing',
     'train_plant_node.node', 'profile_node.node', 'ato_controller_node.node', 'recorder.node',
     'recorder.live', 'recorder.replay', 'recorder.ros_io', 'recorder.cli',
+    # each node's executable: it starts the node (ato_ros.interrupts first, then the adapter)
+    'train_plant_node.entry', 'profile_node.entry', 'ato_controller_node.entry',
 }
 ROS_EDGE_PACKAGES = ('ato_bringup',)
 

@@ -114,6 +114,9 @@ def test_the_check_finds_a_list_that_misses_a_law():
 
 
 def test_the_launch_file_offers_every_law():
+    from ato_bringup.launch_arguments import arguments
     launch = (ROOT / 'ato_bringup/launch/ato.launch.py').read_text()
-    assert 'choices=sorted(LAWS)' in launch
-    assert 'from ato_controller_node.laws import LAWS' in launch
+    # its arguments are those of launch_arguments (which ato launch reads too)
+    assert 'from ato_bringup.launch_arguments import' in launch and 'arguments()' in launch
+    (controller,) = [a for a in arguments() if a.name == 'controller']
+    assert controller.choices == tuple(sorted(LAWS))

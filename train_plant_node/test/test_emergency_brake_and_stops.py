@@ -23,7 +23,7 @@ def run_full_traction(sim, seconds, command=None):
         sim.apply_command(command or (FULL,) * n)
         sim.advance(PERIOD_NS)
         x, v = sim.lead_position(), sim.lead_speed()
-        rows.append((x, v, sim.leg, sim.supervision.curve('ebd', x, sim.leg)))
+        rows.append((x, v, sim.atp.leg, sim.supervision.curve('ebd', x, sim.atp.leg)))
     return rows
 
 
@@ -111,7 +111,7 @@ def test_physically_impossible_failure_force_is_refused(force):
     sim = TrainSimulation(s)
     with pytest.raises(FailureRejected, match='force_n'):
         sim.inject_failures([ActuatorFailure('traction', 'stuck', 0.0, force_n=force)])
-    assert sim.failures == []  # nothing injected
+    assert sim.actuators.failures == []  # nothing injected
     with pytest.raises(FailureRejected, match=r'force_n \+ amplitude_n'):
         sim.inject_failures([ActuatorFailure('traction', 'stuck_signal', 0.0, force_n=1e5,
                                              amplitude_n=failure_force_bound(s.train))])
@@ -133,7 +133,7 @@ def test_impossible_failure_in_a_file_is_refused_at_load():
 
 def test_paper_failures_stay_accepted():
     sim = TrainSimulation(load_scenario('mao_2017_modes'))
-    assert len(sim.failures) == 3
+    assert len(sim.actuators.failures) == 3
 
 
 def test_train_maximum_speed_bounds_the_ceiling():
@@ -150,3 +150,57 @@ def test_train_maximum_speed_bounds_the_ceiling():
     assert s.train.max_speed_mps == pytest.approx(350.0 / 3.6)
     assert run.permitted_speed(40000.0) == pytest.approx(350.0 / 3.6)
     assert run.curve('ebi', 40000.0) == pytest.approx((350.0 + 15.0) / 3.6)
+
+
+def test_the_rogue_ato_never_passes_an_end_of_authority_and_dwells_standing():
+    """Issue 29 item 1: with full traction every period the train ended 8 mm past Terminus'
+    EOA after dozens of brake-to-stop hops, and the authority at Midway moved on 30 s after the
+    train first stood in the stop zone, without a continuous standstill. The ATP now checks
+    the cycle ahead at the train's highest acceleration, and a train standing at a stop is held
+    there until its dwell is over."""
+    sim = TrainSimulation(load_scenario('short_line'))
+    run = sim.supervision
+    rows = run_full_traction(sim, 1300)
+    for leg in (0, 1):
+        stopped_before_end_of_authority(rows, run, leg)
+    assert sim.atp.leg == 1 and rows[-1][1] == 0.0  # stands before Terminus' EOA
+    moved_on = next(k for k, row in enumerate(rows) if row[2] == 1)
+    low, high = run.stop_zone(0)
+    dwell = rows[moved_on - int(run.dwell_s(0) * 10):moved_on]
+    assert all(v <= run.STANDSTILL_MPS and low <= x <= high for x, v, *_ in dwell)
+
+
+@pytest.mark.parametrize('force_n, start_s', [(300e3, 0.0), (300e3, 200.0), (100e3, 0.0)])
+def test_a_drive_that_keeps_pushing_keeps_the_emergency_brake_applied(force_n, start_s):
+    """Issue 29 item 1: released at standstill, the brake let a stuck drive push the train on in
+    hops until it ended past the EOA. The brake and the traction cut-off now hold while a drive
+    delivers traction it is not asked for, and let go once the failure is isolated."""
+    s = load_scenario('short_line')
+    sim = TrainSimulation(s)
+    sim.inject_failures([ActuatorFailure('traction', 'stuck', start_s, force_n=force_n)])
+    rows = run_full_traction(sim, 900, command=(0.0,))  # the ATO asks for nothing
+    moving = next(k for k, (x, v, *_) in enumerate(rows) if v > 1.0)
+    stood = next(k for k, (x, v, *_) in enumerate(rows) if k > moving and v == 0.0)
+    assert sim.atp_intervention and sim.atp_interventions == 1
+    assert {round(x, 9) for x, *_ in rows[stood:]} == {round(rows[stood][0], 9)}
+    assert 'traction' in sim.actuators.active(sim.time_s)  # still failed: held
+    sim.inject_failures([], repaired=['traction'])        # isolated: the cause is gone
+    sim.apply_command((0.0,))
+    sim.advance(PERIOD_NS)
+    assert not sim.atp_intervention
+    run_full_traction(sim, 20, command=(100e3,))
+    assert sim.lead_speed() > 0.0   # the ATO drives again
+
+
+def test_a_train_at_a_stop_is_held_until_its_dwell_is_over():
+    """A train that stands at Midway and is asked for traction before its dwell is over (it
+    arrived later than its reference) stays until the dwell is over, then departs."""
+    sim = TrainSimulation(load_scenario('short_line'))
+    run = sim.supervision
+    sim.state = sim.model.initial_state(run.stations_m[1], 0.0)
+    # standing from the first period (braked: Midway lies on a descent), then full traction
+    rows = run_full_traction(sim, 10, command=(-50e3,)) + run_full_traction(sim, 40)
+    moving = [k for k, (x, v, *_) in enumerate(rows) if v > 0.0]
+    # stood from the end of the first period; the dwell is over 30 s later; then it moves
+    assert moving and moving[0] == int(run.dwell_s(0) * 10) + 1
+    assert rows[moving[0]][2] == 1 and not sim.atp_interventions

@@ -39,6 +39,11 @@ def run(sim, seconds, command=None, every=None):
     return out
 
 
+def mode_now(sim):
+    """The index of the plant's mode now."""
+    return sim.setup.mode_index(sim.time_s, sim.lead_position())
+
+
 MAO_FAILURES = [
     {'actuator': 'motor_2', 'kind': 'stuck', 'start_s': 60, 'end_s': 100, 'force_n': 2e5},
     {'actuator': 'motor_2', 'kind': 'stuck_signal', 'start_s': 100, 'end_s': 120,
@@ -83,7 +88,7 @@ def test_partial_loss_scales_traction_and_braking_by_their_own_shares():
     run(sim, 1, (-30e3,) * 4)
     assert sim.applied == (-30e3, -7.5e3, -15e3, -30e3)
     assert sim.truth().forces[0] == pytest.approx(-82.5e3)  # the train feels the sum
-    described = {f.actuator: f.describe() for f in sim.failures}
+    described = {f.actuator: f.describe() for f in sim.actuators.failures}
     assert '0.5 of the healthy traction, 1 of the braking force' in described['motor_1']
     assert '0.5 of the healthy force' in described['motor_3']
 
@@ -124,9 +129,9 @@ def test_run_time_injection_replaces_and_repairs():
     sim.inject_failures([ActuatorFailure('motor_4', 'stuck', sim.time_s, force_n=-5e4)])
     assert sim.applied[3] == -5e4
     run(sim, 5, (20e3,) * 4)
-    assert sim.applied[3] == -5e4 and sim.active_failures()['motor_4'].kind == 'stuck'
+    assert sim.applied[3] == -5e4 and sim.actuators.active(sim.time_s)['motor_4'].kind == 'stuck'
     sim.inject_failures([], repaired=['motor_4'])
-    assert sim.applied == (20e3,) * 4 and not sim.active_failures()
+    assert sim.applied == (20e3,) * 4 and not sim.actuators.active(sim.time_s)
 
 
 def test_modes_switch_at_their_times_and_change_the_dynamics():
@@ -139,7 +144,7 @@ def test_modes_switch_at_their_times_and_change_the_dynamics():
     sim.state = sim.model.initial_state(0.0, 50.0)
     force = 120e3
     trace = run(sim, 100, (force / 4,) * 4,
-                lambda s: (s.time_s, s.mode_index(), s.truth().speeds[0],
+                lambda s: (s.time_s, mode_now(s), s.truth().speeds[0],
                            s.truth().accelerations[0]))
     modes = {round(t, 1): m for t, m, _, _ in trace}
     assert (modes[39.9], modes[40.0], modes[79.9], modes[80.0]) == (0, 1, 1, 2)
@@ -227,7 +232,8 @@ def test_the_traction_limit_applies_after_the_dead_time_at_the_speed_of_then():
     assert speed > 20.0                  # on the power hyperbola
     limit = traction.max_traction_at(speed) / 4
     assert limit < traction.max_traction_at(0.0) / 4   # below the standstill force
-    assert sim.targets() == [pytest.approx(limit, rel=1e-12)] * 4
+    targets = sim.actuators.targets(sim.commanded, sim.level, sim.lead_speed())
+    assert targets == [pytest.approx(limit, rel=1e-12)] * 4
     # the lag follows the limit as it falls with the speed: a little above it
     assert limit < sim.applied[0] < limit * 1.02
 
@@ -241,10 +247,26 @@ def test_odometry_scale_error_reads_speed_and_the_distance_since_the_last_reset(
     assert m.speeds[0] == pytest.approx(20.2) and m.positions[0] == pytest.approx(60.6 + 0.5)
     sim.state = sim.model.initial_state(300.0, 20.0)  # 200 m since the reset at 100 m
     assert sim.measured().positions[0] == pytest.approx(302.0 + 0.5)
-    assert sim.odometer_error(300.0) == pytest.approx(2.5)
-    assert sim._true_position(302.5) == pytest.approx(300.0)
+    assert sim.sensors.position_error(300.0) == pytest.approx(2.5)
     with pytest.raises(ConfigError, match='plant.sensors.position.reset_positions_m'):
         scenario(plant={'sensors': {'position': {'reset_positions_m': ['x']}}})
+
+
+def test_the_measured_position_integrates_the_measured_speed_under_a_bias():
+    """Issue 28 defect 3, the sensors: a speed bias left the measured position unbiased, so
+    the measured position's rate was not the measured speed (the identification of Tan et
+    al.'s laws saw a contradiction). The odometer integrates what it measures: the position
+    drifts by the bias times the time the train moved, and a wheel that stands reads no speed
+    and no drift."""
+    sim = TrainSimulation(scenario(plant={'sensors': {'speed': {'bias': 0.1}}}))
+    standing = run(sim, 5, (0.0,) * 4, lambda s: s.measured())
+    assert all(m.speeds[0] == 0.0 and m.positions[0] == 0.0 for m in standing)
+    trace = run(sim, 60, (50e3,) * 4, lambda s: (s.time_s, s.truth(), s.measured()))
+    for (t0, _, m0), (t1, _, m1) in zip(trace, trace[1:]):
+        rate = (m1.positions[0] - m0.positions[0]) / (t1 - t0)
+        assert rate == pytest.approx(0.5 * (m0.speeds[0] + m1.speeds[0]), abs=2e-3)
+    t, truth, measured = trace[-1]
+    assert measured.positions[0] - truth.positions[0] == pytest.approx(0.1 * (t - 5.0))
 
 
 def test_sensors_bias_quantisation_noise_dropout_and_failed_speed_sensor():
@@ -327,7 +349,7 @@ def test_multi_car_modes_by_region_scale_every_car_and_failures_hit_a_power_car(
         'failures': [{'actuator': 'car_3', 'kind': 'loss', 'start_s': 5}]}
     sim = TrainSimulation(scenario('crh2_4car_mao', plant), 'multi_car')
     sim.state = sim.model.initial_state(0.0, 40.0)
-    trace = run(sim, 30, (12e3, 12e3), lambda s: (s.mode_index(), s.truth(), s.applied))
+    trace = run(sim, 30, (12e3, 12e3), lambda s: (mode_now(s), s.truth(), s.applied))
     assert {m for m, _, _ in trace} == {0, 1, 2}
     cars = sim.scenario.train.cars
     for mode_index, truth, applied in trace:

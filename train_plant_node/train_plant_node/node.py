@@ -7,8 +7,14 @@ while integrating to t_k+1, and publishes again. Until the first command arrives
 waiting for one) it re-publishes the current step every ``resend_period_s`` of wall time, so
 start-up order and DDS discovery do not matter. A step whose command has not come after
 ``command_wait_limit_s`` of wall time (the controller or the profile gone) is reported as a WARN
-in the diagnostics and in the log, again each such period. Real time: the same simulation
-advanced by a wall-clock timer, commands held as they come.
+in the diagnostics and in the log, again each such period. A command stamped for another step
+is dropped and counted, and the plant waits on at its step: the command stamped for it moves
+the loop on (a controller that fell behind or ahead is in step again at once). Real time: the
+same simulation advanced by a wall-clock timer, commands held as they come.
+
+A run whose emergency brake has held for longer than ``emergency_brake_limit_s`` of simulated
+time ends with exit code ``EMERGENCY_BRAKE_HELD`` (3) and the reason, in the log and the
+diagnostics.
 
 The plant publishes the identity of what it simulates, latched (``train/identity``: the
 scenario's name and a hash of the resolved scenario); the controller and the profile refuse to
@@ -68,6 +74,9 @@ from train_plant_node.simulation import (
     control_period_ns,
 )
 
+#: the exit code of a run ended because its emergency brake held beyond emergency_brake_limit_s
+EMERGENCY_BRAKE_HELD = 3
+
 PARAMS = (
     Param('scenario', DEFAULT_SCENARIO, 'built-in scenario name or path to a scenario YAML file'),
     Param('model', 'point_mass', 'plant model', choices=tuple(sorted(MODELS))),
@@ -126,6 +135,9 @@ PARAMS = (
     Param('final_delivery_timeout_s', 5.0, 'at end_time_s: wall time to wait for every matched '
           'subscriber to acknowledge the last step before exiting, s', minimum=0.0,
           maximum=60.0),
+    Param('emergency_brake_limit_s', 300.0, "a run whose emergency brake (the ATP's or the "
+          "watchdog's) has held for longer than this, in s of simulated time, ends with exit "
+          f'code {EMERGENCY_BRAKE_HELD} and the reason (0: no limit)', minimum=0.0, maximum=1e6),
 )
 
 
@@ -140,6 +152,42 @@ class TrainPlantNode(RunNodeHooks, Node):
         self.period_ns = (control_period_ns(rate) if self.lockstep
                           else control_period_ns(p['real_time_rate_hz']))
         self.end_ns = nanoseconds(p['end_time_s'])
+        self.control_period_ns = control_period_ns(rate)
+        self.sim = self._simulation()
+        self._start_state()
+        self._create_outputs()
+        self.recorder_lead = self._recorder_lead()
+        self.identity = scenario_identity(self.scenario)
+        self.publishing(self.identity_pub, String(data=self.identity))
+        self.add_on_set_parameters_callback(self.check_use_sim_time)
+        # Validate in the set callback, apply once the change is accepted (validate-then-apply).
+        self.params.extra_checks.append(self.check_inject_failure)
+        self.add_post_set_parameters_callback(self.apply_parameters)
+        if p['inject_failure']:  # given at start-up: like scenario failures
+            reason = self.check_inject_failure({'inject_failure': p['inject_failure']})
+            if reason:
+                raise ConfigError(reason)
+            self.inject_failure(p['inject_failure'])
+        self.create_subscription(JointState, topic('command').name, self.on_command,
+                                 qos_profile(topic('command').qos), raw=True)
+        # Wall-clock timer: start-up, re-sends in lockstep, integration in real time.
+        self.timer = self.create_timer(
+            0.02 if self.lockstep else 1.0 / p['real_time_rate_hz'], self.on_timer)
+        if not (self.sim.sensors.exact_odometer or self.scenario.line.balise_groups_m):
+            self.get_logger().warning(
+                'the odometer errs (plant.sensors) and the line declares no balise groups: the '
+                "ATP's odometry cannot relocate, so an odometer error beyond its declared "
+                'interval goes unseen by the supervision (declare line.balise_groups)')
+        self.get_logger().info(
+            f"scenario {self.scenario.name} ({self.scenario.origin}), model {p['model']}, "
+            f"{'lockstep at ' + format(rate, 'g') + ' Hz' if self.lockstep else 'real time'}, "
+            f'actuators {list(self.sim.actuator_names)}')
+        freeze_startup_objects()
+
+    def _simulation(self) -> TrainSimulation:
+        """The simulation the parameters ask for; a parameter or scenario it refuses is a
+        ConfigError naming it."""
+        p = self.params
         if p['emergency_periods'] < p['watchdog_periods']:
             raise ConfigError(f"emergency_periods ({p['emergency_periods']}) must not be below "
                               f"watchdog_periods ({p['watchdog_periods']})")
@@ -148,9 +196,8 @@ class TrainPlantNode(RunNodeHooks, Node):
                               'nobody publishes /clock then, so its clock would never advance '
                               'and it would publish nothing; set use_sim_time false (only the '
                               'other nodes of a lockstep run use simulated time)')
-        self.control_period_ns = control_period_ns(rate)
         try:
-            self.sim = TrainSimulation(
+            return TrainSimulation(
                 self.scenario, p['model'],
                 SensorSettings(p['sensor_position_noise_m'], p['sensor_speed_noise_mps'],
                                p['seed']),
@@ -162,6 +209,9 @@ class TrainPlantNode(RunNodeHooks, Node):
             raise ConfigError(f'plant.failures: {error}') from None
         except ValueError as error:  # e.g. multi_car with a train that has no car description
             raise ConfigError(f"model {p['model']}: {error}") from None
+
+    def _start_state(self) -> None:
+        """The node's own state before the first step."""
         self.last_valid_command_wall = time.monotonic()
         self.safety_state = (NORMAL, False)
         self.finished = False
@@ -175,15 +225,19 @@ class TrainPlantNode(RunNodeHooks, Node):
         self.ready_since: float | None = None
         self.wrong_stamp_commands = 0   # dropped for their stamp (lockstep and real time)
         self.last_wrong_stamp = ''      # why the last one was dropped
-        self.publishing = Publishing(self)
         self.failures_reported = 0
         self.step_since_wall = 0.0      # when the current step was first published
         self.waiting_reported_wall = 0.0
         self.waiting = ''               # lockstep: the wait for a command beyond the limit
         self.held_reported_wall = 0.0   # lockstep: a step held for a recorder, last reported
         self.held = ''                  # lockstep: the wait for a recorder beyond the limit
-        self.status_name = status_name(self, 'simulation')
+        self.ended = ''                 # why the run ended before end_time_s ('' if it did not)
 
+    def _create_outputs(self) -> None:
+        """The plant's outputs: the state (true and measured), /clock in lockstep, the
+        actuator forces, diagnostics, the step records and the identity."""
+        self.publishing = Publishing(self)
+        self.status_name = status_name(self, 'simulation')
         self.truth_pub = self.create_publisher(JointTrajectory, topic('state').name,
                                                qos_profile(topic('state').qos))
         self.measured_pub = self.create_publisher(JointTrajectory, topic('state_measured').name,
@@ -203,42 +257,23 @@ class TrainPlantNode(RunNodeHooks, Node):
             self.truth_pub, self.commanded_pub, self.applied_pub))
         # The per-step messages for the recorders, bundled (ato_ros.step_records).
         self.records = step_recorder(self, self.publishing)
-        # Lockstep: a step waits while a recorder has not written the steps more than the lead
-        # before it (back-pressure: what a SIGKILLed recorder loses is bounded).
-        self.recorder_lead = None
-        if self.lockstep and p['recorder_lead_s'] > 0:
-            least = least_lead_s(seconds(self.period_ns))
-            if p['recorder_lead_s'] < least:
-                raise ConfigError(
-                    f"recorder_lead_s {p['recorder_lead_s']:g} s is under the least lead of "
-                    f'this loop, {least:g} s (the step records\' bundle and acknowledgement '
-                    'periods and two control periods: a smaller lead would wait for records no '
-                    'node sends before the next step); give at least that, or 0 not to wait '
-                    'for recorders')
-            self.recorder_lead = RecorderLead(self, p['recorder_lead_s'], self.publish_step)
         self.identity_pub = self.create_publisher(String, topic('identity').name,
                                                   qos_profile(topic('identity').qos))
-        self.identity = scenario_identity(self.scenario)
-        self.publishing(self.identity_pub, String(data=self.identity))
-        self.add_on_set_parameters_callback(self.check_use_sim_time)
-        # Validate in the set callback, apply once the change is accepted (validate-then-apply).
-        self.params.extra_checks.append(self.check_inject_failure)
-        self.add_post_set_parameters_callback(self.apply_parameters)
-        if p['inject_failure']:  # given at start-up: like scenario failures
-            reason = self.check_inject_failure({'inject_failure': p['inject_failure']})
-            if reason:
-                raise ConfigError(reason)
-            self.inject_failure(p['inject_failure'])
-        self.create_subscription(JointState, topic('command').name, self.on_command,
-                                 qos_profile(topic('command').qos), raw=True)
-        # Wall-clock timer: start-up, re-sends in lockstep, integration in real time.
-        self.timer = self.create_timer(
-            0.02 if self.lockstep else 1.0 / p['real_time_rate_hz'], self.on_timer)
-        self.get_logger().info(
-            f"scenario {self.scenario.name} ({self.scenario.origin}), model {p['model']}, "
-            f"{'lockstep at ' + format(rate, 'g') + ' Hz' if self.lockstep else 'real time'}, "
-            f'actuators {list(self.sim.actuator_names)}')
-        freeze_startup_objects()
+
+    def _recorder_lead(self) -> RecorderLead | None:
+        """Lockstep: a step waits while a recorder has not written the steps more than the lead
+        before it (back-pressure: what a SIGKILLed recorder loses is bounded)."""
+        lead_s = self.params['recorder_lead_s']
+        if not (self.lockstep and lead_s > 0):
+            return None
+        least = least_lead_s(seconds(self.period_ns))
+        if lead_s < least:
+            raise ConfigError(
+                f'recorder_lead_s {lead_s:g} s is under the least lead of this loop, {least:g} s '
+                "(the step records' bundle and acknowledgement periods and two control periods: "
+                'a smaller lead would wait for records no node sends before the next step); '
+                'give at least that, or 0 not to wait for recorders')
+        return RecorderLead(self, lead_s, self.publish_step)
 
     # --- time ----------------------------------------------------------------------------------
     def stamp_ns(self) -> int:
@@ -313,17 +348,23 @@ class TrainPlantNode(RunNodeHooks, Node):
 
     def safety_message(self) -> str:
         sim = self.sim
-        if sim.atp_intervention:
-            if not sim.atp_holds_to_standstill:
+        atp, odometry = sim.atp, sim.odometry
+        if atp.emergency_brake:
+            if sim.actuators.failures and sim.actuators.drive_fault(sim.time_s):
+                until = ('a traction drive delivers force it is not asked for: brake and '
+                         'traction cut-off held until the failure is isolated')
+            elif atp.odometry_lost:
+                until = 'the odometry is lost (its position and speed sensors failed)'
+            elif not atp.hold_to_standstill:
                 until = (f'until at or under the permitted '
-                         f'{units.mps_to_kmh(sim.permitted_speed()):.1f} km/h')
-            elif sim.lead_position() < sim.supervision.legs[sim.leg].end_of_authority_m:
+                         f'{units.mps_to_kmh(atp.permitted_speed(odometry)):.1f} km/h')
+            elif odometry.max_safe_front_m < sim.supervision.legs[atp.leg].end_of_authority_m:
                 until = 'until standstill (target-speed monitoring)'
             else:
                 until = 'past the end of authority (trip): until the authority moves on'
             return ('ATP emergency brake intervention: '
-                    f'{units.mps_to_kmh(sim.lead_speed()):.1f} km/h, intervention speed '
-                    f'{units.mps_to_kmh(sim.intervention_speed()):.1f} km/h, {until}')
+                    f'{units.mps_to_kmh(odometry.speed_mps):.1f} km/h, intervention speed '
+                    f'{units.mps_to_kmh(atp.intervention_speed(odometry)):.1f} km/h, {until}')
         if sim.watchdog != NORMAL:
             cause = self.last_rejection or self.last_wrong_stamp
             return (f'command watchdog: {sim.watchdog} after {sim.missed_periods} control '
@@ -371,25 +412,24 @@ class TrainPlantNode(RunNodeHooks, Node):
             failed and f'{failed} publishes failed (last: {self.publishing.last_failure})')
         level = (DiagnosticStatus.ERROR if safety else
                  DiagnosticStatus.WARN if warning else DiagnosticStatus.OK)
+        sim = self.sim
         status = diagnostic_status(
             self.status_name, self.scenario.train.name, level,
-            safety or warning or 'running',
-            {'time_s': self.sim.time_s, 'commanded_n': list(self.sim.commanded),
-             'applied_n': list(self.sim.applied),
-             'rejected_commands': self.sim.rejected_commands,
+            self.ended or safety or warning or 'running',
+            {'time_s': sim.time_s, 'commanded_n': list(sim.commanded),
+             'applied_n': list(sim.applied),
+             'rejected_commands': sim.rejected_commands,
              'wrong_stamp_commands': self.wrong_stamp_commands,
              'last_wrong_stamp': self.last_wrong_stamp or 'none',
-             'supervised_leg': self.sim.leg,
-             'emergency_brake': self.sim.emergency_brake,
+             'emergency_brake': sim.emergency_brake,
+             'emergency_brake_held_s': self.emergency_brake_held_s(),
              'steps_published': self.steps_published,
-             'watchdog': self.sim.watchdog, 'missed_periods': self.sim.missed_periods,
-             'atp_intervention': self.sim.atp_intervention,
-             'atp_interventions': self.sim.atp_interventions,
-             'permitted_speed_mps': self.sim.permitted_speed(),
-             'mode_index': self.sim.mode_index(),
+             'watchdog': sim.watchdog, 'missed_periods': sim.missed_periods,
+             **self.supervision_values(),
+             'mode_index': sim.setup.mode_index(sim.time_s, sim.lead_position()),
              'active_failures': '; '.join(f.describe() for f in
-                                          self.sim.active_failures().values()) or 'none',
-             'scheduled_failures': len(self.sim.failures),
+                                          sim.actuators.active(sim.time_s).values()) or 'none',
+             'scheduled_failures': len(sim.actuators.failures),
              'waiting_for_command_s': (time.monotonic() - self.step_since_wall
                                        if self.waiting else 0.0),
              'held_for_recorder_s': (time.monotonic() - self.recorder_lead.held_since
@@ -400,6 +440,26 @@ class TrainPlantNode(RunNodeHooks, Node):
              'identity': self.identity,
              **self.publishing.values()})
         self.publishing(self.diag_pub, DiagnosticArray(header=self._header(), status=[status]))
+
+    def supervision_values(self) -> dict:
+        """The ATP's and its odometry's state, for the diagnostics."""
+        atp, odometry = self.sim.atp, self.sim.odometry
+        return {'supervised_leg': atp.leg, 'supervision_status': atp.status(odometry),
+                'atp_intervention': atp.emergency_brake,
+                'atp_interventions': atp.interventions,
+                'holding_brake': atp.holding_brake,
+                'permitted_speed_mps': atp.permitted_speed(odometry),
+                'odometry_position_m': odometry.position_m,
+                'odometry_interval_m': odometry.max_safe_front_m - odometry.min_safe_front_m,
+                'odometry_speed_mps': odometry.speed_mps,
+                'odometry_relocations': odometry.relocations,
+                'odometry_last_discrepancy_m': odometry.last_discrepancy_m,
+                'odometry_outside_interval': odometry.outside_interval}
+
+    def emergency_brake_held_s(self) -> float:
+        """How long the emergency brake has been held without a break, s of simulated time."""
+        since = self.sim.actuators.brake_since_s
+        return 0.0 if since is None else self.sim.time_s - since
 
     def _header(self) -> Header:
         return Header(stamp=to_time(self.stamp_ns()))
@@ -491,6 +551,8 @@ class TrainPlantNode(RunNodeHooks, Node):
             steps = min(max(behind_ns // self.period_ns, 1), nanoseconds(1.0) // self.period_ns)
             for _ in range(steps):
                 self.advance()
+                if self.finished:
+                    break
 
     def report_held(self, now: float) -> None:
         """A step held for a recorder beyond command_wait_limit_s is reported (WARN log and
@@ -516,12 +578,15 @@ class TrainPlantNode(RunNodeHooks, Node):
                 return  # the previous step's command again (it answered a re-sent step)
             wrong = self.wrong_stamp(command.stamp_ns)
             if wrong:
+                # Dropped and counted. In lockstep it is no command for this step: the plant
+                # waits on for the one stamped for it (re-sending the step), so a controller
+                # that fell behind or ahead answers the step it is sent and the loop is in
+                # step again; advancing here would leave the gap open for good.
                 self.wrong_stamp_commands += 1
                 self.last_wrong_stamp = wrong
                 self.get_logger().warning(wrong, throttle_duration_sec=1.0)
-                if self.lockstep:  # this step's command was not valid: the watchdog counts it
-                    self.sim.command_missed()
-                    self.advance()
+                if self.lockstep:
+                    self.publish_diagnostics()
                 return
             self.sim.apply_command(command.forces)
             self.last_valid_command_wall = time.monotonic()
@@ -560,6 +625,10 @@ class TrainPlantNode(RunNodeHooks, Node):
     def advance(self) -> None:
         self.sim.advance(self.period_ns)
         self.publish_step()
+        limit = self.params['emergency_brake_limit_s']
+        if limit and self.emergency_brake_held_s() > limit:
+            self.end_on_held_brake(limit)
+            return
         if self.end_ns and self.sim.stamp_ns >= self.end_ns:
             self.publish_diagnostics()
             held = self.recorder_lead
@@ -567,6 +636,20 @@ class TrainPlantNode(RunNodeHooks, Node):
                 f'; {held.steps_held} steps waited {held.held_s:.2f} s of wall time in all for '
                 'the recorders' if held and held.steps_held else ''))
             self.finished = True
+
+    def end_on_held_brake(self, limit_s: float) -> None:
+        """The emergency brake has held longer than ``emergency_brake_limit_s``: the run
+        cannot go on as a run of the ATO, so it ends now with ``EMERGENCY_BRAKE_HELD``, the
+        reason in the log and the diagnostics."""
+        sim = self.sim
+        cause = self.safety_message() or 'emergency brake'
+        self.ended = (f'run ended at t = {sim.time_s:.3f} s: the emergency brake held for '
+                      f'{self.emergency_brake_held_s():.1f} s of simulated time, over the limit '
+                      f'emergency_brake_limit_s {limit_s:g} s ({cause})')
+        self.get_logger().error(self.ended)
+        self.publish_diagnostics()
+        self.exit_code = EMERGENCY_BRAKE_HELD
+        self.finished = True
 
     def close_outputs(self) -> None:
         """The last step (and diagnostics) reach every matched subscriber before the exit."""

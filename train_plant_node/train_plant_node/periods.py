@@ -1,22 +1,22 @@
 """Many control periods of the plant in one compiled call.
 
-``TrainSimulation.run_commands`` (simulation.py) defines the result: for each row of commands,
+:func:`train_plant_node.batch.run_commands` defines the result: for each row of commands,
 ``apply_command`` then ``advance`` by one period, then ``truth``. Per period that path costs
 several microseconds of Python around a compiled physics step of one or two (the actuator
-limits, the ATP's table look-ups, the state snapshot), so a plant driven from Python cannot run
-much faster than 10,000x real time at 10 Hz. These kernels do the same work per period in
-compiled code: the actuator limits (``TrainSimulation.targets``), the integration (the models'
-step kernels), the ATP supervision (``TrainSimulation._supervise`` with ``SampledLimit``
-look-ups) and the truth (the models' ``outputs``), in the same floating-point operations in the
-same order, so that both paths give the same numbers to the last bit (the tests check this).
-The simulation uses them only where that holds: instant actuators, no failure active,
-surroundings constant, one integration step per period, nothing scheduled within the periods.
+limits, the ATP's check, the state snapshot), so a plant driven from Python cannot run much
+faster than 10,000x real time at 10 Hz. These kernels do the same work per period in compiled
+code: the actuator limits (``Actuators.targets``), the integration (the models' step kernels),
+the ATP's anticipated check (``OnboardATP.over_speed`` with ``SampledLimit`` look-ups, on an
+exact odometry) and the truth (the models' ``outputs``), in the same floating-point operations
+in the same order, so that both paths give the same numbers to the last bit (the tests check
+this). The simulation uses them only where that holds (``batch.compiled_periods``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from train_plant_node.atp import ACCELERATION_CAP_MPS2
 from train_plant_node.jit import kernel
 from train_plant_node.models.multi_car import (
     CAR_ACTUATOR,
@@ -87,7 +87,7 @@ def limit_at(leg, offsets, positions, speeds, position):
 @kernel
 def actuator_targets(out, commanded, speed, intervention, max_force_n, max_power_w,
                      emergency_brake_n):
-    """``TrainSimulation.targets`` with the watchdog quiet (every period has a command): each
+    """``Actuators.targets`` with the watchdog quiet (every period has a command): each
     unit's share of the traction characteristic and of the emergency brake; under an
     intervention traction is cut (the kernels stop at its first period, where the emergency
     brake has not built up yet)."""
@@ -106,35 +106,47 @@ def actuator_targets(out, commanded, speed, intervention, max_force_n, max_power
 
 
 @kernel
-def supervise(atp, position, speed, intervention):
-    """``TrainSimulation._supervise`` from a period without an intervention (the kernels stop
-    at the first period of one): (intervention after this period, 1 if one began)."""
-    leg, _low, _high, _standstill, ebi_offsets, ebi_positions, ebi_speeds, _po, _pp, _ps = atp
-    if not intervention and speed > limit_at(leg, ebi_offsets, ebi_positions, ebi_speeds,
-                                             position):
+def supervise(atp, position, speed, previous_speed, period_s, intervention):
+    """``OnboardATP.cycle`` on an exact odometry from a period without an intervention (the
+    kernels stop at the first period of one): ``OnboardATP.over_speed`` in the same
+    operations. Returns (intervention after this period, 1 if one began)."""
+    leg, _low, _high, _standstill, offsets, positions, speeds, highest, starts, ceilings = atp
+    if intervention:
+        return intervention, 0
+    measured = (speed - previous_speed) / period_s
+    a = max(highest, min(measured, ACCELERATION_CAP_MPS2))
+    ahead = position + speed * period_s + 0.5 * a * period_s * period_s
+    limit = limit_at(leg, offsets, positions, speeds, ahead)
+    first = np.searchsorted(starts, position, side='right') - 1
+    last = np.searchsorted(starts, ahead, side='right') - 1
+    if last > first:
+        for i in range(max(first, 0), last + 1):
+            limit = min(limit, ceilings[i])
+    if speed + a * period_s > limit:
         return True, 1
-    return intervention, 0
+    return False, 0
 
 
 @kernel
 def at_stop(atp, position, speed):
-    """``RunSupervision.at_stop`` for the leg: the kernels stop there (the dwell is counted
-    period by period)."""
+    """``OnboardATP.track_stop``'s zone for the leg: the kernels stop there (the dwell is
+    counted period by period)."""
     _leg, low, high, standstill = atp[0], atp[1], atp[2], atp[3]
     return abs(speed) <= standstill and low <= position <= high
 
 
 # The kernels below share one signature: the state (updated in place), the time, the commands
 # (one row per period), the traction limits (force N, power W, emergency brake N), the ATP's
-# packed tables, its intervention state, the truth per period (positions, speeds,
-# accelerations, forces: one column per car; the ATP's state), and the model's own inputs
-# (``kernel_inputs`` of the model). They return how many periods they ran (fewer than asked
-# where the interface would have split a step), the intervention state and how many began.
+# packed tables (``batch.packed_supervision``), the speed the ATP saw at its last cycle, its
+# intervention state, the truth per period (positions, speeds, accelerations, forces: one
+# column per car; the ATP's state), and the model's own inputs (``kernel_inputs`` of the
+# model). They return how many periods they ran (fewer than asked where the interface would
+# have split a step), the intervention state, how many began and the ATP's last speed.
 
 @kernel
-def run_point_mass_periods(state, stamp_ns, period_ns, commands, traction, atp, intervention,
-                           out_positions, out_speeds, out_accelerations, out_forces,
-                           out_intervention, model):
+def run_point_mass_periods(state, stamp_ns, period_ns, commands, traction, atp, previous,
+                           intervention, out_positions, out_speeds, out_accelerations,
+                           out_forces, out_intervention, model):
     p, table, work, max_substep_s = model
     max_force_n, max_power_w, emergency_brake_n = traction
     count = commands.shape[1]
@@ -151,7 +163,8 @@ def run_point_mass_periods(state, stamp_ns, period_ns, commands, traction, atp, 
         position, speed = step_kernel(p, table, work, position, speed, time_s, duration_s,
                                       max_substep_s, exact_sum(forces, count, scratch))
         stamp_ns += period_ns
-        intervention, new = supervise(atp, position, speed, intervention)
+        intervention, new = supervise(atp, position, speed, previous, duration_s, intervention)
+        previous = speed
         began += new
         # The truth holds the forces for the new state: the ATP's decision, the same command.
         actuator_targets(forces, row, speed, intervention, max_force_n, max_power_w,
@@ -165,15 +178,15 @@ def run_point_mass_periods(state, stamp_ns, period_ns, commands, traction, atp, 
         out_intervention[k] = intervention
         if intervention or at_stop(atp, position, speed):
             state[0], state[1] = position, speed
-            return k + 1, intervention, began
+            return k + 1, intervention, began, previous
     state[0], state[1] = position, speed
-    return commands.shape[0], intervention, began
+    return commands.shape[0], intervention, began, previous
 
 
 @kernel
-def run_multi_car_periods(state, stamp_ns, period_ns, commands, traction, atp, intervention,
-                          out_positions, out_speeds, out_accelerations, out_forces,
-                          out_intervention, model):
+def run_multi_car_periods(state, stamp_ns, period_ns, commands, traction, atp, previous,
+                          intervention, out_positions, out_speeds, out_accelerations,
+                          out_forces, out_intervention, model):
     """``MultiCarModel.step`` when it takes one ETDRK4 step: it stops before a period in which
     a car reaches another line segment (the interface splits that step at the boundary)."""
     props, table, cars, p, linear = model
@@ -192,14 +205,16 @@ def run_multi_car_periods(state, stamp_ns, period_ns, commands, traction, atp, i
         time_s = stamp_ns / 1_000_000_000
         end = time_s + duration_s
         if not end - time_s > duration_s * (1.0 - 1e-9):
-            return k, intervention, began  # the interface would step end - time_s
+            return k, intervention, began, previous  # the interface would step end - time_s
         if substep_kernel(state, moved, time_s, duration_s, props, forces, table, cars, p):
-            return k, intervention, began
+            return k, intervention, began, previous
         if end - (time_s + duration_s) > 1e-12 * max(1.0, abs(end)):
-            return k, intervention, began  # the interface would add a sliver of a step
+            return k, intervention, began, previous  # the interface would add a sliver
         state[:] = moved
         stamp_ns += period_ns
-        intervention, new = supervise(atp, state[0], state[n], intervention)
+        intervention, new = supervise(atp, state[0], state[n], previous, duration_s,
+                                      intervention)
+        previous = state[n]
         began += new
         actuator_targets(forces, row, state[n], intervention, max_force_n, max_power_w,
                          emergency_brake_n)
@@ -212,8 +227,8 @@ def run_multi_car_periods(state, stamp_ns, period_ns, commands, traction, atp, i
             out_forces[k, q] = forces[actuator] if actuator >= 0 else 0.0
         out_intervention[k] = intervention
         if intervention or at_stop(atp, state[0], state[n]):
-            return k + 1, intervention, began
-    return commands.shape[0], intervention, began
+            return k + 1, intervention, began, previous
+    return commands.shape[0], intervention, began, previous
 
 
 def period_kernel(model):

@@ -6,6 +6,11 @@ the host shares equally over the actuators, or one force per actuator. Saturatio
 actuator limits is applied by the host, which tells the law what was actually commanded so that
 its adaptation or integrator does not wind up.
 
+A law declares its loop about cruise (``feedback_gains``: its error feedback linearised with its
+adaptation frozen at the nominal estimates), which the host's ATO envelope (anti-windup of the
+position and speed errors, the same for every law) and the loop margins
+(``ato_campaigns.margins``) use.
+
 A law declares what it needs of the running plant: the measured quantities (``requires``), the
 number of cars whose measurements it uses (``cars``) and the number of actuators it drives
 (``actuators``); the host refuses a law that does not fit, with the reason.
@@ -62,29 +67,69 @@ class Measurement:
 @dataclass(frozen=True)
 class LawOutput:
     """The total force wanted (N) and, from a law that drives each actuator itself
-    (``ControlLaw.actuators`` set), one force per actuator summing to it."""
+    (``ControlLaw.actuators`` set), one force per actuator summing to it. A law that limits
+    its per-actuator forces itself (sharing a force over actuators with limits) gives the
+    total it wanted before that in ``unlimited_force_n``: the host counts the step as
+    saturated, tells the law and winds its envelope from it, not from the limited forces."""
 
     force_n: float
     estimates: Mapping[str, float] = field(default_factory=dict)
     forces_n: tuple[float, ...] | None = None
+    unlimited_force_n: float | None = None
 
 
-def setting(default: float, *, minimum: float, maximum: float, units: str, description: str):
+@dataclass(frozen=True)
+class FeedbackGains:
+    """A law's loop about cruise: its feedback linearised with its adaptation frozen at the
+    nominal estimates, as specific force (per kg of the nominal mass) per unit of the errors of
+    the reference over the measurement, F / M_nom = kp e_x + kd e_v + ki int e_x (e_x = x* - x,
+    e_v = v* - v), with the feedforward left out. ``note`` says how it was linearised."""
+
+    position_per_s2: float             # kp, 1/s^2
+    speed_per_s: float                 # kd, 1/s
+    integral_per_s3: float = 0.0       # ki, 1/s^3
+    note: str = ''
+
+
+def setting(default: float, *, minimum: float, maximum: float, units: str, description: str,
+            admissible: tuple[float, float] | None = None, scale: str = 'linear'):
     """A law gain: its default (the paper's value where it has one), range, units and meaning.
-    The controller node declares one ROS parameter per setting from this metadata."""
+    The controller node declares one ROS parameter per setting from this metadata.
+    ``admissible``: the range the law's stability conditions allow for it (the paper's, with the
+    sampled loop's where the paper has none), within [minimum, maximum]: the settings the tuning
+    (``ato_campaigns.tuning``) searches, ``scale`` 'log' or 'linear' over it; None: not
+    tuned (a switch, a structural choice or a prior)."""
+    if admissible is not None and not minimum <= admissible[0] < admissible[1] <= maximum:
+        raise ValueError(f'admissible range {admissible} outside [{minimum}, {maximum}]')
+    if scale not in ('linear', 'log') or (scale == 'log' and admissible is not None
+                                           and not admissible[0] * admissible[1] > 0.0):
+        raise ValueError(f"scale must be 'linear' or 'log' (log of the magnitude over a range "
+                         f'of one sign), got {scale!r} over {admissible}')
     return field(default=default, metadata={'minimum': minimum, 'maximum': maximum,
-                                            'units': units, 'description': description})
+                                            'units': units, 'description': description,
+                                            'admissible': admissible, 'scale': scale})
 
 
 def setting_fields(settings_type) -> list:
     return [f for f in fields(settings_type) if 'minimum' in f.metadata]
 
 
+def admissible_fields(settings_type) -> list:
+    """The settings of a law the tuning searches (those with an ``admissible`` range)."""
+    return [f for f in setting_fields(settings_type) if f.metadata.get('admissible')]
+
+
 def validated_settings(settings_type, values: Mapping[str, Any], base=None):
-    """New settings from ``values``; ValueError naming the field if one is out of range."""
+    """New settings from ``values``; ValueError naming the field if one is out of range or is
+    not a setting of ``settings_type`` at all."""
     base = base if base is not None else settings_type()
+    known = setting_fields(settings_type)
+    unknown = sorted(set(values) - {f.name for f in known})
+    if unknown:
+        raise ValueError(f"{', '.join(unknown)}: not a setting ({settings_type.__name__}); "
+                         f"valid: {', '.join(f.name for f in known)}")
     changes = {}
-    for f in setting_fields(settings_type):
+    for f in known:
         if f.name not in values:
             continue
         value = values[f.name]
@@ -145,6 +190,19 @@ class ControlLaw(ABC):
 
     def update_settings(self, settings) -> None:
         self.settings = settings
+
+    @classmethod
+    def inadmissible(cls, settings) -> str | None:
+        """Why ``settings`` lie outside what the law's stability conditions allow jointly
+        (a condition coupling several settings, e.g. Routh-Hurwitz), None if they do not.
+        Each setting's own range is its ``admissible`` metadata."""
+        return None
+
+    @abstractmethod
+    def feedback_gains(self) -> FeedbackGains:
+        """The law's error feedback about cruise with its adaptation frozen at the nominal
+        estimates (:class:`FeedbackGains`): the host's envelope scales its reference shift by
+        it, ``ato_campaigns.margins`` builds the loop from it."""
 
     @abstractmethod
     def reset(self, measurement: Measurement, reference: ReferencePoint,

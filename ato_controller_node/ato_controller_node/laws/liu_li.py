@@ -53,7 +53,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ato_controller_node.laws.base import ControlLaw, LawOutput, setting
+from ato_controller_node.laws.base import ControlLaw, FeedbackGains, LawOutput, setting
 
 
 def leaky_step(x, rate: float, drive, leak: float, dt: float):
@@ -160,6 +160,14 @@ class LiuLiLaw(ControlLaw):
         self.w2 = np.zeros(len(NN2_CENTRES))
         self.rho1 = self.rho2 = 0.0
         self._pending = None
+
+    def feedback_gains(self) -> FeedbackGains:
+        # (31) with the observer exact (v_hat = v), NN2 and D2 at their initial 0:
+        # F = -K r = K (e_v + lambda e_x)
+        s = self.settings
+        return FeedbackGains(s.K * s.lam / self.mass, s.K / self.mass, 0.0,
+                             'control (31) with the observer taken as exact and the networks '
+                             'and robust terms at their initial zero')
 
     def reset(self, measurement, reference, last_force_n):
         speed = measurement.speed if math.isfinite(measurement.speed) else reference.speed

@@ -5,22 +5,31 @@ Plant (eq 3): x1' = x2, x2' = u/m - theta^T phi(x2), theta = (c0, cv, ca) per kg
 phi = (1, x2, x2^2). Both the mass m and theta are unknown and estimated.
 
     z1 = x1 - x*,   z2 = x2 - x*' + c1 z1                                   (backstepping errors)
-    varphi = (c1^2 - 1) z1 - (c1 + c2) z2 + x*''                            [FIX, see below]
+    varphi = c1^2 z1 - (c1 + c2) z2 + x*''                                  (as printed)
     u = m_hat (theta_hat^T phi + varphi)                                    (12)
     theta_hat' = -Gamma phi z2,   m_hat' = -gamma (theta_hat^T phi + varphi) z2    (16)
 
-[FIX] The paper's varphi omits the "-1" in the z1 term; then V2' keeps a +z1 z2 cross term and
-is negative definite only if 4 c1 c2 > 1, which its own c1 = c2 = 0.1 violate. With the fix
-V2' = -c1 z1^2 - c2 z2^2 (docs/papers/luo_xu.md). ``paper_as_printed`` runs the
-printed law (``printed_varphi`` the printed varphi alone, with the corrected branches of (24)).
+The law as printed is the default. Its error dynamics are z1' = -c1 z1 + z2,
+z2' = -c2 z2 + (parameter errors): stable for any c1, c2 > 0 (the weighted Lyapunov function
+V = a z1^2/2 + z2^2/2 + rho m_t^2/(2 gamma) + theta_t^T Gamma^-1 theta_t/2 has
+V' = -a c1 z1^2 + a z1 z2 - c2 z2^2, negative definite for 0 < a < 4 c1 c2, with the adaptive
+laws (16) unchanged). The gap is in the paper's proof, which takes a = 1 and so needs
+4 c1 c2 > 1, not in its law. ``fixed_varphi`` runs the suite's former [FIX],
+varphi = (c1^2 - 1) z1 - (c1 + c2) z2 + x*'', for which a = 1 works, but whose error dynamics
+e'' + (c1 + c2) e' + (1 + c1 c2) e = 0 have, at c1 = c2 = 0.1, a natural frequency of 1 rad/s
+with damping 0.1 (a phase margin of 11 deg, a delay margin of 0.2 s), and whose added "1"
+carries s^-2, so the loop's frequency depends on the unit system (docs/papers/luo_xu.md).
 
-Gains. Gamma and gamma are given in SI (theta per kg, m in kg). The default, preset ``paper``
-(:data:`GAIN_PRESETS`), is the paper's Gamma = diag(1e4, 1, 0.01), converted exactly by
-:func:`ato_common.units.davis_adaptation_gains_per_tonne_to_si` (Gamma_SI = D Gamma D with the
-per-tonne-to-SI factors D, which leaves the Lyapunov function (17) unchanged): about
-diag(1e-2, 1.296e-5, 1.68e-6); gamma keeps the paper's 1e5 (m in kg). The preset ``tuned`` is
-the suite's earlier retuning diag(1e-3, 3e-7, 3e-10) (Gamma_ii ~ theta_i / (phi_i z2 T_adapt),
-docs/papers/luo_xu.md).
+Gains. One reading for all of Table 1's gains
+(:func:`ato_common.units.luo_xu_adaptation_gains_to_si`): each acts on its estimate in Table
+1's unit for it, m in t and theta per tonne with V in km/h, the errors in SI; converted so that
+every term of the Lyapunov function (17) is the same number: gamma = 1e5 -> 1e8 kg s^2/m^2,
+Gamma = diag(1e4, 1, 0.01) -> D Gamma D = about diag(1e-2, 1.296e-5, 1.68e-6) (D the
+per-tonne-to-SI factors of the coefficients). These are the defaults (preset ``paper`` of
+:data:`GAIN_PRESETS`); the preset ``earlier_retuning`` is the suite's earlier hand retuning
+diag(1e-3, 3e-7, 3e-10) with gamma 1e5 (Gamma_ii ~ theta_i / (phi_i z2 T_adapt),
+docs/papers/luo_xu.md). The ``tuned`` configuration of the suite (``ato_controller_node.gains``)
+comes from the tuning procedure, not from here.
 
 Deviations, all for a sampled, saturating implementation:
 - the adaptive laws (16)/(24) are integrated implicitly (backward Euler) over each control
@@ -35,17 +44,20 @@ Deviations, all for a sampled, saturating implementation:
   estimates. Forward Euler of the same laws (the rate of sample k applied after its control)
   makes the sampled adaptation loop unstable once dt phi^T Gamma phi > c2, which the paper's
   gains exceed at any onboard rate (phi^T Gamma phi ~ 70 1/s^2 at 300 km/h); the implicit step
-  is stable for any gain and tends to the paper's law as dt -> 0. ``forward_euler`` runs the
+  is stable for any Gamma and tends to the paper's law as dt -> 0 (the mass law at the paper's
+  gamma, 1e8 in SI, forms with z2 an oscillator at sqrt(gamma psi^2 / m), about 2 rad/s at
+  cruise, damped by c2 alone, which the 10 Hz hold can tip over). ``forward_euler`` runs the
   earlier explicit step for comparison;
 - under saturation the adaptation runs on the augmented error (Karason & Annaswamy's
-  anti-windup for adaptive control): an auxiliary copy of the error dynamics (8), (15) without
-  the parameter errors, driven by the force the limits took away (commanded - wanted, over
-  m_hat) and stepped exactly (zero-order hold) each period, gives the part of (z1, z2) that the
-  saturation caused; the laws adapt on z2 minus that part, which only the parameter errors
-  drive. Freezing the adaptation instead (``freeze_under_saturation``, the earlier behaviour)
-  is enough at small gains, but at the paper's the adaptation loop swings the force onto the
-  traction limit and the frozen, then released, estimates go into a limit cycle of hundreds of
-  metres;
+  anti-windup for adaptive control): an auxiliary copy of the error dynamics of the law that
+  runs (8), (15) without the parameter errors (z1' = -c1 z1 + z2 and z2' = -c2 z2 with the
+  printed varphi, z2' = -z1 - c2 z2 with ``fixed_varphi``), driven by the force the limits took
+  away (commanded - wanted, over m_hat) and stepped exactly (zero-order hold) each period,
+  gives the part of (z1, z2) that the saturation caused; the laws adapt on z2 minus that part,
+  which only the parameter errors drive. Freezing the adaptation instead
+  (``freeze_under_saturation``, the earlier behaviour) is enough at small gains, but at the
+  paper's the adaptation loop swings the force onto the traction limit and the frozen, then
+  released, estimates go into a limit cycle of hundreds of metres;
 - m_hat is projected onto [mass_min_ratio, mass_max_ratio] x nominal mass (the paper does not,
   but a non-positive mass estimate would reverse the control direction); it starts at
   initial_mass_ratio x nominal.
@@ -61,8 +73,8 @@ resistance the train's on-board prior carries (cv corrected from the printed 0.6
 
 [FIX] The branch conditions printed in (24) are swapped: it projects when (Gamma phi z2)^T grad_g
 >= 0, i.e. when the raw update points into S, and lets outward updates through; its proof and
-(26) project the outward ones. ``paper_as_printed`` runs the printed branches (and the printed
-varphi).
+(26) project the outward ones (the paper is not self-consistent there, and the suite follows
+its proof). ``paper_as_printed`` runs the printed branches.
 Deviations of Theorem 2:
 - S is an ellipsoid sum(((theta_i - theta_i*) / (R delta_i))^2) <= 1 with the Table 2 spans
   delta_i, not the single-radius ball of eq (20): a single radius M0 is dominated by c0
@@ -84,17 +96,19 @@ import numpy as np
 from scipy.linalg import expm
 
 from ato_common import units
-from ato_controller_node.laws.base import ControlLaw, LawOutput, setting
+from ato_controller_node.laws.base import ControlLaw, FeedbackGains, LawOutput, setting
 
-#: Luo & Xu Table 1: Gamma = diag(1e4, 1, 0.01) in the paper's units, exactly in SI
-PAPER_GAINS = units.davis_adaptation_gains_per_tonne_to_si(1e4, 1.0, 0.01)
-#: the gain presets: ``paper`` (the default of the settings), ``tuned`` (the suite's earlier
-#: retuning for forward Euler at 10 Hz); give one as the settings' values, e.g.
-#: ``run_offline(..., settings={'luo_xu': GAIN_PRESETS['tuned']})`` or three ``ros2 param set``
+#: Luo & Xu Table 1: gamma = 1e5 and Gamma = diag(1e4, 1, 0.01) in the paper's units, exactly
+#: in SI (gamma, Gamma_11, Gamma_22, Gamma_33), one reading for all four
+PAPER_GAINS = units.luo_xu_adaptation_gains_to_si(1e5, 1e4, 1.0, 0.01)
+#: the gain presets: ``paper`` (the default of the settings), ``earlier_retuning`` (the suite's
+#: earlier hand retuning, for forward Euler at 10 Hz); give one as the settings' values, e.g.
+#: ``run_offline(..., settings={'luo_xu': GAIN_PRESETS['earlier_retuning']})``
 GAIN_PRESETS = {
-    'paper': {'gamma_mass': 1e5, 'gamma_c0': PAPER_GAINS[0], 'gamma_cv': PAPER_GAINS[1],
-              'gamma_ca': PAPER_GAINS[2]},
-    'tuned': {'gamma_mass': 1e5, 'gamma_c0': 1e-3, 'gamma_cv': 3e-7, 'gamma_ca': 3e-10},
+    'paper': {'gamma_mass': PAPER_GAINS[0], 'gamma_c0': PAPER_GAINS[1],
+              'gamma_cv': PAPER_GAINS[2], 'gamma_ca': PAPER_GAINS[3]},
+    'earlier_retuning': {'gamma_mass': 1e5, 'gamma_c0': 1e-3, 'gamma_cv': 3e-7,
+                         'gamma_ca': 3e-10},
 }
 
 #: Luo & Xu Table 2: half-widths of the nominal prior, 3.138 N/t, 0.01417 N/t per km/h,
@@ -105,21 +119,27 @@ TABLE2_SPANS = units.davis_per_tonne_to_per_kg(3.138, 0.01417, 0.000152)
 @dataclass(frozen=True)
 class LuoXuSettings:
     c1: float = setting(0.1, minimum=1e-4, maximum=10.0, units='1/s',
-                        description='backstepping gain of the position error (paper: 0.1)')
+                        description='backstepping gain of the position error (paper: 0.1)',
+                        admissible=(0.02, 2.0), scale='log')
     c2: float = setting(0.1, minimum=1e-4, maximum=10.0, units='1/s',
-                        description='backstepping gain of z2 (paper: 0.1)')
-    gamma_mass: float = setting(1e5, minimum=0.0, maximum=1e9, units='kg s^2/m^2',
+                        description='backstepping gain of z2 (paper: 0.1)',
+                        admissible=(0.02, 2.0), scale='log')
+    gamma_mass: float = setting(PAPER_GAINS[0], minimum=0.0, maximum=1e10, units='kg s^2/m^2',
                                 description='adaptation gain gamma of the mass estimate '
-                                            '(paper: 1e5)')
-    gamma_c0: float = setting(PAPER_GAINS[0], minimum=0.0, maximum=1.0, units='1/s^2',
-                              description='adaptation gain Gamma_11 of c0 (paper: 1e4, in SI; '
-                                          'preset tuned: 1e-3)')
-    gamma_cv: float = setting(PAPER_GAINS[1], minimum=0.0, maximum=1.0, units='1/m^2',
-                              description='adaptation gain Gamma_22 of cv (paper: 1, in SI; '
-                                          'preset tuned: 3e-7)')
-    gamma_ca: float = setting(PAPER_GAINS[2], minimum=0.0, maximum=1.0, units='s^2/m^4',
-                              description='adaptation gain Gamma_33 of ca (paper: 0.01, in SI; '
-                                          'preset tuned: 3e-10)')
+                                            '(paper: 1e5 with m in t, 1e8 in SI)',
+                                admissible=(1e3, 1e9), scale='log')
+    gamma_c0: float = setting(PAPER_GAINS[1], minimum=0.0, maximum=1.0, units='1/s^2',
+                              description='adaptation gain Gamma_11 of c0 (paper: 1e4 per '
+                                          'tonne, 1e-2 in SI)',
+                              admissible=(1e-7, 0.1), scale='log')
+    gamma_cv: float = setting(PAPER_GAINS[2], minimum=0.0, maximum=1.0, units='1/m^2',
+                              description='adaptation gain Gamma_22 of cv (paper: 1 per tonne '
+                                          'with V in km/h, 1.296e-5 in SI)',
+                              admissible=(1e-11, 1e-4), scale='log')
+    gamma_ca: float = setting(PAPER_GAINS[3], minimum=0.0, maximum=1.0, units='s^2/m^4',
+                              description='adaptation gain Gamma_33 of ca (paper: 0.01 per '
+                                          'tonne with V in km/h, 1.68e-6 in SI)',
+                              admissible=(1e-13, 1e-5), scale='log')
     mass_min_ratio: float = setting(0.7, minimum=0.1, maximum=1.0, units='-',
                                     description='lower bound of m_hat over the nominal mass')
     mass_max_ratio: float = setting(1.5, minimum=1.0, maximum=10.0, units='-',
@@ -134,11 +154,10 @@ class LuoXuSettings:
                                             description='freeze the adaptation over a saturated '
                                                         'period instead of adapting on the '
                                                         'augmented error')
-    printed_varphi: bool = setting(False, minimum=0, maximum=1, units='-',
-                                   description='use the printed varphi without the -z1 fix '
-                                               '(and nothing else as printed)')
-    paper_as_printed: bool = setting(False, minimum=0, maximum=1, units='-',
-                                     description='use the printed varphi without the -z1 fix')
+    fixed_varphi: bool = setting(False, minimum=0, maximum=1, units='-',
+                                 description="the suite's former [FIX] varphi = (c1^2 - 1) z1 - "
+                                             "(c1 + c2) z2 + x*'' instead of the printed "
+                                             'varphi (a deviation from the paper)')
 
 
 class LuoXuLaw(ControlLaw):
@@ -159,12 +178,35 @@ class LuoXuLaw(ControlLaw):
         super().update_settings(settings)
         self._aux_matrices()
 
-    def _aux_matrices(self) -> None:
-        """The exact zero-order-hold step of the error dynamics (8), (15) with the parameter
-        errors left out, z1' = -c1 z1 + z2, z2' = -z1 - c2 z2 + w (w: the force the saturation
-        took away, over m_hat): aux(k+1) = step aux(k) + input w(k)."""
+    def _z1_gain(self) -> float:
+        """The coefficient of z1 in varphi: c1^2 as printed, c1^2 - 1 with ``fixed_varphi``."""
+        c1 = self.settings.c1
+        return c1 * c1 - 1.0 if self.settings.fixed_varphi else c1 * c1
+
+    def error_dynamics(self) -> np.ndarray:
+        """The error dynamics (z1, z2)' = A (z1, z2) of the law that runs, with the parameter
+        errors left out: z1' = -c1 z1 + z2 (8), z2' = (g - c1^2) z1 - c2 z2 with g the
+        coefficient of z1 in varphi (from (9) and the certainty-equivalence control (12))."""
         c1, c2 = self.settings.c1, self.settings.c2
-        a = np.array([[-c1, 1.0, 0.0], [-1.0, -c2, 1.0], [0.0, 0.0, 0.0]])
+        return np.array([[-c1, 1.0], [self._z1_gain() - c1 * c1, -c2]])
+
+    def feedback_gains(self) -> FeedbackGains:
+        # F / M = m_hat / M (varphi + ...), varphi = g z1 - (c1 + c2) z2 + x*'' with
+        # z1 = -e_x, z2 = -e_v - c1 e_x: kp = c1 (c1 + c2) - g, kd = c1 + c2
+        s = self.settings
+        nominal = self.train.nominal_mass_kg
+        ratio = self._clip_mass(s.initial_mass_ratio * nominal) / nominal
+        return FeedbackGains(ratio * (s.c1 * (s.c1 + s.c2) - self._z1_gain()),
+                             ratio * (s.c1 + s.c2), 0.0,
+                             'adaptation frozen at the initial estimates (the on-board prior)')
+
+    def _aux_matrices(self) -> None:
+        """The exact zero-order-hold step of the error dynamics of the law that runs
+        (:meth:`error_dynamics`) driven by w, the force the saturation took away over m_hat
+        (z2' += w): aux(k+1) = step aux(k) + input w(k)."""
+        a = np.zeros((3, 3))
+        a[:2, :2] = self.error_dynamics()
+        a[1, 2] = 1.0
         zoh = expm(a * self.dt)
         self._aux_step, self._aux_input = zoh[:2, :2], zoh[:2, 2]
 
@@ -194,9 +236,7 @@ class LuoXuLaw(ControlLaw):
         v = measurement.speed
         z1 = measurement.position - reference.position
         z2 = v - reference.speed + s.c1 * z1
-        printed = s.paper_as_printed or s.printed_varphi
-        z1_gain = s.c1 * s.c1 if printed else s.c1 * s.c1 - 1.0
-        varphi = z1_gain * z1 - (s.c1 + s.c2) * z2 + reference.acceleration
+        varphi = self._z1_gain() * z1 - (s.c1 + s.c2) * z2 + reference.acceleration
         phi = (1.0, v, v * v)
         if self._free and not s.forward_euler:
             # implicit step over the period that ends now, before this sample's control
@@ -270,6 +310,9 @@ class LuoXuProjectionSettings(LuoXuSettings):
     prior_radius: float = setting(math.sqrt(3.0), minimum=0.1, maximum=100.0, units='-',
                                   description='radius R of the set S in units of the spans '
                                               '(sqrt(3) circumscribes the Table 2 box)')
+    paper_as_printed: bool = setting(False, minimum=0, maximum=1, units='-',
+                                     description='the branch conditions of (24) as printed '
+                                                 '(swapped against its proof and (26))')
 
 
 class LuoXuProjectionLaw(LuoXuLaw):

@@ -52,7 +52,7 @@ import math
 from dataclasses import dataclass
 
 from ato_common.units import STANDARD_GRAVITY
-from ato_controller_node.laws.base import ControlLaw, LawOutput, setting
+from ato_controller_node.laws.base import ControlLaw, FeedbackGains, LawOutput, setting
 
 #: the coefficient of the curve parameter D in the paper's model (eq 8)
 CURVE_COEFFICIENT = 0.004
@@ -156,6 +156,15 @@ class Mao2017Law(ControlLaw):
         """The known failure basis varpi(t) (Section 4: 1 and sin(0.05 t - 30))."""
         s = self.settings
         return 1.0, math.sin(s.failure_basis_omega_radps * time_s + s.failure_basis_phase_rad)
+
+    def feedback_gains(self) -> FeedbackGains:
+        # n nu0 = n rho_hat (zeta - eta - r2 z2): with z1 = -e_x, z2 = -e_v - r1 e_x,
+        # -eta - r2 z2 = (1 + r1 r2) e_x + (r1 + r2) e_v + x_m''; n rho_hat = ratio x mass
+        s = self.settings
+        ratio = s.initial_estimate_ratio
+        return FeedbackGains(ratio * (1.0 + s.r1 * s.r2), ratio * (s.r1 + s.r2), 0.0,
+                             'control (34) with every motor healthy and the adaptation frozen '
+                             'at the initial estimates')
 
     def reset(self, measurement, reference, last_force_n):
         # Estimates restart from the known modes; the host's bumpless offset bridges the step.

@@ -82,7 +82,13 @@ from dataclasses import dataclass
 from ato_common import units
 from ato_common.knowledge import TrainKnowledge
 from ato_common.types import ReferencePoint
-from ato_controller_node.laws.base import ControlLaw, LawOutput, Measurement, setting
+from ato_controller_node.laws.base import (
+    ControlLaw,
+    FeedbackGains,
+    LawOutput,
+    Measurement,
+    setting,
+)
 from ato_controller_node.laws.mao_rigid import split_by_mass
 
 CARS = 4
@@ -288,6 +294,14 @@ class _MaoBase(ControlLaw):
         return (reference.acceleration - s.alpha3 * e_y2 + nu_extra, e_y2,
                 {'y2_error_mps': e_y2, 'internal_extension_error_m': deviation})
 
+    def feedback_gains(self) -> FeedbackGains:
+        # (51) on car 1's speed through F2 and the rigid unit: F' / M = -alpha1 e' - alpha2 e,
+        # e = v - v_m, so F / M = alpha2 e_x + alpha1 e_v (the loop (55) of car 3 left out)
+        s = self.settings
+        return FeedbackGains(s.alpha2, s.alpha1, 0.0,
+                             "approximate: the relative-degree-2 loop (51) of car 1's speed on "
+                             'the rigid unit, the loop (55) of car 3 and the couplers left out')
+
     def _allocate(self, f2: float, f3: float, speed: float) -> tuple[float, float]:
         if not self.settings.regulate_internal_force:
             return f2, f3
@@ -334,7 +348,8 @@ class MaoNominalLaw(_MaoBase):
         f2 = theta1[0] * (nu2 - phi1)                                                  # (17)
         f3 = theta2[0] * (nu3 - phi2)                                                  # (18)
         forces = self._allocate(f2, f3, state.x[5])
-        return LawOutput(forces[0] + forces[1], {'e2_mps': e2, 'e6_mps': e6, **reported}, forces)
+        return LawOutput(forces[0] + forces[1], {'e2_mps': e2, 'e6_mps': e6, **reported}, forces,
+                         unlimited_force_n=f2 + f3)
 
 
 @dataclass(frozen=True)
@@ -444,7 +459,7 @@ class MaoAdaptiveLaw(_MaoBase):
         estimates.update({f'theta1{k + 1}_hat': t for k, t in enumerate(th1)})
         estimates.update({f'theta2{k + 1}_hat': t for k, t in enumerate(th2)})
         forces = self._allocate(f2, f3, state.x[5])
-        return LawOutput(forces[0] + forces[1], estimates, forces)
+        return LawOutput(forces[0] + forces[1], estimates, forces, unlimited_force_n=f2 + f3)
 
     def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=(), applied_n=None):
         if self._pending is None:

@@ -35,7 +35,10 @@ limit, the other car takes the rest up to its own limit, so the unit's force is 
 as it can be; the coupler then carries the difference, which is bounded.
 
 Sampled implementation (period dt, 10 - 100 Hz): the adaptive law by forward Euler, frozen
-while an actuator is saturated (the error then no longer reflects the parameter error);
+while the unit's force F is not what the actuators are commanded (the error then no longer
+reflects the parameter error): the split limits the shares itself, so the law gives the host
+its unlimited F (``LawOutput.unlimited_force_n``) and freezes when the host's commanded total
+differs from it;
 theta_M_hat projected onto [mass_min_ratio, mass_max_ratio] x nominal so that the control
 direction cannot reverse. The loop's pole is e' = -alpha e: forward Euler is stable for
 alpha dt < 2 (alpha <= max_alpha_dt / dt is checked by ``fits``).
@@ -46,7 +49,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ato_controller_node.laws.base import ControlLaw, LawOutput, setting
+from ato_controller_node.laws.base import ControlLaw, FeedbackGains, LawOutput, setting
 
 CARS = 4
 
@@ -141,6 +144,15 @@ class MaoRigidLaw(ControlLaw):
         if ratio_changed:
             self._start_from_prior()
 
+    def feedback_gains(self) -> FeedbackGains:
+        # F = M_hat (v_m' - alpha e - Phi_hat) - beta e / width inside the boundary layer
+        s = self.settings
+        nominal = sum(c.mass_kg for c in self.train.cars) or self.train.nominal_mass_kg
+        return FeedbackGains(0.0, s.initial_estimate_ratio * s.alpha
+                             + s.beta / (s.boundary_width * nominal), 0.0,
+                             'speed loop (55), (71) of the rigid unit, adaptation frozen at the '
+                             'initial estimates, inside the boundary layer')
+
     def reset(self, measurement, reference, last_force_n):
         # the estimates restart from the prior; the host's bumpless offset bridges the step
         self._start_from_prior()
@@ -159,18 +171,18 @@ class MaoRigidLaw(ControlLaw):
         force = mass_hat * (nu - phi_hat) + robust                                 # as (71)
         limits = self.train.actuator_limits_at(speed)
         forces = split_by_mass(force, self._share2, limits, limits)
-        self._pending = (nu - phi_hat, speed, e, forces)
+        self._pending = (nu - phi_hat, speed, e)
         estimates = {'e_mps': e, 'mass_hat_kg': mass_hat, 'resistance_a_hat_mps2': a_hat,
                      'resistance_b_hat_per_s': b_hat, 'resistance_c_hat_per_m': c_hat}
-        return LawOutput(math.fsum(forces), estimates, forces)
+        return LawOutput(math.fsum(forces), estimates, forces, unlimited_force_n=force)
 
     def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=(), applied_n=None):
         if self._pending is None:
             return
-        regressor, speed, e, wanted = self._pending
+        regressor, speed, e = self._pending
         self._pending = None
-        if any(abs(w - c) > 1e-9 * max(1.0, abs(w)) for w, c in zip(wanted, commanded_forces_n)):
-            return  # frozen while an actuator is saturated
+        if abs(wanted_n - commanded_n) > 1e-9 * max(1.0, abs(wanted_n)):
+            return  # frozen while the unit does not get the force F it wanted
         s, dt = self.settings, self.dt
         mass_hat, a_hat, b_hat, c_hat = self.theta_hat
         mass_hat -= dt * s.gamma_mass * regressor * e                              # as (74)

@@ -74,13 +74,14 @@ from __future__ import annotations
 import math
 import sys
 from abc import abstractmethod
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import expm, solve_continuous_lyapunov
 
 from ato_common import units
-from ato_controller_node.laws.base import ControlLaw, LawOutput, setting
+from ato_controller_node.laws.base import ControlLaw, FeedbackGains, LawOutput, setting
 
 MODELS = 5
 ALPHA_INITIAL = 0.2   # Tan et al. Section 4.1: equal initial convex-combination coefficients
@@ -89,9 +90,11 @@ ALPHA_INITIAL = 0.2   # Tan et al. Section 4.1: equal initial convex-combination
 @dataclass(frozen=True)
 class TanSettings:
     am1: float = setting(-0.1, minimum=-100.0, maximum=-1e-6, units='1/s^2',
-                         description='reference model Am = [[0, 1], [am1, am2]] (paper: -0.1)')
+                         description='reference model Am = [[0, 1], [am1, am2]] (paper: -0.1)',
+                         admissible=(-1.0, -0.005), scale='log')
     am2: float = setting(-0.1, minimum=-100.0, maximum=-1e-6, units='1/s',
-                         description='reference model Am = [[0, 1], [am1, am2]] (paper: -0.1)')
+                         description='reference model Am = [[0, 1], [am1, am2]] (paper: -0.1)',
+                         admissible=(-3.0, -0.05), scale='log')
     mass_low_ratio: float = setting(0.8, minimum=0.1, maximum=1.0, units='-',
                                     description='lightest train of the model box / nominal mass')
     mass_high_ratio: float = setting(1.2, minimum=1.0, maximum=10.0, units='-',
@@ -105,6 +108,14 @@ class TanSettings:
     grade_max_per_mille: float = setting(35.0, minimum=-100.0, maximum=100.0,
                                          units='per mille', description='highest equivalent '
                                          'grade of the model box (covers the 30 per mille jump)')
+    model_actuator_lag_s: float = setting(0.0, minimum=0.0, maximum=10.0, units='s',
+                                          description='deviation (not in the paper, which has '
+                                          'the force act at once): the identification models '
+                                          'see the commanded force through a first-order lag '
+                                          'of this time constant')
+    model_actuator_dead_time_s: float = setting(0.0, minimum=0.0, maximum=5.0, units='s',
+                                                description='deviation (not in the paper): ... '
+                                                'and this dead time, in whole control periods')
 
 
 def _initial_alpha(k: int):
@@ -117,7 +128,8 @@ def _initial_alpha(k: int):
 def _identification_gain():
     return setting(0.1, minimum=0.0, maximum=1e6, units='-',
                    description='gamma of the adaptive identification models, Gamma = gamma '
-                               'diag(box width^2) in the units of theta (not in the paper)')
+                               'diag(box width^2) in the units of theta (not in the paper)',
+                   admissible=(1e-4, 10.0), scale='log')
 
 
 @dataclass(frozen=True)
@@ -125,7 +137,8 @@ class SecondLevelSettings(TanSettings):
     alpha_gain: float = setting(1.0, minimum=0.0, maximum=1e6, units='1/(m^2 s)',
                                 description='Gamma_a of the convex-combination law (23) '
                                             '(paper: identity; 0 keeps the initial alpha: '
-                                            'law (24) with fixed parameters)')
+                                            'law (24) with fixed parameters)',
+                                admissible=(1e-3, 1e3), scale='log')
     initial_alpha_1: float = _initial_alpha(1)
     initial_alpha_2: float = _initial_alpha(2)
     initial_alpha_3: float = _initial_alpha(3)
@@ -146,9 +159,12 @@ class IndexSettings(TanSettings):
     index_instant: float = setting(1.0, minimum=0.0, maximum=1e6, units='1/m^2',
                                    description='c1: weight of |e_k|^2 now in the index J_k')
     index_memory: float = setting(1.0, minimum=0.0, maximum=1e6, units='1/(m^2 s)',
-                                  description='c2: weight of the discounted integral of |e_k|^2')
+                                  description='c2: weight of the discounted integral of |e_k|^2 '
+                                              '(only c2/c1 matters: c1 is not tuned)',
+                                  admissible=(1e-3, 1e3), scale='log')
     forgetting_per_s: float = setting(0.1, minimum=0.0, maximum=100.0, units='1/s',
-                                      description='lambda: forgetting rate of the index memory')
+                                      description='lambda: forgetting rate of the index memory',
+                                      admissible=(0.01, 1.0), scale='log')
     adaptive_models: bool = setting(False, minimum=0, maximum=1, units='-',
                                     description='the five models adapt their parameters (the '
                                                 'law of tan_second_level_adaptive) instead of '
@@ -160,13 +176,20 @@ class IndexSettings(TanSettings):
 class SwitchingSettings(IndexSettings):
     hysteresis: float = setting(0.1, minimum=0.0, maximum=0.99, units='-',
                                 description='switch only to a model whose index is lower by '
-                                            'this fraction')
+                                            'this fraction', admissible=(0.01, 0.5), scale='log')
 
 
 @dataclass(frozen=True)
 class WeightedSettings(IndexSettings):
     weight_floor: float = setting(1e-3, minimum=0.0, maximum=0.19, units='-',
-                                  description='lowest weight of a model (lets it come back)')
+                                  description='lowest weight of a model (lets it come back)',
+                                  admissible=(1e-4, 0.1), scale='log')
+    adaptive_models: bool = setting(True, minimum=0, maximum=1, units='-',
+                                    description='the five models adapt their parameters (the '
+                                                'law of tan_second_level_adaptive; Section '
+                                                '4.3: all four methods start their models '
+                                                'from the same values); false: fixed corner '
+                                                'models, onto one of which the weights lock')
 
 
 def model_box(train, s: TanSettings) -> tuple[np.ndarray, np.ndarray]:
@@ -274,7 +297,8 @@ class _MultipleModelLaw(ControlLaw):
     def update_settings(self, settings) -> None:
         rebuild = any(getattr(settings, f) != getattr(self.settings, f)
                       for f in ('am1', 'am2', 'mass_low_ratio', 'mass_high_ratio',
-                                'davis_uncertainty', 'grade_min_per_mille', 'grade_max_per_mille'))
+                                'davis_uncertainty', 'grade_min_per_mille', 'grade_max_per_mille',
+                                'model_actuator_lag_s', 'model_actuator_dead_time_s'))
         super().update_settings(settings)
         if rebuild:   # other models: they start again from the next measured state
             self._build()
@@ -292,12 +316,24 @@ class _MultipleModelLaw(ControlLaw):
         self._last_x = None
         self._last_time = None
         self._last_force = 0.0
+        self._delay_periods = round(s.model_actuator_dead_time_s / self.dt)
+        lag = s.model_actuator_lag_s
+        decay = math.exp(-self.dt / lag) if lag > 0.0 else 0.0
+        # the lag's output over a period with its input held: end = u + (F0 - u) decay, mean =
+        # u + (F0 - u) mean_weight
+        self._lag = (decay, lag / self.dt * (1.0 - decay) if lag > 0.0 else 0.0)
+        self._start_actuator_model(0.0)
         self._start_weights()
+
+    def _start_actuator_model(self, force: float) -> None:
+        self._asked = deque([force] * self._delay_periods)   # the dead time's commands
+        self._acting = force                                 # the lag's output
 
     def reset(self, measurement, reference, last_force_n):
         self.bank.thetas = self.initial_thetas.copy()
         self._last_x = None
         self._last_force = 0.0 if last_force_n is None else last_force_n
+        self._start_actuator_model(self._last_force)
         self._start_weights()
 
     def step(self, measurement, reference):
@@ -319,8 +355,24 @@ class _MultipleModelLaw(ControlLaw):
         return LawOutput(force, estimates)
 
     def after_saturation(self, wanted_n, commanded_n, commanded_forces_n=(), applied_n=None):
-        # the models see the force the plant gets (the host's bumpless offset included)
-        self._last_force = commanded_n if applied_n is None else applied_n
+        # the models see the force the plant gets (the host's bumpless offset included), the
+        # paper's way at once, or through the model actuator (the mean over the coming period)
+        force = commanded_n if applied_n is None else applied_n
+        if self._delay_periods:
+            self._asked.append(force)
+            force = self._asked.popleft()
+        decay, mean_weight = self._lag
+        if decay:
+            start = self._acting
+            self._acting = force + (start - force) * decay
+            force += (start - force) * mean_weight
+        self._last_force = force
+
+    def feedback_gains(self) -> FeedbackGains:
+        # (24) at the nominal train (G_hat = 1/M_nom, Z_hat = Z): F / M = -am1 e_x - am2 e_v
+        s = self.settings
+        return FeedbackGains(-s.am1, -s.am2, 0.0, 'control (24) with the identification and '
+                             'the weights frozen at the nominal train (G_hat = 1/M_nom)')
 
     def _controller(self, x, reference, theta, g_floor: float) -> float:
         """(24) for one parameter vector: u = (k1*^T x + k2* r - Z) / G, written with the

@@ -16,17 +16,32 @@ from ato_common.trains import TrainParameters
 
 
 class PlantModel(Protocol):
-    car_names: tuple[str, ...]
-    actuator_names: tuple[str, ...]
+    @property
+    def car_names(self) -> tuple[str, ...]: ...
+
+    @property
+    def actuator_names(self) -> tuple[str, ...]: ...
+
+    @property
+    def max_substep_s(self) -> float:
+        """The longest integration step, s."""
 
     def initial_state(self, position_m: float, speed_mps: float = 0.0) -> np.ndarray: ...
 
-    def step(self, state: np.ndarray, duration_s: float, forces: Sequence[float]) -> np.ndarray:
+    def lead_speed(self, state) -> float:
+        """The lead car's speed in a state, m/s."""
+
+    def step(self, state: np.ndarray, duration_s: float, forces: Sequence[float],
+             time_s: float = 0.0, env=None) -> np.ndarray:
         """State after ``duration_s`` with the actuator forces held constant."""
 
-    def outputs(self, state: np.ndarray, forces: Sequence[float]) -> tuple[
-            tuple[float, ...], tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
+    def outputs(self, state: np.ndarray, forces: Sequence[float], time_s: float = 0.0,
+                env=None) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...],
+                                   tuple[float, ...]]:
         """(positions, speeds, accelerations, applied forces) per car."""
+
+    def kernel_inputs(self, env, duration_s: float) -> tuple:
+        """What the model's compiled periods read (``periods.py``)."""
 
 
 def _point_mass(train: TrainParameters, line: Line, **options) -> PlantModel:

@@ -24,7 +24,10 @@ table, each mode's per-car parameters (``_ModeMatrices.cars``) and propagators (
 step length), and the parameter array of the surroundings (layout below).
 
 The constant resistance a_p is applied as a_p tanh(v_p / 0.01 m/s): a smooth sign, so that the
-coupler oscillation around standstill does not make it chatter.
+coupler oscillation around standstill does not make it chatter. A train at rest stays at rest
+while what pushes it (drives, line forces, disturbance) does not overcome that static friction
+(``held``): brakes hold a train, they never push it backwards, and it does not roll back, as in
+the point-mass model; its couplers still ring about its resting centre of mass.
 """
 
 from __future__ import annotations
@@ -74,8 +77,9 @@ E_HALF, PHI1_HALF, E_FULL, F1, F2, F3 = range(6)
 
 
 def phi_functions(matrix: np.ndarray, order: int = 3) -> list[np.ndarray]:
-    """[phi_0 .. phi_order](matrix), phi_0 = exp, phi_k(Z) = int_0^1 e^{(1-s)Z} s^(k-1)/(k-1)! ds,
-    from the exponential of one block-companion matrix (Higham & Al-Mohy, Sidje 1998)."""
+    """``[phi_0 .. phi_order](matrix)``, phi_0 = exp,
+    phi_k(Z) = int_0^1 e^{(1-s)Z} s^(k-1)/(k-1)! ds, from the exponential of one
+    block-companion matrix (Higham & Al-Mohy, Sidje 1998)."""
     m = matrix.shape[0]
     size = m * (order + 1)
     augmented = np.zeros((size, size))
@@ -486,9 +490,52 @@ class MultiCarModel:
     def lead_speed(self, state) -> float:
         return float(state[self.n])
 
+    def standing(self, state, env: Surroundings | None = None) -> bool:
+        """The train stands: the mean speed of its cars, weighted by their masses, is at most
+        the standstill speed (a train braked to rest within a step may end it a little
+        backwards: its brakes hold it, as the next step does)."""
+        masses = 1.0 / self.mode_matrices(env or self.nominal).cars[CAR_INVERSE_MASS]
+        speeds = np.asarray(state, dtype=float)[self.n:]
+        return float(np.dot(masses, speeds)) <= STANDSTILL_SPEED_MPS * float(masses.sum())
+
+    def held(self, state: np.ndarray, forces: Sequence[float], time_s: float = 0.0,
+             env: Surroundings | None = None) -> bool:
+        """A standing train stays at rest (module docstring): the resultant of the drives and
+        brakes, the line forces and the disturbance on its cars at rest does not exceed the
+        static friction (the constant Davis term) of the whole train. Brakes never push a
+        train backwards, and a train does not roll back (as in the point-mass model)."""
+        if not self.standing(state, env):
+            return False
+        mm, p = self._prepare(env or self.nominal, time_s, 0.0)
+        n = self.n
+        rest = np.array(state, dtype=float)
+        rest[n:] = 0.0
+        masses = 1.0 / mm.cars[CAR_INVERSE_MASS]
+        accelerations = self.derivative(rest, forces, time_s, env)[n:]
+        friction = env_factors(p, ENV, time_s)[0] * float(np.dot(masses, mm.cars[CAR_A]))
+        return float(np.dot(masses, accelerations)) <= friction
+
     def step(self, state: np.ndarray, duration_s: float, forces: Sequence[float],
              time_s: float = 0.0, env: Surroundings | None = None) -> np.ndarray:
-        """State after ``duration_s`` with the forces held (zero-order hold) from ``time_s``."""
+        """State after ``duration_s`` with the forces held (zero-order hold) from ``time_s``.
+        A train ``held`` at rest stays where it stands: its brakes exert no force beyond
+        holding it, and its centre of mass does not move (its couplers still ring)."""
+        if self.held(state, forces, time_s, env):
+            start = np.asarray(state, dtype=float)
+            moved = self._integrate(start, duration_s, tuple(max(f, 0.0) for f in forces),
+                                    time_s, env)
+            n = self.n
+            masses = 1.0 / self.mode_matrices(env or self.nominal).cars[CAR_INVERSE_MASS]
+            weights = masses / masses.sum()
+            moved[:n] -= float(np.dot(weights, moved[:n] - start[:n]))
+            moved[n:] -= float(np.dot(weights, moved[n:]))
+            return moved
+        return self._integrate(state, duration_s, forces, time_s, env)
+
+    def _integrate(self, state: np.ndarray, duration_s: float, forces: Sequence[float],
+                   time_s: float, env: Surroundings | None) -> np.ndarray:
+        """``step``'s integration: ETDRK4 steps of at most ``max_substep_s``, split where a car
+        reaches another line segment."""
         mm, p = self._prepare(env or self.nominal, time_s, duration_s)
         forces = self._force_array(forces)
         substeps = max(1, math.ceil(duration_s / self.max_substep_s - 1e-9))

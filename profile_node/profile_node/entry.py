@@ -1,0 +1,10 @@
+"""The ``profile_node`` executable: a stop while the node is still importing ends it cleanly
+(``ato_ros.interrupts``), then the node runs (``profile_node.node``)."""
+
+from ato_ros.interrupts import quiet_until_running
+
+
+def main() -> int:
+    quiet_until_running()
+    from profile_node.node import main as run_node_main
+    return run_node_main()
