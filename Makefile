@@ -11,8 +11,10 @@ PYTEST_ARGS ?=
 # make test: two pytest workers, the graph tests one after the other on one of them
 # (tests/conftest.py), the unit tests on both
 PYTEST_WORKERS ?= 2
+# make test-stress: the integration tests one after the other beside this many busy processes
+STRESS_LOAD ?= 2
 
-.PHONY: help setup build demo compare campaign tune reproduce test test-unit test-integration lint docs docs-serve bench curves clean
+.PHONY: help setup build demo compare campaign tune reproduce test test-unit test-integration test-stress lint docs docs-serve bench curves clean
 
 help:
 	@echo "make setup   create .venv with pinned packages and build ros_ws (idempotent)"
@@ -31,6 +33,8 @@ help:
 	@echo "make reproduce run the papers' reproduction tests and write docs/results/reproduction.md"
 	@echo "make test    lint, build the docs strictly, run every test (unit tests of the cores and"
 	@echo "             integration tests over rclpy)"
+	@echo "make test-stress the integration tests beside two busy processes (STRESS_LOAD=n), as on"
+	@echo "             a loaded machine; a failure shows the end of every process log"
 	@echo "make lint    ruff over the repository"
 	@echo "make docs    build the documentation site into site/ (warnings are errors)"
 	@echo "make bench   lockstep real-time factor through the ROS graph and controller step times"
@@ -79,6 +83,10 @@ test-unit: setup
 
 test-integration: setup
 	@$(ENV) python -m pytest -m integration $(PYTEST_ARGS)
+
+test-stress: setup
+	@$(ENV) python -m pytest -p no:xdist -m integration --stress-load $(STRESS_LOAD) tests \
+	  $(PYTEST_ARGS)
 
 bench: setup
 	@$(ENV) python bench/bench.py \

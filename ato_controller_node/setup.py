@@ -21,7 +21,7 @@ setup(
         'its registry of laws at a fixed rate.'
     ),
     license='Apache-2.0',
-    tests_require=['pytest', 'hypothesis', 'numpy'],
+    tests_require=['pytest', 'hypothesis', 'numpy', 'scipy'],
     entry_points={
         'console_scripts': [
             'ato_controller_node = ato_controller_node.entry:main'

@@ -1,14 +1,86 @@
 """Integration tests over rclpy: each test starts the real executables (as ``ros2 run`` would
 find them) in a DDS domain that no other test session on this machine uses at the same time,
-with discovery limited to this machine, so parallel runs never hear each other."""
+with discovery limited to this machine, so parallel runs never hear each other.
+
+The graph tests must hold on a loaded machine: ``--stress-load N`` (``make test-stress``: 2)
+runs them beside N busy processes. A failed test shows the end of every process log written
+while it ran (the stack's ``<name>.log`` files, wherever under the session's temporary folder).
+"""
 
 import os
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import pytest
 
 from ato_common.domains import NoFreeDomain, free_domain
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+
+#: what a failed test shows of each process log
+LOG_LINES = 40
+MAX_LOGS = 12
+STARTED = pytest.StashKey[float]()
+BASETEMP = pytest.StashKey[Path]()
+
+
+def pytest_addoption(parser):
+    parser.addoption('--stress-load', type=int, default=0, metavar='N',
+                     help='run the tests beside N busy processes (make test-stress: 2)')
+
+
+@pytest.fixture(scope='session', autouse=True)
+def temporary_folder(request, tmp_path_factory):
+    """The session's temporary folder, where a failed test's process logs are looked for."""
+    request.config.stash[BASETEMP] = tmp_path_factory.getbasetemp()
+
+
+@pytest.fixture(scope='session', autouse=True)
+def stress_load(request):
+    """``--stress-load N``: N processes that keep a CPU each busy for the whole session."""
+    busy = [subprocess.Popen([sys.executable, '-c', 'while True: pass'])
+            for _ in range(request.config.getoption('stress_load'))]
+    yield len(busy)
+    for process in busy:
+        process.kill()
+        process.wait()
+
+
+def pytest_runtest_setup(item):
+    item.stash[STARTED] = time.time()
+
+
+def process_logs(item) -> list[tuple[str, str]]:
+    """(title, last lines) of every ``.log`` file under the session's temporary folder written
+    since the test began, newest last."""
+    started = item.stash.get(STARTED, None)
+    base = item.config.stash.get(BASETEMP, None)
+    if started is None or base is None:
+        return []
+    logs = []
+    for path in base.rglob('*.log'):
+        try:
+            modified = path.stat().st_mtime
+        except OSError:
+            continue
+        if modified >= started:
+            logs.append((modified, path))
+    sections = []
+    for _, path in sorted(logs)[-MAX_LOGS:]:
+        lines = path.read_text(errors='replace').splitlines()[-LOG_LINES:]
+        sections.append((f'process log {Path(path).relative_to(base)}', '\n'.join(lines)))
+    return sections
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item, call):
+    report = yield
+    if report.failed and item.get_closest_marker('integration') is not None:
+        for title, text in process_logs(item):
+            report.sections.append((title, text))
+    return report
 
 
 def pytest_collection_modifyitems(items):

@@ -51,6 +51,7 @@ from ato_ros.messages import (
     topic,
 )
 from ato_ros.middleware import with_middleware_defaults
+from ato_ros.stall import wait_for_exit
 from ato_simulation.applies import plant_model_for
 
 EXECUTABLES = {
@@ -497,10 +498,15 @@ class Stack:
     # lets discovery settle before each (a process that has just ended by itself, e.g. a replay,
     # is such a peer). Each stop costs this much more.
     SETTLE_S = 0.3
+    # stop's bound in wall time on a process that keeps looking runnable, in stall limits
+    STOP_WALL_FACTOR = 30.0
 
     def stop(self, names=None, timeout_s: float = 10.0) -> dict[str, int]:
         """Stop the processes one at a time: SIGINT, wait, abort what does not end; exit codes.
-        The recorders go last, so that they record everything the others sent."""
+        The recorders go last, so that they record everything the others sent. A process is
+        aborted once it has made no progress for ``timeout_s`` (stalled, not waiting for a CPU:
+        ``ato_ros.stall``, so that a recorder at nice 19 on a loaded machine may finish), or
+        after ``STOP_WALL_FACTOR`` times that in any case."""
         names = list(names or self.processes)
         order = [n for n in names if not n.startswith('recorder')] + \
             [n for n in names if n.startswith('recorder')]
@@ -514,7 +520,7 @@ class Stack:
                     error = error or raised
                 process.send_signal(signal.SIGINT)
                 try:
-                    process.wait(timeout=timeout_s)
+                    wait_for_exit(process, timeout_s, self.STOP_WALL_FACTOR * timeout_s)
                 except subprocess.TimeoutExpired:
                     self._abort(name)
             codes[name] = process.returncode

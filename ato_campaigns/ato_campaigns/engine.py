@@ -54,7 +54,6 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
-import yaml
 
 from ato_campaigns.dataset import (
     check_folder,
@@ -65,6 +64,7 @@ from ato_campaigns.dataset import (
 )
 from ato_campaigns.run_process import RunDied, RunFailed, RunTimeout, limited
 from ato_common import uncertainty
+from ato_common.files import load_yaml
 from ato_common.run_events import (
     JOURNEY,
     LATE_AFTER_S,
@@ -275,13 +275,7 @@ def _law_entry(item: Any, i: int) -> LawEntry:
 
 def load_campaign(path: str | Path) -> Campaign:
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except (OSError, UnicodeDecodeError) as error:
-        raise ConfigError(f'{path}: cannot read: {error}') from None
-    except yaml.YAMLError as error:
-        raise ConfigError(f'{path}: not valid YAML: {error}') from None
-    return parse_campaign(data, str(path), path.parent)
+    return parse_campaign(load_yaml(path), str(path), path.parent)
 
 
 # --- one run ------------------------------------------------------------------------------------

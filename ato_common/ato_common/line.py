@@ -171,6 +171,10 @@ def parse_line(data, where: str = 'line') -> Line:
     for item in f.items('tunnels'):
         start = item.number('start_m', minimum=0.0, maximum=length)
         tunnel_length = item.number('length_m', minimum=0.0, exclusive_minimum=True)
+        if start + tunnel_length > length:
+            raise ConfigError(f'{item.where}.length_m: the tunnel ends at '
+                              f'{start + tunnel_length:g} m, past the end of the line '
+                              f'({length:g} m)')
         section = (item.number('cross_section_m2', minimum=0.0, exclusive_minimum=True)
                    if item.has('cross_section_m2') else None)
         tunnels.append(Tunnel(start, tunnel_length, section))

@@ -554,11 +554,8 @@ def parse_failure_injection(text: str, actuator_names: Sequence[str], now_s: flo
     """A run-time failure injection: YAML (or JSON) text of one failure mapping or a list of
     them, as in ``plant.failures``; ``start_s`` defaults to now and must not be in the past;
     ``kind: healthy`` repairs the actuator now. Returns (failures, repaired actuators)."""
-    import yaml
-    try:
-        data = yaml.safe_load(text) if text.strip() else []
-    except yaml.YAMLError as error:
-        raise ConfigError(f'{where}: not valid YAML: {error}') from None
+    from ato_common.files import load_yaml_text  # the limits of the suite's files
+    data = load_yaml_text(text, where) if text.strip() else []
     items = Fields({'failures': data if isinstance(data, list) else [data]}, '').items('failures')
     repaired, rest = [], []
     for i, item in enumerate(items):

@@ -23,14 +23,13 @@ from importlib import resources
 from pathlib import Path
 from typing import Mapping
 
-import yaml
-
 from ato_common import trains, ttobench, units
 from ato_common.braking_curves import (
     SupervisionSettings,
     constant_deceleration,
     tabulated_deceleration,
 )
+from ato_common.files import load_yaml, load_yaml_text
 from ato_common.line import Line, PiecewiseConstant, parse_line
 from ato_common.plant_setup import PlantSetup, parse_plant_setup
 from ato_common.trains import TRAIN_PRESETS, TrainParameters, train_preset
@@ -120,7 +119,7 @@ def load_scenario(name_or_path: str) -> Scenario:
     if name_or_path in builtin_scenarios():
         origin = f'built-in scenario {name_or_path}'
         folder = resources.files('ato_common') / 'scenarios'
-        text = (folder / f'{name_or_path}.yaml').read_text()
+        data = load_yaml_text((folder / f'{name_or_path}.yaml').read_text(), origin)
         base = Path(str(folder))
     else:
         path = Path(name_or_path)
@@ -129,14 +128,7 @@ def load_scenario(name_or_path: str) -> Scenario:
                               f"({', '.join(builtin_scenarios())}) nor a readable file")
         origin = str(path)
         base = path.parent
-        try:
-            text = path.read_text()
-        except (OSError, UnicodeDecodeError) as error:
-            raise ConfigError(f'{path}: cannot read: {error}') from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        raise ConfigError(f'{origin}: not valid YAML: {error}') from None
+        data = load_yaml(path)
     try:
         return parse_scenario(data, origin, base)
     except ConfigError as error:

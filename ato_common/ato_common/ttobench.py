@@ -34,7 +34,6 @@ Mapping (simplifications are stated where they are made):
 
 from __future__ import annotations
 
-import json
 import math
 import re
 import warnings
@@ -43,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from ato_common import units
+from ato_common.files import load_json
 from ato_common.line import Curve, Line, PiecewiseConstant, Station, Tunnel
 from ato_common.trains import (
     DavisResistance,
@@ -222,14 +222,7 @@ class _Reader:
 
 def _read_json(path: str | Path) -> tuple[Path, Any]:
     path = Path(path)
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as error:
-        raise ConfigError(f'{path}: cannot read: {error}') from None
-    try:
-        return path, json.loads(text)
-    except json.JSONDecodeError as error:
-        raise ConfigError(f'{path}: not valid JSON: {error}') from None
+    return path, load_json(path)
 
 
 def _metadata_id(reader: _Reader, fields: tuple[str, ...] = METADATA_FIELDS) -> str:

@@ -10,6 +10,7 @@ import os
 import signal
 import sys
 import textwrap
+import threading
 import time
 from typing import Callable, Iterable, Sequence
 
@@ -19,6 +20,7 @@ import rclpy.signals
 
 from ato_common.commands import ros_command
 from ato_ros.publishing import shared_step_recorders
+from ato_ros.stall import StallWatch
 
 
 def make_executor(context=None):
@@ -46,8 +48,9 @@ def freeze_startup_objects() -> None:
 
 
 # A node asked to stop must end: if tearing down the executor, the node's rcl entities and the
-# context takes longer than this (a rare middleware hang), every thread's Python stack is written
-# to stderr and the process exits with code 1, instead of waiting for its supervisor's SIGKILL.
+# context makes no progress for this long (a rare middleware hang: stalled time, ato_ros.stall,
+# not the time a starved process waits for a CPU), every thread's Python stack is written to
+# stderr and the process exits with code 1, instead of waiting for its supervisor's SIGKILL.
 TEARDOWN_LIMIT_S = 5.0
 # A node told to stop (SIGINT, SIGTERM) is gone within this much wall time: a launch escalates
 # SIGINT to SIGTERM after 5 s (``sigterm_timeout``) and logs it as an error. Closing the outputs
@@ -56,6 +59,13 @@ TEARDOWN_LIMIT_S = 5.0
 # takes a few tenths of a second).
 STOP_BUDGET_S = 4.0
 LEAST_TEARDOWN_S = 1.0
+# ... and in any case after this long in wall time, even if the hang holds the GIL (then the
+# watchdog thread cannot run: faulthandler's own thread ends the process) or periodic middleware
+# threads make a hung process look runnable on a loaded machine.
+TEARDOWN_WALL_LIMIT_S = 120.0
+#: how often the teardown's watchdog judges the progress, s
+WATCH_PERIOD_S = 0.1
+_teardown_watch: threading.Event | None = None
 
 
 class RunNodeHooks:
@@ -82,26 +92,97 @@ class RunNodeHooks:
 
 
 def teardown_limit_s(stopped_at: float | None) -> float:
-    """The time the teardown may take: ``TEARDOWN_LIMIT_S`` for a node that ended by itself,
-    what is left of ``STOP_BUDGET_S`` (at least ``LEAST_TEARDOWN_S``) for one told to stop at
-    ``stopped_at`` (``time.monotonic()``)."""
+    """The time without progress the teardown may take: ``TEARDOWN_LIMIT_S`` for a node that
+    ended by itself, what is left of ``STOP_BUDGET_S`` (at least ``LEAST_TEARDOWN_S``) for one
+    told to stop at ``stopped_at`` (``time.monotonic()``)."""
     if stopped_at is None:
         return TEARDOWN_LIMIT_S
     left = STOP_BUDGET_S - (time.monotonic() - stopped_at)
     return min(TEARDOWN_LIMIT_S, max(LEAST_TEARDOWN_S, left))
 
 
+def watch_teardown(limit_s: float = TEARDOWN_LIMIT_S) -> None:
+    """From now until the process exits (or :func:`cancel_teardown_watch`): once the process
+    has made no progress for ``limit_s`` although it could have (:mod:`ato_ros.stall`) or
+    ``TEARDOWN_WALL_LIMIT_S`` have passed, write every thread's stack to stderr and exit with
+    code 1. A node starved of CPU by other processes (the recorder at nice 19 on a loaded
+    machine) is slow, not hung, and is left to finish."""
+    global _teardown_watch
+    cancel_teardown_watch()
+    faulthandler.dump_traceback_later(TEARDOWN_WALL_LIMIT_S, exit=True)
+    stop = _teardown_watch = threading.Event()
+    watch = StallWatch()
+
+    def watchdog() -> None:
+        while not stop.wait(WATCH_PERIOD_S):
+            if watch.update() > limit_s:
+                print(f'Timeout: the teardown made no progress for {limit_s:g} s '
+                      '(stalled, not waiting for a CPU); every thread:', file=sys.stderr,
+                      flush=True)
+                faulthandler.dump_traceback(all_threads=True)
+                os._exit(1)
+
+    threading.Thread(target=watchdog, name='teardown watchdog', daemon=True).start()
+
+
+def cancel_teardown_watch() -> None:
+    """Stop :func:`watch_teardown`'s limits (a test that tears a node down in its own
+    process)."""
+    global _teardown_watch
+    faulthandler.cancel_dump_traceback_later()
+    if _teardown_watch is not None:
+        _teardown_watch.set()
+        _teardown_watch = None
+
+
 def tear_down(executor, node: RunNodeHooks | Sequence[RunNodeHooks],
               limit_s: float | None = None) -> None:
     """Shut the executor down (it lets go of every entity while the context is still valid),
-    then destroy the node (or each of the nodes), within ``limit_s`` (default
-    ``TEARDOWN_LIMIT_S``): past it, faulthandler writes every thread's stack to stderr and the
-    process exits with code 1. The caller shuts rclpy down."""
+    then destroy the node (or each of the nodes), under :func:`watch_teardown`'s limits
+    (``limit_s`` without progress, default ``TEARDOWN_LIMIT_S``). The caller shuts rclpy
+    down."""
     limit_s = TEARDOWN_LIMIT_S if limit_s is None else limit_s
-    faulthandler.dump_traceback_later(limit_s, exit=True)
+    watch_teardown(limit_s)
     executor.shutdown(timeout_sec=limit_s)
     for each in (node if isinstance(node, (list, tuple)) else (node,)):
         each.destroy_node()
+
+
+def parameter_files(args: Sequence[str]) -> list[str]:
+    """The files of the ``--params-file`` options in the ``--ros-args`` parts of a command
+    line (each part ends at ``--`` or at the end)."""
+    files, in_ros_args = [], False
+    words = iter(args)
+    for word in words:
+        if word == '--ros-args':
+            in_ros_args = True
+        elif word == '--':
+            in_ros_args = False
+        elif in_ros_args and word == '--params-file':
+            files.append(next(words, ''))
+    return files
+
+
+def refused_command_line(args=None) -> str | None:
+    """Why a node's command line is refused before rclpy starts (None if it is not): a
+    parameters file refused by :mod:`ato_common.files` (deep nesting, an alias bomb, a key given
+    twice: rcl would silently keep the last value) or ROS arguments rcl cannot parse (rcl refuses
+    YAML aliases in a parameters file)."""
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+    from rclpy.utilities import remove_ros_args
+
+    from ato_common.files import load_yaml
+    from ato_common.validation import ConfigError
+    argv = list(sys.argv if args is None else args)
+    try:
+        for path in parameter_files(argv):
+            load_yaml(path)
+        remove_ros_args(argv)
+    except ConfigError as error:
+        return f'--params-file {error}'
+    except rclpy_implementation.RCLInvalidROSArgsError as error:
+        return ' '.join(str(error).split())
+    return None
 
 
 def help_requested(args=None) -> bool:
@@ -142,11 +223,12 @@ def run_node(make_node: Callable[[], RunNodeHooks], args=None,
     object is a TypeError naming its class.
 
     Teardown order: the node's own outputs first (``node.close_outputs()``, e.g. the recorder's
-    file, with no time limit), then, within ``TEARDOWN_LIMIT_S`` (a node told to stop: what is
-    left of ``STOP_BUDGET_S``, :func:`teardown_limit_s`), the executor (it lets go of
-    every entity while the context is still valid), the node, the context.
+    file, with no time limit), then, under the limits of :func:`watch_teardown` (a node told to
+    stop: what is left of ``STOP_BUDGET_S``, :func:`teardown_limit_s`), the executor (it lets go
+    of every entity while the context is still valid), the node, the context.
 
-    ``usage``: the text ``-h``/``--help`` prints (then the node exits 0 without starting)."""
+    ``usage``: the text ``-h``/``--help`` prints (then the node exits 0 without starting). A
+    command line :func:`refused_command_line` refuses is printed and gives exit 2."""
     return run_nodes((make_node,), args, usage)
 
 
@@ -181,6 +263,10 @@ def run_nodes(makers: Sequence[Callable[[], RunNodeHooks]], args=None,
     ``ato_bringup.composed``): built in the order given, spun together until any of them is
     finished; each one's outputs are closed in that order; the exit code is the first non-zero
     ``exit_code`` among them (0 if none)."""
+    refused = refused_command_line(args)
+    if refused is not None:
+        print(f'error: {refused}', file=sys.stderr)
+        return 2
     if usage is not None and help_requested(args):
         print(usage())
         return 0

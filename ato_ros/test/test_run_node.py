@@ -1,22 +1,21 @@
 """run_node runs only nodes that declare the hooks it calls (RunNodeHooks), and reads them."""
 
-import faulthandler
 import signal
 
 import pytest
 from rclpy.node import Node
 
-from ato_ros.lifecycle import RunNodeHooks, run_node, run_nodes
+from ato_ros.lifecycle import RunNodeHooks, cancel_teardown_watch, run_node, run_nodes
 
 
 @pytest.fixture(autouse=True)
 def restore_the_process():
     """run_node installs its own SIGINT/SIGTERM handlers and ignores both once it tears down,
-    and its teardown arms faulthandler to end the process after TEARDOWN_LIMIT_S (a node's
-    process exits right after): both are undone here, or pytest itself would be ended."""
+    and its teardown starts a watchdog that ends the process (watch_teardown: a node's process
+    exits right after): both are undone here, or pytest itself would be ended."""
     saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     yield
-    faulthandler.cancel_dump_traceback_later()
+    cancel_teardown_watch()
     for s, handler in saved.items():
         signal.signal(s, handler)
 
