@@ -232,6 +232,8 @@ RECORDER_CPU_GOAL_MS = 0.115
 def recorder_cpu_ms(runs: list[GraphRun]) -> float:
     """The separate recorder's own CPU per step in the steady window, ms: the median of runs."""
     return statistics.median(run.cpu_ms_per_step['recorder'] for run in runs)
+
+
 #: the burner's cycle (``burner``), s: a few lockstep steps at 200x
 BURNER_PERIOD_S = 1e-3
 
