@@ -35,7 +35,7 @@ help:
 	@echo "             integration tests over rclpy)"
 	@echo "make test-stress the integration tests beside two busy processes (STRESS_LOAD=n), as on"
 	@echo "             a loaded machine; a failure shows the end of every process log"
-	@echo "make lint    ruff over the repository"
+	@echo "make lint    ruff over the repository, mypy over the packages mypy.ini lists"
 	@echo "make docs    build the documentation site into site/ (warnings are errors)"
 	@echo "make bench   lockstep real-time factor through the ROS graph and controller step times"
 	@echo "make curves  plot every built-in scenario's target curve and braking curves to runs/curves/"
@@ -71,6 +71,7 @@ test: setup lint docs
 
 lint: setup
 	@$(ENV) ruff check .
+	@$(ENV) mypy
 
 docs: setup
 	@$(ENV) mkdocs build --strict --site-dir site 2>&1 | { grep -v '^INFO' || true; }

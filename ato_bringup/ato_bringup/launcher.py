@@ -107,6 +107,7 @@ class Launch:
                                    stdin=subprocess.DEVNULL, env=env, start_new_session=True,
                                    preexec_fn=_die_with_parent)
         child = Child(name, process)
+        assert process.stdout is not None  # stdout=PIPE
         os.set_blocking(process.stdout.fileno(), False)
         self.selector.register(process.stdout, selectors.EVENT_READ, child)
         self.children.append(child)

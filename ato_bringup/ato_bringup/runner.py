@@ -102,7 +102,8 @@ def progress_bar(end_time_s: float):
 def last_reports(stack: Stack) -> str:
     """Each node's newest diagnostics message and the tail of its log (a stalled run)."""
     newest = {}
-    for _, name, _, message in stack.monitor.diagnostics:
+    monitor = stack.monitor
+    for _, name, _, message in (monitor.diagnostics if monitor is not None else ()):
         newest[name] = message
     lines = [f'  {name}: {message}' for name, message in sorted(newest.items())]
     alive = [n for n in stack.processes if not stack.exited(n)]
@@ -123,7 +124,7 @@ class RunClock:
     """The run's simulated time as the monitor sees it: the newest state's stamp in lockstep;
     in real time (stamps on the wall clock) the time since the first state's stamp."""
 
-    monitor: object
+    monitor: Monitor
     lockstep: bool
     origin_ns: int | None = None
 

@@ -22,7 +22,7 @@ import subprocess
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable, Sequence
 
 import rclpy
 import yaml
@@ -72,11 +72,11 @@ MONITORS = {'full': (FULL, ()), 'lean': (LEAN, ('state', 'reference'))}
 """Each monitor: what it watches, and which of those it takes in batches (``Monitor.batch``)."""
 RUN_DIAGNOSTICS_PERIOD_S = 10.0
 """The periodic diagnostics of the plant and the controller in a ``run_scenario`` run, s of
-simulated time: at a lockstep's 150x, 1 s of simulated time is 150 reports per node and wall
-second (10 s instead of 1 s measured, interleaved: the monitor 0.113 -> 0.086 ms and the plant
-0.315 -> 0.289 ms of CPU per step on 2 cores, 2026-12-02). What a run's summary and
-report need of them is published at once (a safety reaction, a rejected command, a failure, a
-law switch) and at the end; the counters are cumulative."""
+simulated time: a lockstep runs about a hundred times faster than real time, where 1 s would
+be that many reports per node and wall second, each costing the monitor and the plant CPU per
+step (``make bench`` measures the loop). What a run's summary and report need of them is
+published at once (a safety reaction, a rejected command, a failure, a law switch) and at the
+end; the counters are cumulative."""
 
 
 def ros_args(params: dict[str, object], namespace: str = '') -> list[str]:
@@ -147,7 +147,7 @@ class Monitor:
                      'reference': (JointTrajectory, self.on_reference, True),
                      'command': (JointState, self.on_command, True),
                      'diagnostics': (DiagnosticArray, self.on_diagnostics, False)}
-        self.batched: dict[str, tuple[object, Callable]] = {}
+        self.batched: dict[str, tuple[Any, Callable]] = {}  # (rclpy Subscription, callback)
         self.batch_node = Node(f'{n.get_name()}_batched', namespace=n.get_namespace(),
                                context=n.context, start_parameter_services=False) \
             if self.batch else None
@@ -325,7 +325,7 @@ class Stack:
             if config.monitor else None
         # The process that runs the plant (and so ends the run at end_time_s).
         self.plant_process = 'loop' if config.composed else 'plant'
-        self.parameter_clients: dict[str, object] = {}
+        self.parameter_clients: dict[str, Any] = {}  # rclpy Clients
         self.executor = make_executor(self.context)
         self.executor.add_node(self.node)
 
@@ -411,8 +411,8 @@ class Stack:
         from ato_campaigns.provenance import commit_description
         return ['--custom-data', f'suite_commit={commit_description()}']
 
-    def start_process(self, name: str, params: dict, args: list[str] = (),
-                      extra_ros_args: list[str] = (), kind: str | None = None,
+    def start_process(self, name: str, params: dict, args: Sequence[str] = (),
+                      extra_ros_args: Sequence[str] = (), kind: str | None = None,
                       command: list[str] | None = None, env: dict[str, str] | None = None
                       ) -> subprocess.Popen:
         """Start the executable of ``kind`` (``EXECUTABLES``; default ``name``), or the

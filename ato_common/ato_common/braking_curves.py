@@ -155,7 +155,8 @@ def most_restrictive_speed_profile(limits: PiecewiseConstant, end_m: float,
                 for s, e, v in limits.segments(end_m)]
     candidates = sorted({s for s, _, _, _ in sections}
                         | {min(clear, end_m) for _, _, _, clear in sections} - {end_m})
-    starts, values = [], []
+    starts: list[float] = []
+    values: list[float] = []
     for x in candidates:
         value = min(v for s, _, v, clear in sections if s <= x < clear)
         if not values or value != values[-1]:
@@ -327,14 +328,15 @@ class SpeedSupervision:
             ebi = ebd.shifted(settings.traction_cut_off_s + settings.emergency_brake_build_up_s)
             sbi = sbd.shifted(settings.service_brake_build_up_s)
             permitted = sbi.shifted(settings.driver_reaction_s)
-            curves = {'ebd': ebd, 'ebi': ebi, 'sbd': sbd, 'sbi': sbi,
-                      'warning': sbi.shifted(settings.warning_s), 'permitted': permitted,
-                      'indication': permitted.shifted(settings.indication_s)}
+            plain = {'ebd': ebd, 'ebi': ebi, 'sbd': sbd, 'sbi': sbi,
+                     'warning': sbi.shifted(settings.warning_s), 'permitted': permitted,
+                     'indication': permitted.shifted(settings.indication_s)}
+            curves: dict[str, DecelerationCurve | ReleasedCurve] = dict(plain)
             if target.kind != 'speed_decrease':
                 self.release_speed_mps = max(min(settings.release_speed_max_mps,
                                                  ebi(stopping_point_m)), 0.0)
                 for name in ('ebi', 'sbi', 'warning', 'permitted', 'indication'):
-                    curves[name] = ReleasedCurve(curves[name], self.release_speed_mps,
+                    curves[name] = ReleasedCurve(plain[name], self.release_speed_mps,
                                                  stopping_point_m, eoa)
             for name in CURVE_NAMES:
                 self.curves[name].append(curves[name])

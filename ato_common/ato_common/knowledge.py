@@ -177,8 +177,8 @@ class TrainKnowledge:
     def mode_schedule(self) -> ModeSchedule:
         """The schedule of the known modes: the same lookup as the plant's. ValueError if the
         modes have no start (records given without one: the caller gives the mode index)."""
-        starts = tuple(m.start for m in self.modes)
-        if None in starts:
+        starts = tuple(m.start for m in self.modes if m.start is not None)
+        if len(starts) != len(self.modes):
             raise ValueError('the known modes have no start: no schedule to look the mode up')
         return ModeSchedule(self.mode_switch, starts)
 

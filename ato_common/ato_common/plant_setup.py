@@ -69,8 +69,9 @@ class ResistanceVariation:
     line: Sinusoid | None = None
 
     def factors(self, time_s: float) -> tuple[float, float, float, float]:
-        return tuple(1.0 if s is None else s.factor(time_s)
-                     for s in (self.a, self.b, self.c, self.line))
+        a, b, c, line = (1.0 if s is None else s.factor(time_s)
+                         for s in (self.a, self.b, self.c, self.line))
+        return a, b, c, line
 
 
 @dataclass(frozen=True)
@@ -373,7 +374,7 @@ def _modes(f: Fields, train: TrainParameters) -> tuple[tuple[Mode, ...], str]:
         return (), 'time'
     switch = 'time' if items[0].has('from_s') else 'position'
     key = 'from_s' if switch == 'time' else 'from_m'
-    modes = []
+    modes: list[Mode] = []
     for i, item in enumerate(items):
         if not item.has(key):
             raise ConfigError(f"{item.where}: every mode needs {key} (the first mode's switch "
@@ -387,14 +388,14 @@ def _modes(f: Fields, train: TrainParameters) -> tuple[tuple[Mode, ...], str]:
         mass = item.number('mass_kg', train.mass_kg, minimum=0.0, exclusive_minimum=True)
         modes.append(Mode(
             name=item.text('name', f'mode {i + 1}'), start=start, mass_kg=mass,
-            davis=_davis(item, train.davis), grade_sine=_grade_sine(item, 0.0),
+            davis=_davis(item, train.davis), grade_sine=_grade_sine(item, 0.0) or 0.0,
             curve_accel_mps2=CURVATURE_ACCEL_PER_D * item.number('curvature', 0.0, minimum=0.0)))
         item.reject_unknown()
     return tuple(modes), switch
 
 
 def _abrupt_changes(f: Fields) -> tuple[AbruptChange, ...]:
-    changes = []
+    changes: list[AbruptChange] = []
     for item in f.items('abrupt_changes'):
         start = item.number('start_s', minimum=0.0)
         end = item.number('end_s', minimum=start, exclusive_minimum=True)
@@ -447,7 +448,7 @@ def _partial(item: Fields, actuator: str, start: float, end: float) -> ActuatorF
 def parse_failures(items: Sequence[Fields], actuator_names: Sequence[str],
                    default_start_s: float | None = None) -> tuple[ActuatorFailure, ...]:
     """Failure records (also what the node accepts at run time, where start_s defaults to now)."""
-    failures = []
+    failures: list[ActuatorFailure] = []
     for item in items:
         actuator = item.text('actuator')
         if actuator not in actuator_names:
@@ -510,8 +511,9 @@ def _quantity_sensor(f: Fields, car_names: Sequence[str]) -> QuantitySensor:
 
 
 def _sensors(f: Fields, car_names: Sequence[str]) -> SensorSetup:
-    setup = SensorSetup(*(_quantity_sensor(f.section(q), car_names)
-                          for q in ('position', 'speed', 'acceleration')),
+    position, speed, acceleration = (_quantity_sensor(f.section(q), car_names)
+                                     for q in ('position', 'speed', 'acceleration'))
+    setup = SensorSetup(position, speed, acceleration,
                         seed=int(f.number('seed', 0.0, minimum=0.0, maximum=2**31 - 1)))
     f.reject_unknown()
     return setup

@@ -300,8 +300,9 @@ def late_arrivals(stops: Sequence[tuple[str, float, float]], times_s, positions,
     the train arrived at ``late_after_s`` or more after its timetabled arrival
     (:func:`arrival_times`)."""
     arrived = arrival_times(stops, times_s, positions, speeds, reach_m)
-    return [(name, arrived[name] - planned) for name, _, planned in stops
-            if arrived[name] is not None and arrived[name] - planned >= late_after_s]
+    delays = ((name, at - planned) for name, _, planned in stops
+              if (at := arrived[name]) is not None)
+    return [(name, delay) for name, delay in delays if delay >= late_after_s]
 
 
 def run_status(events: RunEvents, unfinished: str = '', late: Sequence[tuple[str, float]] = (),

@@ -336,11 +336,11 @@ def _any_distribution(value: Any, where: str, param: Parameter) -> Distribution:
         weights = f.raw('weights') or []
         if weights:
             ws = [as_number(w) for w in weights] if isinstance(weights, list) else [None]
-            if len(ws) != len(checked) or any(w is None or not w >= 0 for w in ws) \
-                    or not sum(ws) > 0:
+            numbers = [w for w in ws if w is not None and w >= 0]
+            if len(ws) != len(checked) or len(numbers) != len(ws) or not sum(numbers) > 0:
                 raise ConfigError(f'{where}.weights: must be {len(checked)} numbers >= 0 with '
                                   'a positive sum')
-            weights = ws
+            weights = numbers
         d = Distribution(dist, values=tuple(checked), weights=tuple(weights))
     f.reject_unknown()
     return d

@@ -88,7 +88,7 @@ def read_artefact(path: Path) -> TunedArtefact:
         validated_settings(registry.LAWS[law].Settings, settings)
     except ValueError as error:
         raise ValueError(f'{path}: {error}') from None
-    return TunedArtefact(law, str(train), settings, record, path)
+    return TunedArtefact(str(law), str(train), settings, record, path)
 
 
 def tuned_artefact(law: str, train: str, folder: Path | None = None) -> TunedArtefact:

@@ -77,8 +77,10 @@ class ControllerHost:
         self.faults = 0
         self.mode = 0  # the known operating mode, kept while it cannot be determined
         self._actuators = len(train.actuator_names)  # the knowledge is frozen
-        self._fit = (None, None, None, None)  # (law, knowledge, cars, law.fits' reason) checked
-        self._decay = (None, None, 1.0)   # (dt, time constant, the offset's decay per step)
+        # (law, knowledge, cars, law.fits' reason) checked
+        self._fit: tuple[Any, Any, Any, Any] = (None, None, None, None)
+        # (dt, time constant, the offset's decay per step)
+        self._decay: tuple[Any, Any, float] = (None, None, 1.0)
         # (law, its settings, law.feedback_gains()) asked
         self._gains: tuple[Any, Any, Any] = (None, None, None)
 

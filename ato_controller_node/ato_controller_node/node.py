@@ -172,7 +172,7 @@ class AtoControllerNode(RunNodeHooks, Node):
         self.add_post_set_parameters_callback(self.apply_changes)
 
         self.states: dict[int, object] = {}
-        self.references: dict[int, object] = {}
+        self.references: dict[int, Reference] = {}
         self.last_stamp_ns = -1
         self.last_command_msg = None
         self.last_result = None

@@ -12,7 +12,7 @@ import sys
 import textwrap
 import threading
 import time
-from typing import Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 
 import rclpy
 import rclpy.exceptions
@@ -232,7 +232,7 @@ def run_node(make_node: Callable[[], RunNodeHooks], args=None,
     return run_nodes((make_node,), args, usage)
 
 
-def _built(makers: Sequence[Callable[[], RunNodeHooks]]) -> list[RunNodeHooks] | int:
+def _built(makers: Sequence[Callable[[], RunNodeHooks]]) -> list[Any] | int:
     """The nodes, built in order (several in one process share their step recorders), or the
     exit code 2 of a configuration error, printed."""
     from ato_common.validation import ConfigError

@@ -359,11 +359,12 @@ class RecorderLead:
 
     def waiting(self) -> str:
         """What a held step waits for ('' if none)."""
-        behind = self.acknowledgements.behind(self.held) if self.held is not None else None
-        if behind is None:
+        held = self.held
+        behind = self.acknowledgements.behind(held) if held is not None else None
+        if held is None or behind is None:
             return ''
         recorder, stamp_ns = behind
-        return (f'the step at {seconds(self.held):.3f} s has waited '
+        return (f'the step at {seconds(held):.3f} s has waited '
                 f'{time.monotonic() - self.held_since:.1f} s of wall time for recorder '
                 f'{recorder}, whose file holds the step records up to {seconds(stamp_ns):.3f} s '
                 f'(lead {seconds(self.acknowledgements.lead_ns):g} s)')

@@ -117,7 +117,8 @@ class _Layout:
         self.var('d', count)
 
     def build(self) -> '_Layout':
-        pack_parts, self._order = [], []  # _order: None for a slot, bytes for a constant
+        pack_parts: list[str] = []
+        self._order: list[bytes | None] = []  # None for a slot, bytes for a constant
         unpack_parts, constant_at, index = [], [], 0
         pending = b''
         for token in self.tokens + [('end',)]:

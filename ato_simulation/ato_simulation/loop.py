@@ -176,16 +176,20 @@ class _ClosedLoop:
         self.journey = JourneyEnd.of(scenario, plan) if end_time_s is None else None
         end = end_time_s if end_time_s is not None else run_end_time_s(scenario, plan)
         steps = int(end * 1e9 // period_ns)
-        self.references = sampled_references(plan, key, period_ns, steps)
-        self.sampled = self.references is not None
-        if not self.sampled:
-            self.references = []  # sampled as the run goes
+        sampled = sampled_references(plan, key, period_ns, steps)
+        self.sampled = sampled is not None
+        # without a sampled table, sampled as the run goes
+        self.references: list = sampled if sampled is not None else []
         self.at = plan.trajectory.at
         self.count = count = steps + 1
         self.times, self.forces, self.step_times = (np.empty(count) for _ in range(3))
         self.saturated = np.empty(count, dtype=bool)
-        self.car_positions, self.car_speeds, self.actuator_forces = [], [], []
-        self.laws, self.estimates, self.faults = [], [], []
+        self.car_positions: list[tuple[float, ...]] = []
+        self.car_speeds: list[tuple[float, ...]] = []
+        self.actuator_forces: list[tuple[float, ...]] = []
+        self.laws: list[str] = []
+        self.estimates: list[dict] = []
+        self.faults: list[str] = []
         self.watchdog_events = 0
         self.atp_times: list[float] = []
 
@@ -262,8 +266,8 @@ class _ClosedLoop:
                     lockstep.check(sim.stamp_ns, measured.positions[0], measured.speeds[0])
                 changed = lockstep.plan_at(sim.stamp_ns) is not in_force
             else:
-                changed = replanning and replanner.update(t, measured.positions[0],
-                                                          measured.speeds[0])
+                changed = replanning and replanner.update(
+                    t, measured.positions[0], measured.speeds[0]) is not None
             if changed:
                 self._plan_changed(k)
                 references, sampled, at = self.references, self.sampled, self.at

@@ -24,6 +24,33 @@ def test_the_linter_fails_on_an_unused_import_and_on_a_long_line(tmp_path):
     assert 'F401' in done.stdout and 'E501' in done.stdout
 
 
+def test_the_type_checker_fails_on_a_wrong_type_in_a_listed_package(tmp_path):
+    """mypy, with the repository's mypy.ini, over a package of the list: clean, then with a
+    string passed for a float."""
+    config = (ROOT / 'mypy.ini').read_text()
+    package = tmp_path / 'ato_ros' / 'ato_ros'
+    package.mkdir(parents=True)
+    (package / '__init__.py').write_text('')
+    (package / 'sample.py').write_text('def twice(x: float) -> float:\n    return 2 * x\n')
+    (tmp_path / 'mypy.ini').write_text(config)
+    command = (sys.executable, '-m', 'mypy', '--cache-dir', str(tmp_path / 'cache'),
+               '-p', 'ato_ros')
+    assert _run(*command, cwd=tmp_path).returncode == 0
+    (package / 'use.py').write_text('from ato_ros.sample import twice\n\ntwice("1")\n')
+    done = _run(*command, cwd=tmp_path)
+    assert done.returncode == 1 and 'arg-type' in done.stdout
+
+
+def test_mypy_checks_every_package_it_lists_and_make_lint_runs_it():
+    config = (ROOT / 'mypy.ini').read_text()
+    listed = next(line for line in config.splitlines() if line.startswith('packages ='))
+    for name in listed.split('=', 1)[1].split(','):
+        folder = 'tools' if name.strip() == 'ato_tools' else name.strip()
+        assert (ROOT / folder / name.strip() / '__init__.py').exists(), name
+    lint = (ROOT / 'Makefile').read_text().split('\nlint:', 1)[1].split('\n\n', 1)[0]
+    assert 'mypy' in lint
+
+
 def _site_copy(tmp_path) -> Path:
     site = tmp_path / 'site-source'
     shutil.copytree(ROOT / 'docs', site / 'docs')

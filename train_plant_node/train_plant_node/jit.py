@@ -13,7 +13,7 @@ from __future__ import annotations
 try:
     import numba
 except ImportError:  # pragma: no cover - exercised only where numba is not installed
-    numba = None
+    numba = None  # type: ignore[assignment]
 
 JIT_AVAILABLE = numba is not None
 

@@ -220,7 +220,7 @@ class TrainPlantNode(RunNodeHooks, Node):
         self.last_publish_wall = 0.0
         self.next_diagnostic_ns = 0
         self.wall_start_ns = 0
-        self.step_messages = None
+        self.step_messages: list | None = None
         self.steps_published = 0  # re-sent steps included: what a recording must hold
         self.ready_since: float | None = None
         self.wrong_stamp_commands = 0   # dropped for their stamp (lockstep and real time)
@@ -305,6 +305,7 @@ class TrainPlantNode(RunNodeHooks, Node):
                 self.get_logger().info(f'the recorders caught up after {self.held}')
                 self.held = ''
         messages = self.step_messages
+        assert messages is not None  # built above for this step
         publish, records = self.publishing, self.records
         recording = records.begin_step()  # a recorder takes every message of the step from it
         if self.clock_pub is not None:

@@ -65,7 +65,7 @@ class Surroundings:
         """(factor of a, of b, of c, of the line force, disturbance in N) at a time."""
         values = np.zeros(ENV_SIZE)
         self.write_parameters(values, 0)
-        if self.held_disturbance:
+        if self.disturbance is not None and self.held_disturbance:
             values[DISTURBANCE_VALUE] = self.disturbance.force(time_s)
         return env_factors(values, 0, time_s)
 

@@ -414,7 +414,9 @@ class MaoAdaptiveLaw(_MaoBase):
 
     def _start_from_prior(self) -> None:
         ratio = self.settings.initial_estimate_ratio
-        self.nominal1, self.nominal2 = self._parameters(self.settings.paper_as_printed) or ((), ())
+        nominal: tuple[tuple[float, ...], tuple[float, ...]] = \
+            self._parameters(self.settings.paper_as_printed) or ((), ())
+        self.nominal1, self.nominal2 = nominal
         self.theta1_hat = [ratio * t for t in self.nominal1]
         self.theta2_hat = [ratio * t for t in self.nominal2]
         self._pending = None

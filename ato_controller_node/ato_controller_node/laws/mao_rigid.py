@@ -130,7 +130,9 @@ class MaoRigidLaw(ControlLaw):
 
     def _start_from_prior(self) -> None:
         if len(self.train.cars) != CARS:
-            self.nominal, self.theta_hat, self._share2 = (), [], 0.5
+            self.nominal: tuple[float, ...] = ()
+            self.theta_hat: list[float] = []
+            self._share2 = 0.5
         else:
             self.nominal = rigid_parameters(self.train)
             self.theta_hat = [self.settings.initial_estimate_ratio * t for t in self.nominal]

@@ -15,10 +15,9 @@ s^3 + kd s^2 + kp s + ki have a triple pole at -0.4 rad/s (kd = 3w, kp = 3w^2, k
 damped, far below the 10 Hz sampling and the actuator lag. The integral removes the steady error
 of resistance mismatch and of the grades not fed forward.
 
-Checked on every built-in scenario with `make compare` (RMS speed error 0.003-0.03 km/h, stop
-errors under 0.02 m on short_line, jinan_xuzhou, liu_li_2020, luo_xu_crh3, mao_4car; on
-mao_2017_modes the error comes from the power-limited motors after the failure, not the gains):
-the default gains were kept; the applied force's max jerk stays at 0.1-0.3 m/s^3 there.
+These published defaults are checked on every built-in scenario by `make compare` (its page,
+docs/results/comparison.md, has the figures); the tuned gains are the tuning procedure's
+(``ato_controller_node.gains``, docs/results/tuning.md).
 
 Anti-windup. The position error, which winds up while the command is saturated (it is the
 integral of the speed error), is the host's: its ATO envelope (``ato_controller_node.envelope``,

@@ -245,7 +245,7 @@ class IdentificationBank:
     def thetas(self, values) -> None:
         self._thetas = [tuple(float(x) for x in row) for row in values]
 
-    def parameter_rows(self) -> list[tuple[float, float, float, float]]:
+    def parameter_rows(self) -> list[tuple[float, ...]]:
         return self._thetas
 
     def model_gains(self) -> list[float]:

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from ato_common.line import Line
+from ato_common.line import Curve, Line, Tunnel
 from train_plant_node.jit import kernel
 
 # A car that has just been integrated onto a boundary is in the segment it is entering.
@@ -19,7 +19,8 @@ BOUNDARY_NUDGE_M = 1e-6
 class LineSegments:
     def __init__(self, line: Line, gravity: float):
         bounds = set(line.grade_sine.starts[1:])
-        for feature in (*line.curves, *line.tunnels):
+        features: list[Curve | Tunnel] = [*line.curves, *line.tunnels]
+        for feature in features:
             bounds.update((feature.start_m, feature.start_m + feature.length_m))
         self.bounds = sorted(bounds)
         starts = [self.bounds[0] - 1.0 if self.bounds else 0.0] + self.bounds

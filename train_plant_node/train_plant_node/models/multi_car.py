@@ -164,6 +164,7 @@ class _ModeMatrices:
     """Per-mode car parameters and the linear dynamics."""
 
     def __init__(self, model: 'MultiCarModel', mode: Mode):
+        self.mode = mode
         train, cars, n = model.train, model.train.cars, model.n
         d, nominal = mode.davis, train.davis
 
@@ -206,7 +207,7 @@ class _ModeMatrices:
             actuator[i] = float(j)
         self.cars = np.array([self.a, self.b, self.c, self.inverse_mass, model.offsets, actuator],
                              dtype=float)
-        self._propagators: dict[float, tuple] = {}
+        self._propagators: dict[float, np.ndarray] = {}
 
     def _balancing(self):
         """Positions scaled by the highest coupler frequency against speeds, so that matrix
@@ -422,7 +423,8 @@ class MultiCarModel:
         self._modes: dict[int, _ModeMatrices] = {}
         self.A = self.mode_matrices(self.nominal).A  # the nominal linear dynamics
         self.parameters = np.zeros(PARAMETERS)
-        self._parameters_of = None  # the surroundings ``parameters`` holds, and their matrices
+        # the surroundings ``parameters`` holds, and their matrices
+        self._parameters_of: Surroundings | None = None
         self._matrices_of_parameters: _ModeMatrices | None = None
         self._outputs = np.empty(3 * n)  # outputs_kernel's
         self._forces: tuple = ()
@@ -466,9 +468,11 @@ class MultiCarModel:
             p[:ENV] = (mm.extra, mm.total_mass, self.gravity)
             env.write_parameters(p, ENV)
             self._parameters_of, self._matrices_of_parameters = env, mm
-        if env.held_disturbance:  # constant within the step (the simulation splits at jumps)
+        if env.disturbance is not None and env.held_disturbance:  # constant within the step
             p[ENV + DISTURBANCE_VALUE] = env.disturbance.force(time_s + 0.5 * duration_s)
-        return self._matrices_of_parameters, p
+        matrices = self._matrices_of_parameters
+        assert matrices is not None  # set with ``_parameters_of``
+        return matrices, p
 
     def kernel_inputs(self, env: Surroundings, duration_s: float) -> tuple:
         """What ``periods.run_multi_car_periods`` reads of the model under ``env`` (without a
@@ -477,7 +481,7 @@ class MultiCarModel:
         mm, p = self._prepare(env, 0.0, 0.0)
         return mm.propagators(duration_s), self.segments.table, mm.cars, p, mm.A
 
-    def _force_array(self, forces: Sequence[float]) -> np.ndarray:
+    def _force_array(self, forces: Sequence[float] | np.ndarray) -> np.ndarray:
         """The actuator forces as the kernels read them (the last array, if they are equal)."""
         if type(forces) is not tuple or forces != self._forces:
             self._forces = tuple(forces)
@@ -532,7 +536,8 @@ class MultiCarModel:
             return moved
         return self._integrate(state, duration_s, forces, time_s, env)
 
-    def _integrate(self, state: np.ndarray, duration_s: float, forces: Sequence[float],
+    def _integrate(self, state: np.ndarray, duration_s: float,
+                   forces: Sequence[float] | np.ndarray,
                    time_s: float, env: Surroundings | None) -> np.ndarray:
         """``step``'s integration: ETDRK4 steps of at most ``max_substep_s``, split where a car
         reaches another line segment."""

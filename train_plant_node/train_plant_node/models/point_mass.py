@@ -148,7 +148,7 @@ class PointMassModel:
         # resistance, against the line (grade, curve, tunnel, mode terms), by the disturbance.
         self.work = np.zeros(4)
         self.parameters = np.zeros(PARAMETERS)
-        self._parameters_of = None  # the surroundings ``parameters`` holds
+        self._parameters_of: Surroundings | None = None  # the surroundings ``parameters`` holds
         # Compile the kernels, or load them from numba's cache, now rather than in a lockstep
         # step (from a tenth of a second to seconds on first use in a process).
         self.step(self.initial_state(0.0), self.max_substep_s, (0.0,) * len(self.actuator_names))
@@ -170,7 +170,7 @@ class PointMassModel:
                        mode.grade_sine * self.gravity + mode.curve_accel_mps2, self.gravity)
             env.write_parameters(p, ENV)
             self._parameters_of = env
-        if env.held_disturbance:  # constant within the step (the simulation splits at jumps)
+        if env.disturbance is not None and env.held_disturbance:  # constant within the step
             p[ENV + DISTURBANCE_VALUE] = env.disturbance.force(time_s + 0.5 * duration_s)
         return p
 
