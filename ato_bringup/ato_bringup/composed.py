@@ -32,6 +32,7 @@ gives the same state sequence, bit for bit, as the same run in three processes
 from __future__ import annotations
 
 import sys
+from typing import Callable
 
 from ato_ros.interrupts import quiet_until_running
 
@@ -62,12 +63,13 @@ def main(args=None) -> int:
 
     from ato_common.validation import ConfigError
     from ato_controller_node.node import AtoControllerNode
-    from ato_ros.lifecycle import help_requested, run_nodes
+    from ato_ros.lifecycle import RunNodeHooks, help_requested, run_nodes
     from profile_node.node import ProfileNode
     from train_plant_node.node import TrainPlantNode
     argv = remove_ros_args(args if args is not None else sys.argv)[1:]
     # The plant first: its latched identity is there when the others subscribe.
-    makers = [TrainPlantNode, ProfileNode, AtoControllerNode]
+    makers: list[Callable[[], RunNodeHooks]] = [TrainPlantNode, ProfileNode,
+                                                AtoControllerNode]
     recorder = None
     if argv and argv[0] == '--record' and not help_requested(args):
         from recorder.node import InProcessRecorder

@@ -175,7 +175,7 @@ class StepRecorder:
         self.names: dict[object, str] = {}  # publisher -> its topic's full name
         self.local: Callable[[list], None] | None = None
         self.batch: list[tuple[str, int, bytes]] = []
-        self.batch_first_ns: int | None = None
+        self.batch_first_ns = 0  # the stamp of the batch's first entry (set with it)
         self.batch_first_wall = 0.0
         self.batch_period_ns = self.bundle.period_ns
 
