@@ -18,8 +18,9 @@ STRESS_LOAD ?= 2
 
 help:
 	@echo "make setup   create .venv with pinned packages and build ros_ws (idempotent)"
-	@echo "make demo    run the full stack on the default scenario in lockstep with the PID baseline"
-	@echo "             and print a summary (SCENARIO=name-or-file CONTROLLER=law to override)"
+	@echo "make demo    run the full stack on the default scenario in lockstep with the PID baseline,"
+	@echo "             print a summary and write the run's report.html (SCENARIO=name-or-file"
+	@echo "             CONTROLLER=law to override)"
 	@echo "make compare every applicable law on every built-in scenario, offline, in parallel:"
 	@echo "             runs/compare/compare.md (tables, ranking) and plots (SCENARIO=name-or-file:"
 	@echo "             one only); a campaign of one nominal draw"

@@ -156,7 +156,7 @@ def test_help_prints_usage_and_every_parameter_and_starts_nothing(name):
     ('plant', {'lockstep': False, 'use_sim_time': True},
      'use_sim_time is true on a real-time plant'),
     ('plant', {'recorder_lead_s': 0.5},
-     'recorder_lead_s 0.5 s is under the least lead of this loop, 0.8 s'),
+     'recorder_lead_s 0.5 s is under the least lead of this loop, 1.6 s'),
 ])
 def test_harmful_parameter_combinations_are_refused_with_the_reason(tmp_path, domain_id, name,
                                                                      params, reason):

@@ -19,6 +19,7 @@ from ato_ros.messages import qos_profile
 from ato_ros.middleware import with_middleware_defaults
 from recorder.foxglove_client import FoxgloveClient, message_data
 from recorder.live import served_url
+from recorder.ros_io import message_class
 
 
 def test_a_watched_topic_arrives_as_published_and_costs_nothing_unwatched(tmp_path, domain_id):
@@ -203,3 +204,129 @@ def test_an_observation_topic_is_sampled_for_a_sampling_subscriber_only(domain_i
         node.destroy_node()
     finally:
         rclpy.shutdown(context=context)
+
+
+class LiveView:
+    """``recorder live`` (its log in ``log``) and the URL it serves."""
+
+    def __init__(self, log, env, *args):
+        self.log = log
+        with open(log, 'wb') as out:
+            self.process = subprocess.Popen(
+                [executable_path('recorder', 'live'), '--port', '0', *args], stdout=out,
+                stderr=subprocess.STDOUT, env=env, stdin=subprocess.DEVNULL)
+        deadline, self.url = time.monotonic() + 30, None
+        while self.url is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+            self.url = served_url(log.read_text(errors='replace'))
+        assert self.url, log.read_text(errors='replace')
+
+    def stop(self) -> None:
+        self.process.send_signal(2)
+        assert self.process.wait(timeout=30) == 0, self.log.read_text(errors='replace')
+        assert 'Traceback' not in self.log.read_text(errors='replace')
+
+
+def stack_env(domain_id):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED='1')
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    return with_middleware_defaults(env)  # as the stack's own processes
+
+
+def test_the_protocol_by_either_name_and_a_clear_refusal_otherwise(tmp_path, domain_id):
+    """Issue 31, defect 2: the SDK's name of the protocol (foxglove.sdk.v1) and its former name
+    (foxglove.websocket.v1) both connect, each answered with the name it asked for, and get the
+    same channels; a request for neither is refused with HTTP 400 and a text saying which to ask
+    for. The step records and acknowledgements are not offered unless named."""
+    import urllib.error
+    import urllib.request
+
+    from recorder.ws_front import OLDER_SUBPROTOCOL, SDK_SUBPROTOCOL
+    with Stack(StackConfig(scenario='short_line', domain_id=domain_id,
+                           log_dir=tmp_path)) as stack:
+        for key in ('state', 'step_records', 'recorded'):
+            spec = TOPICS[key]
+            stack.node.create_publisher(message_class(spec.type_name), '/' + spec.name,
+                                        qos_profile(spec.qos))
+        live = LiveView(tmp_path / 'live.log', stack.env)
+        named = LiveView(tmp_path / 'named.log', stack.env, '/ato/step_records')
+        try:
+            for subprotocol in (SDK_SUBPROTOCOL, OLDER_SUBPROTOCOL):
+                client = FoxgloveClient(live.url, subprotocol=subprotocol)
+                try:
+                    assert client.connection.selected_subprotocol == subprotocol
+                    client.channel('/train/state', 20, lambda: stack.spin_for(0.05))
+                    stack.spin_for(2.0)  # every topic of the graph is offered by now
+                    assert '/ato/step_records' not in client.channels
+                    assert '/ato/recorded' not in client.channels
+                finally:
+                    client.close()
+            client = FoxgloveClient(named.url)
+            try:
+                client.channel('/ato/step_records', 20, lambda: stack.spin_for(0.05))
+            finally:
+                client.close()
+            request = urllib.request.Request(live.url.replace('ws://', 'http://'), headers={
+                'Connection': 'Upgrade', 'Upgrade': 'websocket',
+                'Sec-WebSocket-Version': '13', 'Sec-WebSocket-Key': 'dGhlIHNhbXBsZSBub25jZQ==',
+                'Sec-WebSocket-Protocol': 'some.other.v1'})
+            with pytest.raises(urllib.error.HTTPError) as refused:
+                urllib.request.urlopen(request, timeout=10)
+            assert refused.value.code == 400
+            text = refused.value.read().decode()
+            assert SDK_SUBPROTOCOL in text and OLDER_SUBPROTOCOL in text
+            assert 'some.other.v1' in text
+        finally:
+            live.stop()
+            named.stop()
+
+
+def lose_steps(first_s: float, last_s: float):
+    """An action on the stack: the monitor's samples from ``first_s`` to ``last_s`` of simulated
+    time forgotten, as a monitor that fell behind the loop further than the middleware keeps
+    for it never gets them."""
+    def lose(stack):
+        for stamp in [k for k in stack.monitor.samples if first_s * 1e9 <= k <= last_s * 1e9]:
+            del stack.monitor.samples[stamp]
+    return lose
+
+
+def test_a_watched_multi_car_run_is_summed_up_over_every_step(tmp_path, domain_id):
+    """Issue 31, defect 1: a multi-car run (mao_4car, the multi-car plant, to its end) as
+    run_scenario runs it (the lean monitor, recorded), watched in Foxglove by a client subscribed
+    to topics of the shipped layout. The live view and the app beside it starved the run's
+    monitor of CPU, and the summary was that of part of the run. Here the monitor is stalled
+    outright for a while (its thread takes nothing), and the steps from 30 s to 60 s are taken
+    from it, as the middleware dropped those of a monitor that fell too far behind. The summary
+    still covers every step: those the monitor missed come from the recording, which the loop
+    waits for (and a run without one fails, naming them: tests/test_run_complete.py)."""
+    from ato_bringup.stack import RUN_DIAGNOSTICS_PERIOD_S
+
+    live = LiveView(tmp_path / 'live.log', stack_env(domain_id))
+    client = FoxgloveClient(live.url)
+    try:
+        def watch(stack):
+            for k, topic in enumerate(('/train/state', '/ato/reference', '/ato/command',
+                                       '/train/actuators/applied', '/diagnostics')):
+                client.subscribe(k, client.channel(topic, 30, lambda: stack.spin_for(0.02))['id'])
+
+        config = StackConfig(scenario='mao_4car', controller='mao_multibody_rigid',
+                             domain_id=domain_id, log_dir=tmp_path / 'logs',
+                             record_to=tmp_path / 'bag', monitor='lean',
+                             plant_params={'model': 'multi_car'},
+                             diagnostics_period_s=RUN_DIAGNOSTICS_PERIOD_S)
+        outcome = run_lockstep(config, actions={0.0: watch,
+                                                20.0: lambda stack: time.sleep(10.0),
+                                                100.0: lose_steps(30.0, 60.0)})
+        watched = sum(isinstance(m, bytes) for m in list(client.received.queue))
+    finally:
+        client.close()
+        live.stop()
+    end_ns = round(config.end_time_s * 1e9)  # the scenario's end, set by the run
+    expected = list(range(0, end_ns + 99_999_999, 100_000_000))  # 10 Hz, to the first at the end
+    assert len(expected) > 11_000
+    assert [k for k, _ in outcome.samples] == expected
+    assert all(len(s.positions) == 4 for _, s in outcome.samples)  # every car, every step
+    assert outcome.metrics.samples == len(expected)
+    assert outcome.metrics.simulated_time_s == pytest.approx(expected[-1] / 1e9)
+    assert watched > 0

@@ -318,7 +318,8 @@ def test_the_recorder_acknowledges_step_records_once_they_are_in_its_file(tmp_pa
         stack.start_process('recorder', {}, ['-o', str(tmp_path / 'bag')])
         assert stack.spin_until(lambda: publisher.get_subscription_count() >= 1, 60.0), \
             stack.log_tail('recorder')
-        stamps = [7_000_000_000 + k * 100_000_000 for k in range(4)]
+        # a bundle a step, over one acknowledgement period and a step more
+        stamps = [7_000_000_000 + k * 100_000_000 for k in range(round(ACK_PERIOD_S * 10) + 2)]
         for stamp in stamps:
             bundle = Bundle()
             state.header.stamp.sec, state.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
@@ -388,10 +389,11 @@ def test_a_recorder_that_falls_behind_holds_the_lockstep_and_loses_nothing(tmp_p
     assert held_at - in_file[-1] <= round(LEAD_S * 1e9), (held_at, in_file[-1])
 
 
-def test_a_composed_stack_records_every_step_from_one_bundle(tmp_path, domain_id):
-    """The three nodes in one process (``ato_stack``) share their step records: one publisher
-    of ``ato/step_records`` carries the per-step topics of all three, and the bag holds each of
-    them at every step."""
+def test_a_composed_stack_records_every_step_in_its_own_process(tmp_path, domain_id):
+    """The three nodes in one process (``ato_stack --record``) with the recorder in it: the
+    nodes hand their per-step messages to it directly (nobody subscribes to the step records
+    through the middleware) and the bag holds each per-step topic at every step; the bag is
+    closed when the process ends."""
     from rclpy.qos import QoSProfile
 
     states = []
@@ -403,13 +405,71 @@ def test_a_composed_stack_records_every_step_from_one_bundle(tmp_path, domain_id
         stack.start()
         assert stack.spin_until(lambda: len(states) > 10, 120.0), stack.log_tail('loop')
         publishers = stack.node.get_publishers_info_by_topic('/ato/step_records')
+        subscribers = stack.node.get_subscriptions_info_by_topic('/ato/step_records')
         assert stack.spin_until(lambda: stack.processes['loop'].poll() is not None, 300.0)
         codes = stack.stop()
-    assert set(codes.values()) == {0}, codes
-    assert [i.node_name for i in publishers] == ['train_plant_node']
+        log = stack.log_tail('loop', 200)
+    assert codes == {'loop': 0}, codes
+    assert [i.node_name for i in publishers] == ['train_plant_node'] and subscribers == []
+    assert 'closed ' in log and str(tmp_path / 'bag') in log
     info = bag_info(tmp_path / 'bag')
-    steps = len({state_stamp(m) for m in read_messages(tmp_path / 'bag', ['/train/state'])})
-    assert steps >= 301
-    for topic in ('/clock', '/train/state/measured', '/ato/reference', '/ato/distance_to_go',
-                  '/ato/permitted_speed', '/ato/command', '/train/actuators/applied'):
-        assert info.topics[topic].message_count >= steps - 1, topic
+    stamps = sorted({state_stamp(m) for m in read_messages(tmp_path / 'bag', ['/train/state'])})
+    assert stamps == list(range(0, 30_000_000_001, 100_000_000))  # every step
+    for topic in ('/clock', '/train/state/measured', '/train/actuators/commanded',
+                  '/train/actuators/applied'):
+        assert info.topics[topic].message_count >= len(stamps), topic
+    for topic in ('/ato/reference', '/ato/distance_to_go', '/ato/permitted_speed',
+                  '/ato/command'):
+        assert info.topics[topic].message_count >= len(stamps) - 1, topic
+    assert {'/diagnostics', '/ato/reference/curve', '/train/identity'} <= set(info.topics)
+
+
+def test_an_ato_node_of_ones_own_is_recorded_beside_the_step_records(tmp_path, domain_id):
+    """Issue 32: an ATO node outside the suite publishes ato/command itself, beside the plant
+    and the profile, whose per-step topics come in their step records. The recorder records
+    its commands from the topic (its publisher publishes no step records), each once, and the
+    others from the step records, each once."""
+    from rclpy.qos import QoSProfile
+    from sensor_msgs.msg import JointState
+
+    from ato_common.types import Command
+    from ato_ros import wire
+    from ato_ros.messages import qos_profile, topic
+
+    config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path / 'logs',
+                         record_to=tmp_path / 'bag', end_time_s=30.0)
+    with Stack(config) as stack:
+        commands = stack.node.create_publisher(JointState, topic('command').name,
+                                               qos_profile(topic('command').qos))
+
+        def answer(data: bytes) -> None:  # a P law on the speed, answering every step
+            state = wire.decode_state(data)
+            force = min(max(2e5 * (10.0 - state.speeds[0]), 0.0), 2e5)
+            commands.publish(wire.encode_command(Command(state.stamp_ns, ('traction',),
+                                                         (force,), 'own_ato')))
+        stack.node.create_subscription(JointTrajectory, topic('state_measured').name, answer,
+                                       qos_profile(topic('state_measured').qos), raw=True)
+        stack.node.create_subscription(JointTrajectory, topic('reference').name,
+                                       lambda data: None, QoSProfile(depth=1000), raw=True)
+        # the recorder first (as the Stack starts it), and the run once it has subscribed to the
+        # node's commands (a recorder records a publisher from when it has discovered it)
+        stack.start_process('recorder', {}, ['-o', str(config.record_to), '--sim-time',
+                                             '--background'])
+        assert stack.spin_until(lambda: commands.get_subscription_count() >= 1, 60.0), \
+            stack.log_tail('recorder')
+        params = stack.node_params()
+        for name in ('profile', 'plant'):
+            stack.start_process(name, params[name])
+        assert stack.spin_until(lambda: stack.exited('plant'), 300.0), stack.log_tail('plant')
+        codes = stack.stop()
+        log = stack.log_tail('recorder', 100)
+    assert codes['plant'] == 0 and codes['recorder'] == 0, codes
+    messages = list(read_messages(tmp_path / 'bag', ['/ato/command', '/train/state']))
+    sent = [wire.decode_joint_state(m.data) for m in messages if m.topic == '/ato/command']
+    states = [state_stamp(m) for m in messages if m.topic == '/train/state']
+    assert len(states) == len(set(states)) >= 301, len(states)  # every step, once
+    assert {law for _, law, *_ in sent} == {'own_ato'}
+    stamps = [stamp for stamp, *_ in sent]
+    assert len(stamps) == len(set(stamps)) and set(states) - set(stamps) <= {max(states)}
+    assert 'ato/command has a publisher that publishes no step records' not in log  # from start
+    assert 'recording /ato/command [sensor_msgs/msg/JointState], logged at its stamp' in log

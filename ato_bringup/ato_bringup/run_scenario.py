@@ -219,7 +219,7 @@ def run(args: argparse.Namespace) -> int:
     from ato_common.run_events import final_exit_code
     from ato_common.validation import ConfigError
     from recorder.bag import BagError
-    from recorder.report import load_run, plot
+    from recorder.report import build_report, write_report
     try:
         config, launch = configure(args)
     except LaunchRefused as error:
@@ -250,13 +250,14 @@ def run(args: argparse.Namespace) -> int:
     if config.record_to is not None:
         record_to = config.record_to
         try:
-            plots = plot(load_run(record_to), record_to / 'report')
+            page = write_report(build_report(record_to, scenario=args.scenario),
+                                record_to / 'report')
         except BagError as error:
             print(f'error: the recording cannot be read: {error}', file=sys.stderr)
             return 1
         print(f'recording             {record_to} '
               f'({ros_command(f"run recorder info {record_to}")})')
-        print(f'report                {plots[0].parent} ({", ".join(p.name for p in plots)})')
+        print(f'report                {page}')
     return final_exit_code(outcome.events, not args.no_fail_on_events)
 
 

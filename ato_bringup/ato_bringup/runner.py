@@ -6,6 +6,7 @@ import os
 import sys
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -15,12 +16,16 @@ from ato_bringup.stack import Monitor, Sample, Stack, StackConfig
 from ato_common.metrics import RunMetrics, compute_metrics
 from ato_common.run_events import PLATFORM_TOLERANCE_M, RunEvents, run_events, stations_of
 from ato_common.scenario import Scenario, load_scenario
-from ato_common.types import NS_PER_S
+from ato_common.types import NS_PER_S, nanoseconds
 from ato_simulation.plans import cached_plan, run_end_time_s, stop_samples
 
 
 class RunFailed(RuntimeError):
     pass
+
+
+class RunIncomplete(RunFailed):
+    """A run whose record misses steps: its figures would be those of part of the run."""
 
 
 @dataclass
@@ -202,7 +207,9 @@ def run_lockstep(config: StackConfig, actions: dict[float, Callable[[Stack], obj
         if bad:
             raise RunFailed(f'processes exited with errors {bad}:\n' +
                             '\n'.join(stack.log_tail(k) for k in bad))
-        samples = monitor.complete_samples()
+        # in real time the stamps are the wall clock's: no step's stamp is known beforehand
+        expected = expected_steps(config, scenario) if config.lockstep else []
+        samples = complete_record(monitor, expected, config.record_to)
         diagnostics = list(monitor.diagnostics)
         arrivals = list(monitor.arrivals)
         counts = dict(monitor.counts)
@@ -250,6 +257,51 @@ def judged(scenario: Scenario, config: StackConfig, samples: list[tuple[int, Sam
                         [s.positions[0] for _, s in samples], diagnostics=diagnostics,
                         tolerance_m=stop_tolerance_m)
     return metrics, laws, events
+
+
+def expected_steps(config: StackConfig, scenario: Scenario) -> list[int]:
+    """The stamps of every step a lockstep run to ``config.end_time_s`` publishes: from 0, one
+    control period apart, to the first at or past the end time (where the plant stops)."""
+    rate = config.plant_params.get('control_rate_hz') or scenario.run.controller_rate_hz
+    period = nanoseconds(1.0 / rate)
+    last = -(-nanoseconds(config.end_time_s) // period)
+    return list(range(0, last * period + 1, period))
+
+
+def complete_record(monitor: Monitor, expected: list[int], recording: Path | None
+                    ) -> list[tuple[int, Sample]]:
+    """The run's samples, every expected step: those the monitor missed (it lagged behind the
+    loop, which does not wait for it, further than the middleware keeps for it) are read from
+    the run's recording, which the loop does wait for. RunIncomplete names the steps neither
+    holds."""
+    samples = monitor.complete_samples()
+    missing = set(expected) - {k for k, _ in samples}
+    if missing and recording is not None:
+        monitor.fill_from_recording(recording, missing)
+        samples = monitor.complete_samples()
+        missing = set(expected) - {k for k, _ in samples}
+    if missing:
+        raise RunIncomplete(
+            f'the run monitor missed {len(missing)} of the run\'s {len(expected)} steps '
+            f'({step_ranges(sorted(missing), expected)})'
+            + (' and the recording does not hold them either' if recording else
+               ' and the run was not recorded') + ': no summary of part of a run')
+    return samples
+
+
+def step_ranges(missing: list[int], expected: list[int]) -> str:
+    """The missing steps as ranges of simulated time: '966.8 s to 1101.9 s (1352 steps), ...'."""
+    index = {stamp: i for i, stamp in enumerate(expected)}
+    ranges: list[list[int]] = []
+    for stamp in missing:
+        if ranges and index[stamp] == index[ranges[-1][-1]] + 1:
+            ranges[-1].append(stamp)
+        else:
+            ranges.append([stamp])
+    parts = [f'{r[0] / NS_PER_S:.1f} s' if len(r) == 1 else
+             f'{r[0] / NS_PER_S:.1f} s to {r[-1] / NS_PER_S:.1f} s ({len(r)} steps)'
+             for r in ranges[:5]]
+    return ', '.join(parts) + (f' and {len(ranges) - 5} more gaps' if len(ranges) > 5 else '')
 
 
 def laws_in(diagnostics) -> set[str]:

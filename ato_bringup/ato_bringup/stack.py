@@ -201,19 +201,23 @@ class Monitor:
         state = self._read('state', data, wire.decode_state, JointTrajectory, state_from_msg)
         if state is None:
             return
-        stamp_ns = state.stamp_ns
-        s = self._sample(stamp_ns)
-        self.last_stamp_ns = max(self.last_stamp_ns, stamp_ns)
+        self._state(state)
+        self.last_stamp_ns = max(self.last_stamp_ns, state.stamp_ns)
         self.arrivals.append((time.monotonic() if arrived_s is None else arrived_s,
                               self.last_stamp_ns))
+
+    def _state(self, state) -> None:
+        s = self._sample(state.stamp_ns)
         s.positions, s.speeds = state.positions, state.speeds
         s.accelerations, s.forces = state.accelerations, state.forces
 
     def on_reference(self, data: bytes, arrived_s: float | None = None) -> None:
         reference = self._read('reference', data, wire.decode_reference, JointTrajectory,
                                reference_from_msg)
-        if reference is None:
-            return
+        if reference is not None:
+            self._reference(reference)
+
+    def _reference(self, reference) -> None:
         s = self._sample(reference.stamp_ns)
         s.ref_position, s.ref_speed = reference.now.position, reference.now.speed
 
@@ -221,11 +225,31 @@ class Monitor:
         read = self._read('command', data, wire.decode_joint_state, JointState,
                           lambda m: (from_time(m.header.stamp), m.header.frame_id, m.name,
                                      m.position, m.velocity, m.effort))
-        if read is None:
-            return
+        if read is not None:
+            self._command(read)
+
+    def _command(self, read) -> None:
         stamp_ns, law, _, _, _, effort = read
         s = self._sample(stamp_ns)
         s.command, s.law = tuple(effort), law
+
+    def fill_from_recording(self, bag: Path, stamps: set[int]) -> None:
+        """The samples at ``stamps`` (steps the monitor missed) from the recording ``bag``, the
+        run's complete record (the loop waits for its recorder, not for the monitor): their
+        state, reference and, if watched, command."""
+        from recorder.bag import read_messages
+        readers = {'state': (wire.decode_state, self._state),
+                   'reference': (wire.decode_reference, self._reference),
+                   'command': (wire.decode_joint_state, self._command)}
+        names = {self.node.resolve_topic_name(topic(key).name): readers[key]
+                 for key in self.watch if key in readers}
+        for message in read_messages(bag, list(names)):
+            decode, fill = names[message.topic]
+            if message.log_time_ns in stamps:  # logged at its stamp by the run's recorder
+                try:
+                    fill(decode(message.data))
+                except MessageError:
+                    continue  # not the loop's: the monitor would not have read it either
 
     def on_diagnostics(self, msg: DiagnosticArray) -> None:
         self.counts['diagnostics'] += 1
@@ -336,18 +360,18 @@ class Stack:
     def start(self, order=('controller', 'profile', 'plant')) -> None:
         self.config.log_dir.mkdir(parents=True, exist_ok=True)
         params = self.node_params()
+        if self.config.composed:
+            self.start_composed(params)
+            return
         if self.config.record_to is not None:
             # unstamped topics are logged at simulated time in lockstep: that of the /clock the
             # recorder records (--sim-time: no second subscription to /clock); it runs at the
             # lowest CPU priority (--background), on the CPU the loop leaves: the plant waits for
             # it when it falls behind (recorder_lead_s)
             self.start_process('recorder', params['recorder'],
-                               ['-o', str(self.config.record_to),
+                               ['-o', str(self.config.record_to), *self.provenance(),
                                 *(['--sim-time', '--background'] if self.config.lockstep
                                   else [])])
-        if self.config.composed:
-            self.start_composed(params)
-            return
         for name in order:
             if name == 'controller' and self.config.controller_command:
                 self.start_external_controller()
@@ -369,12 +393,23 @@ class Stack:
 
     def start_composed(self, params: dict[str, dict]) -> subprocess.Popen:
         """The three loop nodes in one process (``ato_stack``), each with its own parameters
-        from a parameters file with a section per node (the file is kept in the log folder)."""
+        from a parameters file with a section per node (the file is kept in the log folder);
+        with ``record_to``, the recorder in that process too (``ato_stack --record``)."""
         sections = {f'/**/{NODE_NAMES[key]}': {'ros__parameters': params[key]}
                     for key in NODE_NAMES}
         path = self.config.log_dir / 'loop_parameters.yaml'
         path.write_text(yaml.safe_dump(sections, sort_keys=True))
-        return self.start_process('loop', {}, extra_ros_args=['--params-file', str(path)])
+        record = [] if self.config.record_to is None else [
+            '--record', '-o', str(self.config.record_to), *self.provenance()]
+        return self.start_process('loop', {}, record,
+                                  extra_ros_args=['--params-file', str(path)])
+
+    @staticmethod
+    def provenance() -> list[str]:
+        """The recorder's custom data of where the run comes from: the suite's commit (the
+        report shows it)."""
+        from ato_campaigns.provenance import commit_description
+        return ['--custom-data', f'suite_commit={commit_description()}']
 
     def start_process(self, name: str, params: dict, args: Sequence[str] = (),
                       extra_ros_args: Sequence[str] = (), kind: str | None = None,

@@ -135,7 +135,7 @@ TOPICS = {
                           'per-step messages of a node bundled for the recorders (the bytes of '
                           'each message of STEP_RECORDED it published, with its topic, log and '
                           'publish times; layout in ato_ros.step_records)',
-                          rate='every 0.4 s of simulated time (at most 0.05 s of wall time) '
+                          rate='every 0.8 s of simulated time (at most 0.05 s of wall time) '
                           'while a recorder subscribes'),
     'recorded': Topic('ato/recorded', 'std_msgs/msg/Header', ACKNOWLEDGEMENTS, 's',
                       'recorder', 'train_plant_node',
@@ -144,7 +144,7 @@ TOPICS = {
                       "recorder's node name; in lockstep the plant runs at most "
                       'recorder_lead_s past the oldest acknowledgement (ato_ros.'
                       'RecorderLead)',
-                      rate='every 0.2 s of simulated time of step records written'),
+                      rate='every 0.6 s of simulated time of step records written'),
 }
 
 #: The per-step topics the loop nodes put in their step records (``step_records``): the recorder

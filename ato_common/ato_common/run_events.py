@@ -190,16 +190,35 @@ def _departure(times_s, positions, position_m) -> float | None:
     return None
 
 
-def journey_events(scenario: Scenario, times_s: Sequence[float], positions: Sequence[float],
-                   tolerance_m: float = PLATFORM_TOLERANCE_M) -> RunEvents:
+@dataclass(frozen=True)
+class TimingPointPassed:
+    """A timing point of a journey against a run: what is timed there (``departure``,
+    ``arrival`` or ``passing``), its window, and when the run did it (None: never)."""
+
+    index: int
+    position_m: float
+    what: str
+    earliest_s: float | None
+    latest_s: float | None
+    time_s: float | None
+
+    @property
+    def met(self) -> bool:
+        return self.time_s is not None and not (
+            (self.earliest_s is not None and self.time_s < self.earliest_s)
+            or (self.latest_s is not None and self.time_s > self.latest_s))
+
+
+def timing_points_passed(scenario: Scenario, times_s: Sequence[float],
+                         positions: Sequence[float],
+                         tolerance_m: float = PLATFORM_TOLERANCE_M) -> list[TimingPointPassed]:
     """Each timing point of the scenario's journey against the run: a passing point when the
     front first reaches it, a stopping point's arrival when the front is first within the
     tolerance of it, a departure (the first point, or the second of a station's pair) when
-    the front last is within the tolerance before leaving; outside [earliest, latest] or never
-    reached is a missed window."""
+    the front last is within the tolerance before leaving. No journey: none."""
     if scenario.journey is None:
-        return RunEvents((), {JOURNEY: 0})
-    events = []
+        return []
+    passed = []
     points = scenario.journey.timing_points
     times_s, positions = list(times_s), list(positions)
     for i, point in enumerate(points):
@@ -213,15 +232,27 @@ def journey_events(scenario: Scenario, times_s: Sequence[float], positions: Sequ
                                                      point.position_m - tolerance_m)
         else:
             what, t = 'passing', _first_at_or_beyond(times_s, positions, point.position_m)
-        window = f'[{_bound(point.earliest_s)}, {_bound(point.latest_s)}] s'
-        where = f'timing point {i} at {point.position_m:.0f} m'
-        if t is None:
-            events.append(RunEvent(JOURNEY, math.nan, f'{where}: no {what} in the run '
+        passed.append(TimingPointPassed(i, point.position_m, what, point.earliest_s,
+                                        point.latest_s, t))
+    return passed
+
+
+def journey_events(scenario: Scenario, times_s: Sequence[float], positions: Sequence[float],
+                   tolerance_m: float = PLATFORM_TOLERANCE_M) -> RunEvents:
+    """The timing points of the scenario's journey (:func:`timing_points_passed`) outside
+    [earliest, latest] or never reached: missed windows."""
+    if scenario.journey is None:
+        return RunEvents((), {JOURNEY: 0})
+    events = []
+    for p in timing_points_passed(scenario, times_s, positions, tolerance_m):
+        window = f'[{_bound(p.earliest_s)}, {_bound(p.latest_s)}] s'
+        where = f'timing point {p.index} at {p.position_m:.0f} m'
+        if p.time_s is None:
+            events.append(RunEvent(JOURNEY, math.nan, f'{where}: no {p.what} in the run '
                                                       f'(window {window})'))
-        elif ((point.earliest_s is not None and t < point.earliest_s)
-              or (point.latest_s is not None and t > point.latest_s)):
-            events.append(RunEvent(JOURNEY, t, f'{where}: {what} at {t:.1f} s, outside '
-                                               f'{window}'))
+        elif not p.met:
+            events.append(RunEvent(JOURNEY, p.time_s, f'{where}: {p.what} at {p.time_s:.1f} s, '
+                                                      f'outside {window}'))
     return RunEvents(tuple(events), {JOURNEY: len(events)}, tolerance_m)
 
 

@@ -133,28 +133,63 @@ class Observation:
 RECORDS_DELIVERY_TIMEOUT_S = 2.0
 
 
+class StepRecordsPublisher:
+    """The publisher of a node's step records as the node sees it: the middleware's publisher,
+    with an in-process recorder (:meth:`StepRecorder.attach`) counted as one more subscriber, so
+    that a node waiting for its recorders (``wait_for_recorders``) starts, and notices one
+    going, the same way for both."""
+
+    def __init__(self, publisher, recorder: StepRecorder):
+        self.publisher, self.recorder = publisher, recorder
+        self.topic_name = publisher.topic_name
+
+    def get_subscription_count(self) -> int:
+        return self.publisher.get_subscription_count() + (self.recorder.local is not None)
+
+    def wait_for_all_acked(self, timeout) -> bool:
+        return self.publisher.wait_for_all_acked(timeout)
+
+
 class StepRecorder:
-    """A loop node's step records (``ato_ros.step_records``): its per-step messages bundled
-    for the recorders on ``step_records``. Each step the node asks ``begin_step`` (is a recorder
-    subscribed?), ``add``s every per-step message it publishes while one is, and calls
-    ``end_step``, which publishes the bundle once it is due; ``close`` publishes what is left
-    and waits until it is delivered (a node about to exit)."""
+    """A loop node's step records (``ato_ros.step_records``): its per-step messages for the
+    recorders. Each step the node asks ``begin_step`` (is a recorder there?), ``add``s every
+    per-step message it publishes while one is, and calls ``end_step``, which hands on what is
+    due; ``close`` hands on what is left and waits until it is delivered (a node about to exit).
+
+    A recorder in another process subscribes to ``step_records``: the messages are bundled
+    (``Bundle``) and the bundle published once it is due. A recorder in the same process (the
+    composed stack's, ``recorder.node``) is attached instead (:meth:`attach`): it is handed the
+    messages themselves, (topic, log time ns, bytes), a list at a time, with no middleware in
+    between; its hand-off may block the loop while the recorder's writer is more than its lead
+    behind (back-pressure, as ``RecorderLead`` for a recorder in another process)."""
 
     def __init__(self, node, publishing: Publishing):
         spec = TOPICS['step_records']
-        self.publisher = node.create_publisher(UInt8MultiArray, spec.name, qos_profile(spec.qos))
+        publisher = node.create_publisher(UInt8MultiArray, spec.name, qos_profile(spec.qos))
+        self.publisher = StepRecordsPublisher(publisher, self)
         self.publishing = publishing
         self.bundle = Bundle()
-        self.recorders = SubscriberCount(self.publisher)
+        self.recorders = SubscriberCount(publisher)
         self.active = False
+        self.bundling = False  # a recorder in another process subscribes
         self.names: dict[object, str] = {}  # publisher -> its topic's full name
+        self.local: Callable[[list], None] | None = None
+        self.batch: list[tuple[str, int, bytes]] = []
+        self.batch_first_ns = 0  # the stamp of the batch's first entry (set with it)
+        self.batch_first_wall = 0.0
+        self.batch_period_ns = self.bundle.period_ns
+
+    def attach(self, hand_off: Callable[[list], None]) -> None:
+        """An in-process recorder: ``hand_off`` takes each due list of the node's per-step
+        messages, (topic, log time ns, bytes), in the order they were added."""
+        self.local = hand_off
 
     def begin_step(self) -> bool:
-        """Whether a recorder subscribes, asked when a bundle begins (a recorder that leaves
-        while one is under way is sent the rest of it all the same); without one, nothing is
-        kept."""
+        """Whether a recorder records, asked when a bundle begins (a recorder that leaves while
+        one is under way is sent the rest of it all the same); without one, nothing is kept."""
         if not len(self.bundle):
-            self.active = self.recorders() > 0
+            self.bundling = self.recorders() > 0
+            self.active = self.bundling or self.local is not None
         return self.active
 
     def add(self, publisher, log_time_ns: int, data: bytes) -> None:
@@ -164,22 +199,41 @@ class StepRecorder:
             name = self.names.get(publisher)
             if name is None:
                 name = self.names[publisher] = publisher.topic_name
-            self.bundle.add(name, log_time_ns, data)
+            if self.bundling:
+                self.bundle.add(name, log_time_ns, data)
+            if self.local is not None:
+                if not self.batch:
+                    self.batch_first_ns, self.batch_first_wall = log_time_ns, time.monotonic()
+                self.batch.append((name, log_time_ns, data))
 
     def end_step(self, stamp_ns: int) -> None:
         if self.bundle.due(stamp_ns):
-            self.flush()
+            self.flush_bundle()
+        if self.batch and (stamp_ns - self.batch_first_ns >= self.batch_period_ns
+                           or time.monotonic() - self.batch_first_wall
+                           >= self.bundle.wall_period_s):
+            self.hand_off()
 
-    def flush(self) -> None:
+    def flush_bundle(self) -> None:
         data = self.bundle.take()
         if data is not None:
-            self.publishing(self.publisher, data)
+            self.publishing(self.publisher.publisher, data)
+
+    def hand_off(self) -> None:
+        batch, self.batch = self.batch, []
+        if batch and self.local is not None:
+            self.local(batch)
+
+    def flush(self) -> None:
+        """Hand on everything kept (the last steps' records)."""
+        self.flush_bundle()
+        self.hand_off()
 
     def close(self, timeout_s: float = RECORDS_DELIVERY_TIMEOUT_S) -> bool:
-        """Publish what is left and wait until every recorder has it (False if one did not
-        acknowledge within ``timeout_s``)."""
+        """Hand on what is left and wait until every recorder in another process has it (False
+        if one did not acknowledge within ``timeout_s``)."""
         self.flush()
-        return wait_until_delivered([self.publisher], timeout_s)
+        return wait_until_delivered([self.publisher.publisher], timeout_s)
 
 
 #: while ``run_nodes`` builds several nodes for one process: their step recorders, per namespace
@@ -210,6 +264,14 @@ def step_recorder(node, publishing: Publishing) -> StepRecorder:
     if recorder is None:
         recorder = shared[node.get_namespace()] = StepRecorder(node, publishing)
     return recorder
+
+
+def local_step_recorder(namespace: str) -> StepRecorder | None:
+    """The step recorder that the nodes of namespace ``namespace`` built so far in this process
+    share (``run_nodes``, while it builds them), for an in-process recorder to attach to; None
+    outside ``shared_step_recorders`` or if no node of the namespace has one."""
+    shared = _shared_step_recorders
+    return None if shared is None else shared.get(namespace)
 
 
 def node_full_name(namespace: str, name: str) -> str:

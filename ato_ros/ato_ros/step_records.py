@@ -2,9 +2,9 @@
 
 Recording a lockstep run topic by topic costs the loop a publish of every observation topic
 (the truth, the actuator forces, the distance to go, the permitted speed) that nobody else
-reads, and the recorder a take of each of the nine per-step topics at every step: on a 2-core
-machine about 0.1 ms of CPU per publish or take in rclpy, which made a recorded run about a
-third slower. Instead, each loop node that a recorder subscribes to adds the bytes of every
+reads, and the recorder a take of each of the nine per-step topics at every step, each a
+fixed cost in rclpy and the middleware that dwarfs the message's own (``make bench`` measures
+what recording costs). Instead, each loop node that a recorder subscribes to adds the bytes of every
 per-step message it publishes (``conventions.STEP_RECORDED``; the observation topics whether
 or not anybody subscribes to them) to a bundle, and publishes the bundle on ``step_records``
 once it spans ``PERIOD_S`` of its stamps or ``WALL_PERIOD_S`` of wall time, and before it
@@ -38,19 +38,22 @@ from ato_common.conventions import STEP_RECORDED, TOPICS
 from ato_ros.wire import MessageError
 
 #: a bundle is published once its entries span this much of the node's stamps, s (fewer
-#: bundles cost the loop less: about 0.1 ms of CPU per publish and per take on a 2-core machine;
-#: what a node holds is lost with a SIGKILLed recorder, which the recorder's lead bounds: LEAD_S)
-PERIOD_S = 0.4
+#: bundles cost the loop and the recorder less, a publish and a take each; what a node holds is
+#: lost with a SIGKILLed recorder, which the recorder's lead bounds: LEAD_S)
+PERIOD_S = 0.8
 #: ... or once its first entry is this old in wall time (a real-time run), s
 WALL_PERIOD_S = 0.05
 #: a recorder acknowledges a namespace's step records (topic ``recorded``) once the oldest of
 #: what it has written of them has advanced by this much since its last acknowledgement, s of
-#: their stamps (half a bundle: the nodes' bundles of a period arrive one after the other)
-ACK_PERIOD_S = PERIOD_S / 2
+#: their stamps; it flushes its file before each (a publish and a flush for the recorder, a take
+#: for the plant: fewer of them cost less, for a longer lead)
+ACK_PERIOD_S = 0.6
 #: in lockstep the plant runs at most this far past the oldest acknowledgement of the recorders
 #: that acknowledge (back-pressure: ``ato_ros.publishing.RecorderLead``), s of simulated time: what
-#: a SIGKILLed recorder can lose (docs/guide/recording.md; the plant's recorder_lead_s)
-LEAD_S = 0.9
+#: a SIGKILLed recorder can lose (docs/guide/recording.md; the plant's recorder_lead_s). A
+#: control period over the least lead at 10 Hz (``least_lead_s``), so that a recorder that
+#: keeps up never holds the loop.
+LEAD_S = 1.7
 
 
 def least_lead_s(control_period_s: float) -> float:

@@ -1,33 +1,49 @@
 """Bags in the rosbag2 MCAP conventions: a folder with ``<name>_0.mcap`` and ``metadata.yaml``.
 
 As rosbag2 Jazzy's MCAP storage plugin writes them: MCAP profile ``ros2``; one schema per type,
-encoding ``ros2msg`` with the full definition and its dependencies; message encoding ``cdr`` (the
-raw bytes as received), sequence 0; each channel carries ``offered_qos_profiles`` (version 9 YAML,
-named policies, as the publishers offered them) and ``topic_type_hash`` (RIHS01); at the close a
-``rosbag2`` metadata record holds the bag's metadata (``serialized_metadata``) and
-``metadata.yaml`` (version 9) is written beside the file (:mod:`recorder.rosbag2_format`).
+encoding ``ros2msg`` with the full definition and its dependencies (:mod:`recorder.definitions`);
+message encoding ``cdr`` (the raw bytes as received); each channel carries
+``offered_qos_profiles`` (version 9 YAML, named policies, as the publishers offered them) and
+``topic_type_hash`` (RIHS01); a ``rosbag2`` metadata record holds the bag's metadata
+(``serialized_metadata``) once at the open and once at the close, and ``metadata.yaml``
+(version 9) is written beside the file at the close (:mod:`recorder.rosbag2_format`).
+
+The file is written by the Foxglove SDK's MCAP writer (``foxglove.open_mcap``, Rust: no Python
+object per message). Two fields of a message record are the writer's, not rosbag2's: the sequence
+counts each channel's messages from 1 (rosbag2 writes 0) and the publish time is the log time
+(rosbag2 writes the publisher's send time); every reader the suite is tested with ignores both.
+A topic without a message has no channel in the file (the writer registers a channel with its
+first message), so it is left out of the bag's metadata too (rosbag2 lists it with no message).
 
 Chunks are zstd-compressed and closed at least every ``flush_period_s`` of wall time and every
 ``flush_period_log_s`` of log time (simulated time in a lockstep run), so a killed recorder loses
 at most about the smaller of the two; ``recover`` turns what a killed recording holds back into a
-valid bag.
+valid bag, and leaves an intact one alone.
 """
 
 from __future__ import annotations
 
+import atexit
 import logging
 import os
+import re
+import shutil
 import struct
 import time
+import weakref
+from collections import Counter
 from dataclasses import dataclass, field
+from operator import itemgetter
 from pathlib import Path
-from typing import BinaryIO, Iterator
+from typing import Iterable, Iterator, NamedTuple, Sequence
 
+import foxglove
 import yaml
 import zstandard
+from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap.records import Channel, Message, Schema
+from mcap.records import Channel, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
@@ -38,11 +54,48 @@ from recorder.rosbag2_format import (
     bag_metadata,
     dump_qos_profiles,
     dump_yaml,
+    opening_metadata,
     parse_qos_profiles,
     type_hash,
 )
 
 log = logging.getLogger(__name__)
+
+
+class _SinkErrors(logging.Handler):
+    """The SDK's writer reports a failed write (a full disk) as a warning for each message it
+    could not write (the first names the operating system's reason), and only that "a write
+    failed" when the chunk is closed: the first reason is kept here for the recorder's own error,
+    which says it once, and none of the warnings is printed."""
+
+    OS_REASON = re.compile(r'message: "([^"]*)"')
+
+    def __init__(self):
+        super().__init__(logging.WARNING)
+        self.first = ''
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if not self.first:
+            found = self.OS_REASON.search(record.getMessage())
+            self.first = found.group(1) if found else ''
+
+
+_sink_errors = _SinkErrors()
+_sink_logger = logging.getLogger('foxglove.log_sink_set')
+_sink_logger.addHandler(_sink_errors)
+_sink_logger.propagate = False
+#: the SDK's writers not yet closed: dropped at the interpreter's exit while it can still run
+#: their last words (a writer dropped during the interpreter's shutdown aborts the process)
+_open_writers: weakref.WeakSet = weakref.WeakSet()
+#: a disk with less free space than this is full for the writer (the reason of a failed write
+#: the SDK does not name)
+FULL_DISK_BYTES = 1 << 20
+
+
+@atexit.register
+def _drop_open_writers() -> None:
+    for writer in list(_open_writers):
+        writer._writer = None
 
 # What the mcap library and its decompressors raise on damaged data, depending on where the
 # damage is.
@@ -55,6 +108,8 @@ METADATA_RECORD = 'rosbag2'  # the MCAP metadata record rosbag2 writes its metad
 DEFAULT_CHUNK_SIZE = 256 * 1024
 DEFAULT_FLUSH_PERIOD_S = 0.5
 DEFAULT_FLUSH_PERIOD_LOG_S = 0.5
+_TOPIC, _LOG_TIME = itemgetter(0), itemgetter(1)
+COMPRESSIONS = {'zstd': MCAPCompression.Zstd, 'lz4': MCAPCompression.Lz4, 'none': None}
 
 
 def recover_command(path) -> str:
@@ -105,55 +160,77 @@ def bag_file(folder: Path) -> Path:
     return Path(folder) / f'{Path(folder).name}_0.mcap'
 
 
+def _check_options(compression: str, flush_period_s: float, flush_period_log_s: float,
+                   custom_data: dict | None) -> dict[str, str]:
+    if compression not in COMPRESSIONS:
+        raise BagError(f"compression '{compression}' is not one of {', '.join(COMPRESSIONS)}")
+    for name, period in (('flush_period_s', flush_period_s),
+                         ('flush_period_log_s', flush_period_log_s)):
+        if not (isinstance(period, (int, float)) and period > 0.0 and period < float('inf')):
+            raise BagError(f'{name} must be a positive number of seconds, got {period!r}')
+    custom_data = dict(custom_data or {})
+    bad = [f'{k!r}: {v!r}' for k, v in custom_data.items()
+           if not isinstance(k, str) or not isinstance(v, str) or not k]
+    if bad:
+        raise BagError(f'custom_data holds non-empty string keys and string values only: '
+                       f'{", ".join(bad)}')
+    return custom_data
+
+
 class BagWriter:
+    """A bag being written. ``add_topic`` registers a topic (its schema and channel), ``write``
+    and ``write_many`` add messages (raw CDR bytes at a log time), ``flush`` closes the open chunk
+    (what a SIGKILL cannot take back), ``close`` finishes the file and writes metadata.yaml.
+    One thread at a time: the recorder writes from its node's thread or, in the composed stack,
+    from a writer thread of its own (:class:`recorder.background.BackgroundWriter`)."""
+
     def __init__(self, folder: Path, compression: str = 'zstd',
                  chunk_size: int = DEFAULT_CHUNK_SIZE,
                  flush_period_s: float = DEFAULT_FLUSH_PERIOD_S,
                  flush_period_log_s: float = DEFAULT_FLUSH_PERIOD_LOG_S,
                  custom_data: dict[str, str] | None = None):
-        kinds = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
-                 'none': CompressionType.NONE}
-        if compression not in kinds:
-            raise BagError(f"compression '{compression}' is not one of {', '.join(kinds)}")
-        for name, period in (('flush_period_s', flush_period_s),
-                             ('flush_period_log_s', flush_period_log_s)):
-            if not (isinstance(period, (int, float)) and period > 0.0 and period < float('inf')):
-                raise BagError(f'{name} must be a positive number of seconds, got {period!r}')
-        custom_data = dict(custom_data or {})
-        bad = [f'{k!r}: {v!r}' for k, v in custom_data.items()
-               if not isinstance(k, str) or not isinstance(v, str) or not k]
-        if bad:
-            raise BagError(f'custom_data holds non-empty string keys and string values only: '
-                           f'{", ".join(bad)}')
-        self.custom_data = custom_data
+        self.custom_data = _check_options(compression, flush_period_s, flush_period_log_s,
+                                          custom_data)
         self.folder = Path(folder)
         if self.folder.exists() and any(self.folder.iterdir()):
             raise BagError(f'{self.folder} exists and is not empty: choose another output folder')
+        # A context of its own: the writer records exactly the channels this bag registers.
+        self._context = foxglove.Context()
+        options = MCAPWriteOptions(profile='ros2', compression=COMPRESSIONS[compression],
+                                   chunk_size=chunk_size, compression_threads=0)
         try:
             self.folder.mkdir(parents=True, exist_ok=True)
             self.path = bag_file(self.folder)
-            # 'x': created by this writer or not at all (two recorders given one folder at
-            # the same moment: the second is refused instead of both writing one file).
-            self._file: BinaryIO = open(self.path, 'xb')
+            # Created by this writer or not at all (two recorders given one folder at the same
+            # moment: the second is refused instead of both writing one file). The SDK opens
+            # the file itself: no Python call per write.
+            self._writer = foxglove.open_mcap(self.path, allow_overwrite=False,
+                                              context=self._context, writer_options=options)
         except FileExistsError:
             raise BagError(f'{self.path} was just created by another recorder: choose another '
                            'output folder') from None
         except OSError as error:
-            raise BagError(f'cannot create {self.folder}: {error.strerror}') from None
-        self._writer = Writer(self._file, chunk_size=chunk_size, compression=kinds[compression])
-        self._writer.start(profile='ros2', library='ato-emulator recorder')
+            raise BagError(f'cannot create {bag_file(self.folder)}: {_reason(error)}') from None
+        _open_writers.add(self)
+        _sink_errors.first = ''
         self.flush_period_s = flush_period_s
         self.flush_period_log_ns = int(flush_period_log_s * 1e9)
-        self._last_flush = time.monotonic()
-        self._last_flush_log_ns: int | None = None
-        self._schemas: dict[str, int] = {}
-        self._channels: dict[str, int] = {}
+        self._schemas: dict[str, foxglove.Schema] = {}
+        self._channels: dict[str, foxglove.Channel] = {}
+        self._log: dict[str, object] = {}  # topic -> its channel's log (the compiled call)
         self.topics: dict[str, TopicInfo] = {}
         self.start_ns: int | None = None
         self.end_ns = 0
         self.closed = False
         self.failed = False
         self.warnings: list[str] = []
+        self._last_flush = time.monotonic()
+        self._last_flush_log_ns: int | None = None
+        self.flushed_ns: int | None = None  # the newest log time on disk (flushed)
+        # As rosbag2 does: the bag's metadata at the open (no topic yet, the custom data), on
+        # disk at once, so that a killed recording keeps its custom data.
+        self._write_record(opening_metadata(self.path.name, self.custom_data))
+        self.flush()
 
     def add_topic(self, topic: str, type_name: str, offered_qos_profiles=(),
                   type_description_hash: str | None = None) -> None:
@@ -168,82 +245,83 @@ class BagWriter:
                                           else offered_qos_profiles)
         except FormatError as error:
             raise BagError(f'{topic}: offered QoS not in the rosbag2 format: {error}') from None
-        definition = ''
-        try:
-            definition = full_definition(type_name)
-        except (DefinitionNotFound, ValueError) as error:
-            if type_name not in self._schemas:
+        schema = self._schemas.get(type_name)
+        if schema is None:
+            definition = ''
+            try:
+                definition = full_definition(type_name)
+            except (DefinitionNotFound, ValueError) as error:
                 # Still recorded; readers that need the definition will not decode it.
                 warning = f'no message definition for {type_name} ({error}); {topic} is ' \
                           'recorded without one'
                 self.warnings.append(warning)
                 log.warning(warning)
-        schema_id = self._schemas.get(type_name)
-        if schema_id is None:
-            schema_id = self._writer.register_schema(type_name, 'ros2msg', definition.encode())
-            self._schemas[type_name] = schema_id
+            schema = self._schemas[type_name] = foxglove.Schema(
+                name=type_name, encoding='ros2msg', data=definition.encode())
         if type_description_hash is None:
-            type_description_hash = type_hash(type_name, definition)
-        self._channels[topic] = self._writer.register_channel(
-            topic, 'cdr', schema_id, {'offered_qos_profiles': dump_qos_profiles(profiles),
-                                      'topic_type_hash': type_description_hash})
+            type_description_hash = type_hash(type_name, schema.data.decode())
+        channel = foxglove.Channel(
+            topic, message_encoding='cdr', schema=schema, context=self._context,
+            metadata={'offered_qos_profiles': dump_qos_profiles(profiles),
+                      'topic_type_hash': type_description_hash})
+        self._channels[topic] = channel
+        self._log[topic] = channel.base.log
         self.topics[topic] = TopicInfo(topic, type_name, profiles,
                                        type_description_hash=type_description_hash)
 
-    def _failed(self, error: OSError) -> BagError:
+    def _failed(self, error: Exception) -> BagError:
         self.failed = True
-        return BagError(f'cannot write {self.path}: {error.strerror}; the recording stopped. '
+        reason = _sink_errors.first or _full_disk(self.folder) or _reason(error)
+        return BagError(f'cannot write {self.path}: {reason}; the recording stopped. '
                         f'The file holds what was flushed before; it is not a closed bag (no '
                         f'metadata.yaml): {recover_command(self.folder)}')
 
-    def write(self, topic: str, log_time_ns: int, data: bytes,
-              publish_time_ns: int | None = None) -> None:
+    def write(self, topic: str, log_time_ns: int, data: bytes) -> None:
         """Add one message; BagError if the file cannot be written (a full disk)."""
-        self.write_many(((topic, log_time_ns, data, publish_time_ns),))
+        self.write_many(((topic, log_time_ns, data),))
 
-    def write_many(self, messages) -> None:
-        """Add messages, each (topic, log time ns, data, publish time ns or None: the log
-        time), in order, then close the chunk if a flush period has passed; BagError if the
-        file cannot be written (a full disk)."""
+    def write_many(self, messages: Sequence[tuple[str, int, bytes]]) -> None:
+        """Add messages, each (topic, log time ns, data), in order, then close the chunk if a
+        flush period has passed; BagError if the file cannot be written (a full disk: the
+        writer reports it when the chunk is closed)."""
         if self.failed:
             raise BagError(f'{self.path}: the recording stopped after a write error')
-        add, channels, topics = self._writer.add_message, self._channels, self.topics
-        start, end = self.start_ns, self.end_ns
-        try:
-            for topic, log_time_ns, data, publish_time_ns in messages:
-                # Sequence 0, as rosbag2 writes it.
-                add(channels[topic], log_time=log_time_ns, data=data,
-                    publish_time=log_time_ns if publish_time_ns is None else publish_time_ns,
-                    sequence=0)
-                topics[topic].message_count += 1
-                if start is None or log_time_ns < start:
-                    start = log_time_ns
-                if log_time_ns > end:
-                    end = log_time_ns
-                if self._last_flush_log_ns is None:
-                    self._last_flush_log_ns = log_time_ns
-        except OSError as error:
-            raise self._failed(error) from None
-        finally:
-            self.start_ns, self.end_ns = start, end
+        logs, topics = self._log, self.topics
+        for topic, log_time_ns, data in messages:
+            logs[topic](data, log_time_ns)
+        if not messages:
+            return
+        for topic, count in Counter(map(_TOPIC, messages)).items():
+            topics[topic].message_count += count
+        first, last = min(map(_LOG_TIME, messages)), max(map(_LOG_TIME, messages))
+        start = first if self.start_ns is None else min(self.start_ns, first)
+        end = self.end_ns = max(self.end_ns, last)
+        self.start_ns = start
         if self._last_flush_log_ns is None:
-            return  # nothing written
+            self._last_flush_log_ns = start
         now = time.monotonic()
         if (now - self._last_flush >= self.flush_period_s
                 or end - self._last_flush_log_ns >= self.flush_period_log_ns):
-            self.flush(now, end)
+            self.flush(now)
 
-    def flush(self, now: float | None = None, log_time_ns: int | None = None) -> None:
+    def flush(self, now: float | None = None) -> None:
         """Close the open chunk and push it to the file (what a SIGKILL cannot take back)."""
         if self.failed or self.closed:
             return
         try:
             self._writer.flush()
-        except OSError as error:
+        except (RuntimeError, OSError) as error:
             raise self._failed(error) from None
         self._last_flush = time.monotonic() if now is None else now
-        if log_time_ns is not None or self.topics:
-            self._last_flush_log_ns = self.end_ns if log_time_ns is None else log_time_ns
+        if self.start_ns is not None:
+            self._last_flush_log_ns = self.flushed_ns = self.end_ns
+
+    def _write_record(self, metadata: dict) -> None:
+        try:
+            self._writer.write_metadata(METADATA_RECORD,
+                                        {'serialized_metadata': dump_yaml(metadata)})
+        except (RuntimeError, OSError) as error:
+            raise self._failed(error) from None
 
     def close(self) -> BagInfo:
         """Finish the file and write metadata.yaml; after a write error only release the file
@@ -253,28 +331,59 @@ class BagWriter:
         self.closed = True
         if not self.failed:
             try:
-                self._writer.add_metadata(METADATA_RECORD, {
-                    'serialized_metadata': serialized_metadata(self.info())})
-                self._writer.finish()
-                self._file.flush()
-                os.fsync(self._file.fileno())
-            except OSError as error:
+                self._write_record(metadata_of(self.info()))
+                self._writer.close()
+            except BagError:
+                pass  # failed: said below
+            except (RuntimeError, OSError) as error:
                 self._failed(error)
-        try:
-            self._file.close()
-        except OSError:
-            pass  # already failed: the error below says so
         if self.failed:
+            try:
+                self._writer.close()
+            except (RuntimeError, OSError):
+                pass  # already failed: the error below says so
+            # Dropped now: the SDK's writer must not be dropped (and report its error) while
+            # the interpreter shuts down.
+            self._writer = None
             raise BagError(f'{self.path} could not be finished after a write error: recover '
                            f'what it holds with: {recover_command(self.folder)}')
+        self._writer = None
+        _fsync(self.path)
         info = self.info()
         write_metadata(info)
         return info
 
     def info(self) -> BagInfo:
+        """The bag as written so far: the topics with a message (a topic without one has no
+        channel in the file, the SDK's writer registering a channel with its first message, and
+        readers that take the topics of metadata.yaml need every one's schema)."""
         start = self.start_ns or 0
-        return BagInfo(self.path, start, max(self.end_ns, start), dict(self.topics),
+        return BagInfo(self.path, start, max(self.end_ns, start),
+                       {name: t for name, t in self.topics.items() if t.message_count},
                        dict(self.custom_data))
+
+
+def _fsync(path: Path) -> None:
+    descriptor = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(descriptor)
+    finally:
+        os.close(descriptor)
+
+
+def _full_disk(folder: Path) -> str:
+    """'No space left on device ...' if the disk of ``folder`` is full, else ''."""
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError:
+        return ''
+    return f'No space left on device ({free} bytes free)' if free < FULL_DISK_BYTES else ''
+
+
+def _reason(error: Exception) -> str:
+    """What went wrong, without the SDK's prefixes."""
+    text = getattr(error, 'strerror', None) or str(error)
+    return text.removeprefix('FoxgloveError: ')
 
 
 def metadata_of(info: BagInfo) -> dict:
@@ -375,7 +484,9 @@ def bag_info(path: Path) -> BagInfo:
     file = resolve(path)
     try:
         with open(file, 'rb') as stream:
-            summary = make_reader(stream).get_summary()
+            reader = make_reader(stream)
+            summary = reader.get_summary()
+            records = list(reader.iter_metadata()) if summary is not None else []
     except READ_ERRORS as error:
         raise _explain(file, error) from None
     if summary is None or summary.statistics is None:
@@ -386,7 +497,7 @@ def bag_info(path: Path) -> BagInfo:
                                       stats.channel_message_counts.get(channel_id, 0))
               for channel_id, channel in summary.channels.items()}
     return BagInfo(file, stats.message_start_time, stats.message_end_time, topics,
-                   _custom_data(file))
+                   _custom_data(file, records))
 
 
 def topic_of(file: Path, channel: Channel, schema: Schema | None, count: int) -> TopicInfo:
@@ -400,40 +511,52 @@ def topic_of(file: Path, channel: Channel, schema: Schema | None, count: int) ->
                      channel.metadata.get('topic_type_hash', ''), channel.message_encoding)
 
 
-def _custom_data(file: Path) -> dict[str, str]:
-    """custom_data of the bag's metadata.yaml, if the folder has one that holds it."""
-    metadata = file.parent / METADATA_FILE
+def _custom_data(file: Path, records: Iterable[Metadata] = ()) -> dict[str, str]:
+    """custom_data of the bag: from its metadata.yaml, or else from the last ``rosbag2``
+    metadata record of the file that holds it (a killed recording has the one of its open)."""
+    found = None
     try:
-        data = yaml.safe_load(metadata.read_text())
-        custom = data['rosbag2_bagfile_information'].get('custom_data') or {}
+        data = yaml.safe_load((file.parent / METADATA_FILE).read_text())
+        found = data['rosbag2_bagfile_information'].get('custom_data')
     except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError):
-        return {}
-    return {str(k): str(v) for k, v in custom.items()} if isinstance(custom, dict) else {}
+        for record in records:
+            if record.name != METADATA_RECORD:
+                continue
+            try:
+                found = yaml.safe_load(record.metadata['serialized_metadata']).get(
+                    'custom_data')
+            except (KeyError, yaml.YAMLError, AttributeError):
+                continue
+    return {str(k): str(v) for k, v in found.items()} if isinstance(found, dict) else {}
 
 
-def recover(path: Path) -> tuple[BagInfo, int]:
-    """Rewrite what a damaged (e.g. SIGKILLed) MCAP holds into a valid bag at the same place.
+class Recovered(NamedTuple):
+    """What ``recover`` did: the bag's info, the bytes at the end of the damaged file that could
+    not be read, and whether the bag was intact (then left as it was: nothing lost, 0 bytes)."""
 
-    Reads records in file order until the data ends or breaks, writes them to a new file, and
-    only then moves the damaged file aside (as ``.damaged``) and the new one into its place, so a
-    failure half-way leaves the original untouched. Returns the new bag's info and the number of
-    bytes that could not be read.
-    """
-    file = resolve(path)
+    info: BagInfo
+    lost_bytes: int
+    intact: bool
+
+
+def intact_info(file: Path) -> BagInfo | None:
+    """The info of a bag whose file is complete (its summary, every chunk's CRC and every
+    message the statistics count read back), else None."""
     try:
-        with open(file, 'rb') as stream:
-            head = stream.read(len(MCAP_MAGIC))
-    except OSError as error:
-        raise BagError(f'{file}: cannot read: {error.strerror}') from None
-    if head != MCAP_MAGIC:
-        raise BagError(f'{file} is not an MCAP file (it does not start with the MCAP magic); '
-                       'there is nothing to recover and it was left untouched')
-    damaged = file.with_name(file.name + '.damaged')
-    if damaged.exists():
-        raise BagError(f'{damaged} exists already: move it away first')
+        info = bag_info(file)
+        read = sum(1 for _ in read_messages(file))
+    except BagError:
+        return None
+    return info if read == info.message_count else None
+
+
+def _read_damaged(file: Path) -> tuple[dict, dict, list, list, int]:
+    """Schemas, channels, messages and ``rosbag2`` metadata records of a damaged MCAP, read in
+    file order until the data ends or breaks, and the number of bytes read."""
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
     messages: list[Message] = []
+    records: list[Metadata] = []
     consumed = 0
     try:
         with open(file, 'rb') as stream:
@@ -446,12 +569,56 @@ def recover(path: Path) -> tuple[BagInfo, int]:
                         channels[record.id] = record
                     elif isinstance(record, Message):
                         messages.append(record)
+                    elif isinstance(record, Metadata):
+                        records.append(record)
                     consumed = stream.tell()
             except READ_ERRORS as error:
                 log.info('stopped reading %s: %s', file, error)
+    except OSError as error:
+        raise BagError(f'{file}: cannot read: {error.strerror}') from None
+    return schemas, channels, messages, records, consumed
+
+
+def recover(path: Path) -> Recovered:
+    """Rewrite what a damaged (e.g. SIGKILLed) MCAP holds into a valid bag at the same place;
+    an intact bag is left alone (its metadata.yaml written if it has none).
+
+    Reads records in file order until the data ends or breaks, writes them to a new file, and
+    only then moves the damaged file aside (as ``.damaged``) and the new one into its place, so a
+    failure half-way leaves the original untouched. The custom data (``log_time`` among them)
+    comes from the ``rosbag2`` record the recorder wrote at the open.
+    """
+    file = resolve(path)
+    try:
+        with open(file, 'rb') as stream:
+            head = stream.read(len(MCAP_MAGIC))
+    except OSError as error:
+        raise BagError(f'{file}: cannot read: {error.strerror}') from None
+    if head != MCAP_MAGIC:
+        raise BagError(f'{file} is not an MCAP file (it does not start with the MCAP magic); '
+                       'there is nothing to recover and it was left untouched')
+    intact = intact_info(file)
+    if intact is not None:
+        if not (file.parent / METADATA_FILE).exists() and file == bag_file(file.parent):
+            write_metadata(intact)
+        return Recovered(intact, 0, True)
+    damaged = file.with_name(file.name + '.damaged')
+    if damaged.exists():
+        raise BagError(f'{damaged} exists already: move it away first')
+    schemas, channels, messages, records, consumed = _read_damaged(file)
+    try:
         lost = file.stat().st_size - consumed
     except OSError as error:
         raise BagError(f'{file}: cannot read: {error.strerror}') from None
+    info = _rewrite(file, schemas, channels, messages, _custom_data(file, records))
+    write_metadata(info)
+    return Recovered(info, lost, False)
+
+
+def _rewrite(file: Path, schemas: dict, channels: dict, messages: list,
+             custom_data: dict[str, str]) -> BagInfo:
+    """The records read from a damaged file written to a new one, which then takes its place
+    (the damaged one kept as ``.damaged``)."""
     temporary = file.with_name(file.name + '.recovering')
     counts: dict[int, int] = {}
     times = [m.log_time for m in messages] or [0]
@@ -465,6 +632,8 @@ def recover(path: Path) -> tuple[BagInfo, int]:
         with open(temporary, 'wb') as out:
             writer = Writer(out, compression=CompressionType.ZSTD)
             writer.start(profile='ros2', library='ato-emulator recorder (recovered)')
+            writer.add_metadata(METADATA_RECORD, {'serialized_metadata': dump_yaml(
+                opening_metadata(file.name, custom_data))})
             schema_ids = {sid: writer.register_schema(s.name, s.encoding, s.data)
                           for sid, s in schemas.items()}
             channel_ids = {cid: writer.register_channel(c.topic, c.message_encoding,
@@ -478,17 +647,16 @@ def recover(path: Path) -> tuple[BagInfo, int]:
                     counts[m.channel_id] = counts.get(m.channel_id, 0) + 1
             for cid, c in channels.items():
                 topics[c.topic].message_count = counts.get(cid, 0)
-            info = BagInfo(file, min(times), max(times), topics, _custom_data(file))
+            info = BagInfo(file, min(times), max(times), topics, custom_data)
             writer.add_metadata(METADATA_RECORD, {'serialized_metadata':
                                                   serialized_metadata(info)})
             writer.finish()
             out.flush()
             os.fsync(out.fileno())
-        file.replace(damaged)
+        file.replace(file.with_name(file.name + '.damaged'))
         temporary.replace(file)
     except OSError as error:
         temporary.unlink(missing_ok=True)
         raise BagError(f'cannot write the recovered bag next to {file}: {error.strerror}; '
                        'the damaged file is unchanged') from None
-    write_metadata(info)
-    return info, lost
+    return info

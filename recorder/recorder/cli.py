@@ -47,14 +47,19 @@ def format_info(info) -> str:
 def recover_main(argv=None) -> int:
     parser = argparse.ArgumentParser(
         prog='recover', description='Make a valid bag of what a killed recording holds; the '
-        'damaged file is kept as <file>.damaged.')
+        'damaged file is kept as <file>.damaged. An intact bag is left as it is.')
     parser.add_argument('bag', type=Path, help='bag folder or .mcap file')
     options = parser.parse_args(argv)
     try:
-        info, lost = recover(options.bag)
+        result = recover(options.bag)
     except BagError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
+    info = result.info
+    if result.intact:
+        print(f'{info.path} is intact ({info.message_count} messages, {info.duration_s:.3f} s, '
+              'closed properly): nothing to recover, left as it is')
+        return 0
     print(f'recovered {info.message_count} messages ({info.duration_s:.3f} s) into {info.path}; '
-          f'{lost} bytes at the end could not be read')
+          f'{result.lost_bytes} bytes at the end could not be read')
     return 0

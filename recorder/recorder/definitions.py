@@ -1,8 +1,25 @@
-"""Full ROS 2 message definitions (``ros2msg`` schema encoding) from the installed .msg files.
+"""Full ROS 2 message definitions (``ros2msg`` schema encoding) from the installed .msg files,
+built as rosbag2 Jazzy's recorder builds the schema of a topic (rosbag2_cpp's local message
+definition source, branch jazzy), so that a schema compares equal, byte for byte, with a Jazzy
+bag's:
 
-The text is what rosbag2 writes into an MCAP schema: the type's own .msg file, then each type it
-depends on, depth first without repetition, each preceded by a line of 80 '=' and
-``MSG: pkg/Type``. Readers such as Foxglove and mcap-ros2-support need the dependencies to decode.
+1. The text of a type is its ``.msg`` file as installed, unchanged: comments, blank lines and
+   the final newline kept.
+2. The types a text depends on are the words that open a line (after any spaces), are followed
+   by an optional array bound ``[...]`` and then by white space, and are not primitive types. A
+   name without a package (``Header`` in std_msgs) belongs to the package of the file it is
+   in; a name with one keeps its spelling (``builtin_interfaces/Time``, no ``msg/``). A bounded
+   string (``string<=10``) is not followed by white space and so is no dependency (it is a
+   primitive anyway).
+3. Each text's dependencies are taken in sorted order (byte order of ``pkg/Type``), each name
+   once per text.
+4. The full text is the root type's text; then, for each dependency in that order that no
+   earlier part of the full text has brought in, a newline, a line of 80 ``=``, a line
+   ``MSG: pkg/Type`` and that type's own full text, built by the same rule (depth first). The
+   root type itself is not counted as brought in.
+
+Since a ``.msg`` file ends with a newline, rule 4 leaves a blank line before each separator.
+Readers such as Foxglove, mcap-ros2-support and rosbags need the dependencies to decode.
 """
 
 from __future__ import annotations
@@ -14,9 +31,14 @@ from ament_index_python.packages import PackageNotFoundError, get_package_share_
 
 PRIMITIVES = {
     'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16', 'int32',
-    'uint32', 'int64', 'uint64', 'string', 'wstring',
+    'uint32', 'int64', 'uint64', 'string',
 }
 SEPARATOR = '=' * 80
+#: rule 2: a word opening a line, an optional array bound, then white space
+_DEPENDENCY = re.compile(r'(?:^|\n)\s*([a-zA-Z0-9_/]+)(?:\[[^\]]*\])?\s+')
+_TYPE_NAME = re.compile(r'^([a-zA-Z0-9_]+)/(?:msg/)?([a-zA-Z0-9_]+)$')
+#: how deep a definition may nest (rosbag2's limit)
+MAX_DEPTH = 50
 
 
 class DefinitionNotFound(LookupError):
@@ -25,12 +47,10 @@ class DefinitionNotFound(LookupError):
 
 def split_type(type_name: str) -> tuple[str, str]:
     """'std_msgs/msg/Header' or 'std_msgs/Header' -> ('std_msgs', 'Header')."""
-    parts = type_name.split('/')
-    if len(parts) == 3 and parts[1] == 'msg':
-        return parts[0], parts[2]
-    if len(parts) == 2:
-        return parts[0], parts[1]
-    raise ValueError(f"'{type_name}' is not a message type name (pkg/msg/Type)")
+    match = _TYPE_NAME.match(type_name)
+    if match is None:
+        raise ValueError(f"'{type_name}' is not a message type name (pkg/msg/Type)")
+    return match.group(1), match.group(2)
 
 
 def msg_file(package: str, name: str) -> Path:
@@ -44,45 +64,39 @@ def msg_file(package: str, name: str) -> Path:
     return path
 
 
-_FIELD = re.compile(r'^\s*([A-Za-z][\w/]*)(?:<=\d+)?(\[[^\]]*\])?\s+[A-Za-z]\w*')
-
-
-def dependencies(package: str, text: str) -> list[tuple[str, str]]:
-    """Non-primitive field types of a .msg text, in order, as (package, Type)."""
-    found = []
-    for line in text.splitlines():
-        line = line.split('#', 1)[0].strip()
-        if not line:
+def dependencies(package: str, text: str) -> list[str]:
+    """The types the .msg ``text`` of a type of ``package`` depends on (rule 2), sorted and
+    each once (rule 3), as ``pkg/Type``."""
+    found = set()
+    for match in _DEPENDENCY.finditer(text):
+        name = match.group(1)
+        if name in PRIMITIVES:
             continue
-        match = _FIELD.match(line)
-        if not match:
-            continue
-        base = match.group(1)
-        if base in PRIMITIVES:
-            continue
-        if '/' in base:
-            dep_package, dep_name = base.split('/')[0], base.split('/')[-1]
-        else:
-            dep_package, dep_name = package, base
-        found.append((dep_package, dep_name))
-    return found
+        found.add(name if '/' in name else f'{package}/{name}')
+    return sorted(found)
 
 
 def full_definition(type_name: str) -> str:
-    """The ros2msg schema text of ``type_name``; DefinitionNotFound if a file is missing."""
-    package, name = split_type(type_name)
-    root = msg_file(package, name).read_text()
-    parts = [root.rstrip('\n')]
-    seen = {(package, name)}
+    """The ros2msg schema text of ``type_name`` (rules 1 to 4); DefinitionNotFound if a file is
+    missing, ValueError for a name that is not a type's."""
+    seen: set[str] = set()
+    texts: dict[str, str] = {}
 
-    def expand(pkg: str, text: str) -> None:
-        for dep in dependencies(pkg, text):
-            if dep in seen:
-                continue
-            seen.add(dep)
-            dep_text = msg_file(*dep).read_text()
-            parts.append(f'{SEPARATOR}\nMSG: {dep[0]}/{dep[1]}\n{dep_text.rstrip(chr(10))}')
-            expand(dep[0], dep_text)
+    def text_of(name: str) -> str:
+        if name not in texts:
+            texts[name] = msg_file(*split_type(name)).read_text()
+        return texts[name]
 
-    expand(package, root)
-    return '\n'.join(parts) + '\n'
+    def expand(name: str, depth: int) -> str:
+        if depth <= 0:
+            raise ValueError(f'the definition of {type_name} nests deeper than {MAX_DEPTH} types')
+        text = text_of(name)
+        parts = [text]
+        for dependency in dependencies(split_type(name)[0], text):
+            if dependency not in seen:
+                seen.add(dependency)
+                parts.append(f'\n{SEPARATOR}\nMSG: {dependency}\n'
+                             + expand(dependency, depth - 1))
+        return ''.join(parts)
+
+    return expand(type_name, MAX_DEPTH)

@@ -25,10 +25,12 @@ MESSAGE_DATA = 0x01
 
 
 class FoxgloveClient:
-    """Connects to ``url`` (``ws://host:port``); frames land in ``received``, and the channels
-    the server advertises (and has not withdrawn) in ``channels``, by topic."""
+    """Connects to ``url`` (``ws://host:port``) asking for ``subprotocol``; frames land in
+    ``received``, and the channels the server advertises (and has not withdrawn) in
+    ``channels``, by topic; ``connection.selected_subprotocol`` is the server's answer."""
 
-    def __init__(self, url: str, timeout_s: float = 10.0):
+    def __init__(self, url: str, timeout_s: float = 10.0, subprotocol: str = SUBPROTOCOL):
+        self.subprotocol = subprotocol
         self.received: queue.Queue = queue.Queue()
         self.channels: dict[str, dict] = {}
         self._lock = threading.Lock()
@@ -52,7 +54,7 @@ class FoxgloveClient:
         self.loop.run_forever()
 
     async def _connect(self, url: str) -> None:
-        self.connection = await websocket_connect(url, subprotocols=[SUBPROTOCOL])
+        self.connection = await websocket_connect(url, subprotocols=[self.subprotocol])
         self.connected.set()
         self.loop.create_task(self._read())
 

@@ -7,7 +7,17 @@
 Open Foxglove (the desktop app or app.foxglove.dev), "Open connection", "Foxglove WebSocket",
 ``ws://127.0.0.1:8765``. Every topic of the graph (or those named) is offered as a channel with
 its ROS 2 message definition (``ros2msg`` schema, CDR messages, as in the suite's MCAP
-recordings), so Foxglove decodes and plots them as it does a recording.
+recordings), so Foxglove decodes and plots them as it does a recording. The step records and the
+recorders' acknowledgements (``ato/step_records``, ``ato/recorded``) say how a recording goes,
+not how the run does: offered only when named.
+
+The protocol is the Foxglove WebSocket protocol, served by the Foxglove SDK (``foxglove-sdk``):
+its subprotocol ``foxglove.sdk.v1``, and ``foxglove.websocket.v1``, its former name, for older
+clients (:mod:`recorder.ws_front`); a request for neither is refused with HTTP 400 and a text
+saying which to ask for.
+
+The view runs at the lowest CPU priority (nice 19) unless ``--no-background``: it takes only the
+CPU the loop and the run's monitor leave, so watching cannot starve them.
 
 Free while nobody watches: the view subscribes to a ROS topic only while a Foxglove client is
 subscribed to its channel (a panel shows it), and forwards the raw CDR bytes without decoding
@@ -25,6 +35,7 @@ recorder's default ``--log-time stamp``), else at the node's ROS time on receipt
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import sys
 import threading
@@ -38,9 +49,10 @@ from rclpy.utilities import remove_ros_args
 from ato_common.validation import ConfigError
 from ato_ros.lifecycle import RunNodeHooks, freeze_startup_objects, run_node
 from recorder.definitions import DefinitionNotFound, full_definition
-from recorder.node import logs_at_stamp
+from recorder.node import BACKGROUND_NICE, is_internal, logs_at_stamp
 from recorder.ros_io import message_class, subscription_qos
 from recorder.rosbag2_format import cdr_stamp_ns
+from recorder.ws_front import Front
 
 DEFAULT_PORT = 8765
 #: messages forwarded per second and watched topic by default (a panel's refresh rate)
@@ -114,21 +126,33 @@ class LiveViewNode(RunNodeHooks, Node):
         self.subscriptions_by_topic: dict[str, object] = {}
         self.forwarded = 0
         self.sim_time = self.get_parameter('use_sim_time').value
-        try:
-            self.server = foxglove.start_server(
-                name='ato live view', host=host, port=port, server_listener=self.watched,
-                capabilities=[foxglove.Capability.Time] if self.sim_time else [])
-        except Exception as error:  # the SDK's errors carry the reason (e.g. the port is taken)
-            raise ConfigError(f'cannot serve Foxglove on {host}:{port}: {error}') from None
+        self.server, self.front = self.serve(host, port)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(poll_period_s, self.poll, clock=steady)
         if rate_hz:
             self.create_timer(1.0 / rate_hz, self.sample, clock=steady)
-        serving = SERVING.format(host=host, port=self.server.port)
+        serving = SERVING.format(host=host, port=self.front.port)
         self.get_logger().info(f'{serving} '
                                f'({"every topic" if self.wanted is None else sorted(self.wanted)})')
         freeze_startup_objects()
         self.poll()
+
+    def serve(self, host: str, port: int):
+        """The SDK's server on a loopback port of its own, and the door clients connect to
+        (``host``:``port``) in front of it (:mod:`recorder.ws_front`)."""
+        try:
+            server = foxglove.start_server(
+                name='ato live view', host='127.0.0.1', port=0, server_listener=self.watched,
+                capabilities=[foxglove.Capability.Time] if self.sim_time else [])
+        except Exception as error:  # the SDK's errors carry the reason
+            raise ConfigError(f'cannot serve Foxglove: {error}') from None
+        try:
+            front = Front(host, port, server.port)
+        except OSError as error:
+            server.stop()
+            raise ConfigError(f'cannot serve Foxglove on {host}:{port}: '
+                              f'{error.strerror or error}') from None
+        return server, front
 
     def poll(self) -> None:
         """Offer new topics as channels; subscribe to the watched ones, unsubscribe from the
@@ -177,6 +201,9 @@ class LiveViewNode(RunNodeHooks, Node):
             if topic in self.channels or topic in self.skipped or (
                     self.wanted is not None and topic not in self.wanted):
                 continue
+            if self.wanted is None and is_internal(topic, types):
+                self.skipped.add(topic)  # how a recording goes: offered only when named
+                continue
             offered = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
             if not offered:
                 continue  # subscribers only so far: wait for a publisher to learn its QoS
@@ -213,6 +240,7 @@ class LiveViewNode(RunNodeHooks, Node):
         if self.outputs_closed:
             return
         self.outputs_closed = True
+        self.front.stop()
         self.server.stop()
         if self.sampler is not None:
             self.sampler.destroy_node()
@@ -257,6 +285,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                              'interface)')
     parser.add_argument('--port', type=port_number, default=DEFAULT_PORT,
                         help=f'WebSocket port (default {DEFAULT_PORT}, as Foxglove expects)')
+    parser.add_argument('--no-background', dest='background', action='store_false',
+                        help=f'keep the normal CPU priority (by default nice {BACKGROUND_NICE}: '
+                             'the view takes only the CPU the run leaves)')
     parser.add_argument('--rate', type=rate, default=DEFAULT_RATE_HZ,
                         help=f'latest messages forwarded per second and watched topic (default '
                              f'{DEFAULT_RATE_HZ:g}; 0: every message)')
@@ -266,6 +297,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
 def main(args=None) -> int:
     argv = remove_ros_args(args if args is not None else sys.argv)[1:]
     options = parse_args(argv)
+    if options.background:
+        os.setpriority(os.PRIO_PROCESS, 0, BACKGROUND_NICE)  # before any thread is started
     foxglove.set_log_level('WARNING')
     return run_node(lambda: LiveViewNode(options.topics, options.host, options.port,
                                          options.rate), args)

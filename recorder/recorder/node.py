@@ -3,38 +3,47 @@
     ros2 run recorder recorder -o runs/my_run                 # every topic, new ones too
     ros2 run recorder recorder -o runs/my_run /train/state /ato/command
 
-Messages are written as the raw CDR bytes received (no deserialise/serialise). Log time
-(``--log-time``): by default ``stamp``, the suite's stamped topics (those of
-:data:`ato_common.conventions.TOPICS` whose message starts with a header stamp or a time, /clock
-included) are logged at their own stamp, so a recording is the same however late the recorder
-received them; every other topic at the recorder's ROS time on receipt (simulated time with
-``--ros-args -p use_sim_time:=true``, or ``--sim-time``). ``receipt`` logs every topic on
-receipt, as rosbag2 does. ``--sim-time`` takes the recorder's time from the ``/clock`` messages
-it records (the simulated time of the last one, 0 before the first), as ``use_sim_time`` would
-but without rclpy's second, deserialising subscription to ``/clock`` (a lockstep run publishes
-one every step); ``/clock`` is then always subscribed, recorded only if asked for.
-The publish time (``--publish-time``): by default ``source``, the publisher's source timestamp
-(wall time) as rosbag2 records it; ``log`` writes the log time instead.
+Messages are written as the raw CDR bytes received (no deserialise/serialise), by the Foxglove
+SDK's compiled MCAP writer (``recorder.bag``). Log time (``--log-time``): by default ``stamp``,
+the suite's stamped topics (those of :data:`ato_common.conventions.TOPICS` whose message starts
+with a header stamp or a time, /clock included) are logged at their own stamp, so a recording is
+the same however late the recorder received them; every other topic at the recorder's ROS time
+on receipt (simulated time with ``--ros-args -p use_sim_time:=true``, or ``--sim-time``).
+``receipt`` logs every topic on receipt, as rosbag2 does. ``--sim-time`` takes the recorder's
+time from the ``/clock`` messages it records (the simulated time of the last one, 0 before the
+first), as ``use_sim_time`` would but without rclpy's second, deserialising subscription to
+``/clock`` (a lockstep run publishes one every step); ``/clock`` is then always subscribed,
+recorded only if asked for.
 
 The recorder takes its messages itself: its subscriptions sit on a node of their own that no
-executor spins (``<name>_subscriptions``), and every ``--take-period`` of wall time (5 ms) it
-takes whatever each one holds (``take_message``, as bytes with the message info, which carries
-the source timestamp) and writes them in the order they were received. An executor would wake
-once per message and, for the message info, would have to be rclpy's single-threaded one; taking
-in batches costs a fraction of that, which matters because the recorder shares the machine with
-the loop it records. A message is on disk at most a take period plus a flush period after it was
-received; SIGINT and SIGTERM take what is left before closing. The loop nodes' step records
-(``ato_ros.step_records``) are taken by the executor as they come: once what is written of a
-namespace's records has moved on by ``ACK_PERIOD_S`` of their stamps, the file is flushed and
-the stamp acknowledged on ``recorded`` in that namespace, and in lockstep the plant waits for
-that acknowledgement when it is more than its ``recorder_lead_s`` ahead (back-pressure:
-``ato_ros.publishing.RecorderLead``). ``--background`` runs the recorder at the lowest CPU priority,
-on the CPU the loop leaves (what ``run_scenario`` does in lockstep).
+executor spins (``<name>_subscriptions``), and every ``--take-period`` of wall time (0.05 s) it
+takes whatever each one holds (``take_message``, as bytes) and writes them in the order they
+were received. An executor would wake once per message; taking in batches costs a fraction of
+that, which matters because the recorder shares the machine with the loop it records. A message
+is on disk at most a take period plus a flush period after it was received; SIGINT and SIGTERM
+take what is left before closing.
+
+The loop nodes' step records (``ato_ros.step_records``) carry their per-step topics: a per-step
+topic of a namespace whose nodes publish step records is taken from them when every publisher
+of the topic is in a process that publishes the namespace's step records (DDS participants),
+else (an ATO node of your own publishing ``ato/command``) it is subscribed to like any other
+topic and its entries in the step records are left out, so each message is recorded once. The
+step records are taken by the executor as they come: once what is written of a namespace's
+records has moved on by ``ACK_PERIOD_S`` of their stamps, the file is flushed and the stamp
+acknowledged on ``recorded`` in that namespace, and in lockstep the plant waits for that
+acknowledgement when it is more than its ``recorder_lead_s`` ahead (back-pressure:
+``ato_ros.publishing.RecorderLead``). ``--background`` runs the recorder at the lowest CPU
+priority, on the CPU the loop leaves (what ``run_scenario`` does in lockstep).
+
+In the composed stack (``ato_stack --record FOLDER``, ``ato_bringup.composed``) the recorder is
+a node of the loop's process: the step records of its namespace are handed to it by the loop
+nodes without the middleware (``ato_ros.publishing.StepRecorder.attach``) and written by a
+thread of its own (``recorder.background``), with the same back-pressure.
 
 SIGINT and SIGTERM close the file properly; a SIGKILL loses at most the last take and flush
 periods: chunks are flushed every ``--flush-period`` of wall time (0.5 s) and every
 ``--flush-period-log`` of log time (0.5 s, simulated time in a lockstep run), whichever comes
-first, and before each acknowledgement (in lockstep, what the plant's lead bounds: 0.9 s of
+first, and before each acknowledgement (in lockstep, what the plant's lead bounds: 1.7 s of
 simulated time by default); ``ros2 run recorder recover <bag>`` makes a valid bag of the rest.
 """
 
@@ -43,7 +52,8 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from datetime import datetime
+from datetime import datetime, timezone
+from operator import itemgetter
 from pathlib import Path
 
 from rclpy.clock import Clock, ClockType
@@ -54,10 +64,12 @@ from std_msgs.msg import Header
 from std_msgs.msg import UInt8MultiArray as STEP_RECORDS_MSG
 
 from ato_common.conventions import TOPICS
+from ato_common.types import nanoseconds
 from ato_common.validation import ConfigError
 from ato_ros.lifecycle import RunNodeHooks, freeze_startup_objects, run_node
 from ato_ros.messages import qos_profile
-from ato_ros.step_records import Written, decode_bundle, namespace_of, step_recorded
+from ato_ros.publishing import local_step_recorder
+from ato_ros.step_records import LEAD_S, Written, decode_bundle, namespace_of, step_recorded
 from ato_ros.wire import MessageError, encode_header
 from recorder.bag import (
     DEFAULT_FLUSH_PERIOD_LOG_S,
@@ -70,10 +82,14 @@ from recorder.rosbag2_format import cdr_stamp_ns, starts_with_stamp
 
 LOG_TIMES = ('stamp', 'receipt')
 #: how often the recorder takes what its subscriptions hold, s of wall time
-DEFAULT_TAKE_PERIOD_S = 0.005
+DEFAULT_TAKE_PERIOD_S = 0.05
 #: at most this many messages of one topic per take (the rest at the next)
 MAX_TAKES = 10_000
 CLOCK = TOPICS['clock'].name
+_TOPIC, _STAMP = itemgetter(0), itemgetter(1)
+#: how often the recorder asks again who publishes a per-step topic it takes from the step
+#: records (a publisher of its own joining mid-run), in discovery periods
+RECHECK_DISCOVERIES = 10
 
 
 def is_suite_topic(topic: str, type_name: str) -> bool:
@@ -93,6 +109,19 @@ def logs_at_stamp(topic: str, type_name: str, log_time: str) -> bool:
         starts_with_stamp(type_name)
 
 
+def is_internal(topic: str, types) -> bool:
+    """The step records and the recorders' acknowledgements (``step_records``, ``recorded``, in
+    any namespace): how a recording goes, not how the run does."""
+    return any(list(types) == [TOPICS[key].type_name] and namespace_of(topic, key) is not None
+               for key in ('step_records', 'recorded'))
+
+
+def participant(info) -> bytes:
+    """The DDS participant (one per process's context) of an endpoint the graph reports: the
+    first 12 bytes of its GID, the RTPS GUID prefix."""
+    return bytes(info.endpoint_gid[:12])
+
+
 STEP_RECORDS = TOPICS['step_records']
 RECORDED = TOPICS['recorded']
 #: --background: the recorder's nice value (the lowest CPU priority)
@@ -100,9 +129,14 @@ BACKGROUND_NICE = 19
 
 
 class RecorderNode(RunNodeHooks, Node):
-    def __init__(self, writer: BagWriter, topics: list[str] | None, discovery_period_s: float,
-                 log_time: str = 'stamp', publish_time: str = 'source', sim_time: bool = False,
-                 take_period_s: float = DEFAULT_TAKE_PERIOD_S, step_records: bool = True):
+    """The recorder. ``writer``: a :class:`recorder.bag.BagWriter`, or in the composed stack a
+    :class:`recorder.background.BackgroundWriter` (``in_process``: the step records of its own
+    namespace are handed to it in the process)."""
+
+    def __init__(self, writer, topics: list[str] | None, discovery_period_s: float,
+                 log_time: str = 'stamp', sim_time: bool = False,
+                 take_period_s: float = DEFAULT_TAKE_PERIOD_S, step_records: bool = True,
+                 in_process: bool = False):
         super().__init__('recorder')
         # The subscriptions' node: never spun, its messages are taken every take period.
         self.taker = Node(f'{self.get_name()}_subscriptions', context=self.context,
@@ -116,7 +150,6 @@ class RecorderNode(RunNodeHooks, Node):
             raise ConfigError('--sim-time and use_sim_time both ask for simulated time: give '
                               'one of them')
         self.log_time = log_time
-        self.publish_time = publish_time
         self.wanted = set(topics) if topics else None
         self.subscribed: dict[str, object] = {}
         # ato_ros.step_records: the per-step topics of a namespace whose loop nodes publish
@@ -125,6 +158,10 @@ class RecorderNode(RunNodeHooks, Node):
         self.bundled: set[str] = set()  # namespaces whose step records are subscribed to
         self.written: dict[str, Written] = {}  # namespace -> what is written of its records
         self.step_subscriptions: list = []
+        self.direct: set[str] = set()  # per-step topics subscribed to: left out of the records
+        self.from_records: set[str] = set()  # per-step topics taken from the step records
+        self.discoveries = 0
+        self.local_namespace = self.attach_in_process() if in_process else None
         self.name = self.get_fully_qualified_name()
         self.received = 0
         self.finished = False  # run_node stops spinning when True
@@ -141,88 +178,158 @@ class RecorderNode(RunNodeHooks, Node):
         self.get_logger().info(f'recording {wanted} to {writer.path}')
         freeze_startup_objects()
 
+    # --- which topic is recorded from where -------------------------------------------------
     def discover(self) -> None:
+        self.discoveries += 1
         clock = step_recorded(self.clock_topic)
         if self.sim_time and self.clock_topic not in self.subscribed and \
                 self.wanted is not None and self.clock_topic not in self.wanted and \
-                (clock is None or clock[1] not in self.bundled):  # else from the step records
+                (clock is None or not self.carries_records(clock[1])):  # else from the records
             # the time only, not recorded
             self._subscribe(self.clock_topic, ClockMsg, qos_profile(TOPICS['clock'].qos),
-                            lambda data, info: self._on_clock(data))
+                            self._on_clock)
         found = self.get_topic_names_and_types()
         # the step records first: a per-step topic they carry is then not subscribed to
         for topic, types in found:
             if topic not in self.subscribed and self.is_step_records(topic, types):
                 self._subscribe_step_records(topic)
+        if self.discoveries % RECHECK_DISCOVERIES == 0:
+            self.recheck_from_records()
         for topic, types in found:
-            if topic in self.subscribed or self.is_step_records(topic, types) or \
-                    self.is_acknowledgements(topic, types):
+            if topic in self.subscribed or is_internal(topic, types) or \
+                    (self.wanted is not None and topic not in self.wanted) or \
+                    self.taken_from_records(topic):
                 continue
-            recorded = step_recorded(topic) if self.step_records else None
-            if recorded is not None and recorded[1] in self.bundled:
-                continue  # taken from the step records
-            if self.wanted is not None and topic not in self.wanted:
-                continue
-            if len(types) != 1:
-                self.get_logger().warning(f'{topic} has several types {types}; not recorded')
-                self.subscribed[topic] = None
-                continue
-            type_name = types[0]
-            try:
-                msg_type = message_class(type_name)
-            except LookupError as error:
-                self.get_logger().warning(f'{topic}: {error}; not recorded')
-                self.subscribed[topic] = None
-                continue
-            offered = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
-            if not offered:
-                continue  # only subscribers so far: wait for a publisher to learn its QoS
-            try:
-                self.writer.add_topic(topic, type_name, offered_profiles(offered))
-            except BagError as error:
-                self.get_logger().warning(f'{error}; not recorded')
-                self.subscribed[topic] = None
-                continue
-            stamped = logs_at_stamp(topic, type_name, self.log_time)
+            self._subscribe_topic(topic, types)
+
+    def _subscribe_topic(self, topic: str, types) -> None:
+        if len(types) != 1:
+            self.get_logger().warning(f'{topic} has several types {types}; not recorded')
+            self.subscribed[topic] = None
+            return
+        type_name = types[0]
+        try:
+            msg_type = message_class(type_name)
+        except LookupError as error:
+            self.get_logger().warning(f'{topic}: {error}; not recorded')
+            self.subscribed[topic] = None
+            return
+        offered = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
+        if not offered:
+            return  # only subscribers so far: wait for a publisher to learn its QoS
+        try:
+            self.writer.add_topic(topic, type_name, offered_profiles(offered))
+        except BagError as error:
+            self.get_logger().warning(f'{error}; not recorded')
+            self.subscribed[topic] = None
+            return
+        stamped = logs_at_stamp(topic, type_name, self.log_time)
+        recorded = step_recorded(topic)
+        if recorded is not None and self.carries_records(recorded[1]):
+            self._subscribe_per_step(topic, msg_type, subscription_qos(offered), recorded[1])
+        else:
             self._subscribe(topic, msg_type, subscription_qos(offered),
                             self._handler(topic, stamped))
-            self.get_logger().info(f'recording {topic} [{type_name}], logged at '
-                                   f'{"its stamp" if stamped else "receipt"}')
+        self.get_logger().info(f'recording {topic} [{type_name}], logged at '
+                               f'{"its stamp" if stamped else "receipt"}')
+
+    def _subscribe_per_step(self, topic: str, msg_type, qos, namespace: str) -> None:
+        """A per-step topic of a namespace whose step records this recorder takes, with a
+        publisher of its own (an ATO node outside the suite on ato/command): its entries in the
+        step records are left out, and it is taken as it comes, each message written at its
+        stamp and counted in what is written of the namespace (``Written``): the
+        acknowledgements, and so the plant's lead, cover it as they cover the step records."""
+        self.direct.add(topic)
+        written = self.written.get(namespace)
+        handler = self._handler(topic, stamped=True)
+
+        def on_message(data: bytes) -> None:
+            handler(data)
+            stamp = cdr_stamp_ns(data)
+            if written is not None and stamp is not None:
+                written.wrote(topic, stamp)
+        self.subscribed[topic] = self.create_subscription(msg_type, topic, on_message, qos,
+                                                          raw=True)
+        self.step_subscriptions.append(self.subscribed[topic])  # taken at the close too
+
+    def carries_records(self, namespace: str) -> bool:
+        """Whether this recorder takes the step records of ``namespace``."""
+        return self.step_records and (namespace in self.bundled
+                                      or namespace == self.local_namespace)
+
+    def taken_from_records(self, topic: str) -> bool:
+        """Whether the per-step topic ``topic`` is recorded from its namespace's step records:
+        every publisher of it is in a process that publishes them (else, or once subscribed to,
+        it is subscribed to). Before any publisher is seen, it is left for later."""
+        recorded = step_recorded(topic) if self.step_records else None
+        if recorded is None or topic in self.direct or not self.carries_records(recorded[1]):
+            return False
+        if topic in self.from_records:
+            return True
+        publishers = self.get_publishers_info_by_topic(topic)
+        if not publishers:
+            return True  # nobody publishes it yet
+        records = {participant(i) for i in self.get_publishers_info_by_topic(
+            recorded[1].rstrip('/') + '/' + STEP_RECORDS.name)}
+        if all(participant(i) in records for i in publishers):
+            self.from_records.add(topic)
+            return True
+        return False
+
+    def recheck_from_records(self) -> None:
+        """A publisher of a per-step topic that joined later, outside the processes whose step
+        records carry it: from now on the topic is subscribed to."""
+        for topic in list(self.from_records):
+            self.from_records.discard(topic)
+            if not self.taken_from_records(topic):
+                self.get_logger().info(f'{topic} has a publisher that publishes no step '
+                                       'records: subscribed to from now on')
 
     def is_step_records(self, topic: str, types) -> bool:
         return list(types) == [STEP_RECORDS.type_name] and \
             namespace_of(topic, 'step_records') is not None
 
-    def is_acknowledgements(self, topic: str, types) -> bool:
-        """The recorders' acknowledgements of step records (``recorded``) say how a recording
-        goes, not how the run does: not recorded, as the step records themselves are not."""
-        return list(types) == [RECORDED.type_name] and \
-            namespace_of(topic, 'recorded') is not None
+    def attach_in_process(self) -> str | None:
+        """In the composed stack: take the step records of this node's namespace from the loop
+        nodes of the process (their shared step recorder), not through the middleware."""
+        namespace = self.get_namespace()
+        records = local_step_recorder(namespace)
+        if records is None:
+            raise ConfigError(f'no loop node in namespace {namespace} of this process keeps step '
+                              'records: the in-process recorder is built after the loop nodes')
+        records.attach(self._on_local_records)
+        return namespace
 
     def _subscribe_step_records(self, topic: str) -> None:
         """Take the per-step topics of ``topic``'s namespace from its step records (and drop a
         subscription to one of them made before the step records were seen: the loop does not
         start before the recorder has matched the step records, so it has received nothing).
         Without step records (``--no-step-records``) the topic is left alone: nobody bundles
-        for this recorder."""
+        for this recorder; nor for the recorder's own namespace in the composed stack (handed
+        on in the process)."""
         namespace = namespace_of(topic, 'step_records')
-        if not self.step_records or (self.wanted is not None and not any(
-                (step_recorded(t) or (None, None))[1] == namespace for t in self.wanted)):
+        if not self.step_records or namespace == self.local_namespace or (
+                self.wanted is not None and not any(
+                    (step_recorded(t) or (None, None))[1] == namespace for t in self.wanted)):
             self.subscribed[topic] = None
             return
         offered = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
         if not offered:
             return  # no publisher yet
         self.bundled.add(namespace)
+        written = self.written[namespace] = Written()
         for other in list(self.takes):
             recorded = step_recorded(other)
-            if recorded is not None and recorded[1] == namespace:
-                subscription, _ = self.takes.pop(other)
-                self.taker.destroy_subscription(subscription)
-                del self.subscribed[other]
+            if recorded is None or recorded[1] != namespace:
+                continue
+            subscription, _ = self.takes.pop(other)
+            self.taker.destroy_subscription(subscription)
+            del self.subscribed[other]
+            if not self.taken_from_records(other):  # a publisher of its own: as it comes
+                self._subscribe_per_step(other, subscription.msg_type, subscription.qos_profile,
+                                         namespace)
         # Taken as they come (an executor's subscription, not the take period's): in lockstep
         # the plant waits for their acknowledgement (ato_ros.publishing.RecorderLead).
-        written = self.written[namespace] = Written()
         acknowledgements = self.create_publisher(
             Header, namespace.rstrip('/') + '/' + RECORDED.name, qos_profile(RECORDED.qos))
         self.step_subscriptions.append(self.create_subscription(
@@ -234,11 +341,12 @@ class RecorderNode(RunNodeHooks, Node):
                                f'records ({topic}), each logged at its step, acknowledged on '
                                f'{acknowledgements.topic_name}')
 
+    # --- the step records -----------------------------------------------------------------
     def _on_step_records(self, data: bytes, written: Written, acknowledgements) -> None:
-        """Every message of a bundle under its own topic, at the log and publish times the
-        node gave it (``--log-time receipt``: on receipt; ``--publish-time log``: the log
-        time); then, once what is written of the namespace's records has moved on by
-        ``ACK_PERIOD_S``, the file flushed and that acknowledged (``recorded``)."""
+        """Every message of a bundle under its own topic, at the log time the node gave it
+        (``--log-time receipt``: on receipt); then, once what is written of the namespace's
+        records has moved on by ``ACK_PERIOD_S``, the file flushed and that acknowledged
+        (``recorded``)."""
         if self.finished:
             return
         try:
@@ -247,30 +355,80 @@ class RecorderNode(RunNodeHooks, Node):
             self.get_logger().warning(f'step records not read: {error}',
                                       throttle_duration_sec=1.0)
             return
-        source, topics, by_stamp = self.publish_time == 'source', self.writer.topics, \
-            self.log_time == 'stamp'
-        messages = []
-        for topic, stamp_ns, publish_time_ns, message in entries:
-            if topic == self.clock_topic and self.sim_time:
-                self._on_clock(message)  # the recorder's time, /clock recorded or not
-            if self.wanted is not None and topic not in self.wanted:
-                continue
-            if topic not in topics and not self._add_recorded_topic(topic):
-                continue
-            messages.append((topic, stamp_ns if by_stamp else self.now_ns(), message,
-                             publish_time_ns if source else None))
-            written.wrote(topic, stamp_ns)
-        try:
-            self.writer.write_many(messages)
-        except BagError as error:
-            self.stop_on_error(error)
+        if self.plain(entries):
+            # the common case, without a Python step per message beyond the writer's
+            self.clock_from(entries)
+            messages = [(topic, stamp_ns, message) for topic, stamp_ns, _, message in entries]
+            written.latest.update(zip(map(_TOPIC, messages), map(_STAMP, messages)))
+        else:
+            messages = self._recorded_entries(entries, written)
+        if not self._write_entries(messages):
             return
-        self.received += len(messages)
         stamp_ns = written.acknowledgement()
         if stamp_ns is not None:
             self.flush()
             if not self.finished:  # a write error stops the recording: nothing to vouch for
                 acknowledgements.publish(encode_header(stamp_ns, self.name))
+
+    def plain(self, entries) -> bool:
+        """Whether every entry of ``entries`` is written as it is: every topic recorded (and
+        known to the bag), none subscribed to, each at its stamp, no /clock to read."""
+        return self.wanted is None and not self.direct and self.log_time == 'stamp' and \
+            self.writer.topics.keys() >= set(map(_TOPIC, entries))
+
+    def clock_from(self, entries) -> None:
+        """``--sim-time``: the recorder's time from the last /clock among the entries of step
+        records (its log time is its stamp)."""
+        if self.sim_time:
+            clock = self.clock_topic
+            for entry in reversed(entries):
+                if entry[0] == clock:
+                    self.sim_now_ns = entry[1]
+                    return
+
+    def _recorded_entries(self, entries, written: Written | None = None
+                          ) -> list[tuple[str, int, bytes]]:
+        """The entries of step records (topic, stamp, [publish time,] bytes) this recorder
+        writes, as (topic, log time, bytes): those of the topics it records and does not
+        subscribe to, each noted in ``written``; /clock read for ``--sim-time``."""
+        topics, by_stamp, direct = self.writer.topics, self.log_time == 'stamp', self.direct
+        messages = []
+        for topic, stamp_ns, *_, message in entries:
+            if topic == self.clock_topic and self.sim_time:
+                self._on_clock(message)  # the recorder's time, /clock recorded or not
+            if (self.wanted is not None and topic not in self.wanted) or topic in direct:
+                continue
+            if topic not in topics and not self._add_recorded_topic(topic):
+                continue
+            messages.append((topic, stamp_ns if by_stamp else self.now_ns(), message))
+            if written is not None:
+                written.wrote(topic, stamp_ns)
+        return messages
+
+    def _write_entries(self, messages, newest_ns: int | None = None) -> bool:
+        try:
+            if newest_ns is None:
+                self.writer.write_many(messages)
+            else:
+                self.writer.write_many(messages, newest_ns)
+        except BagError as error:
+            self.stop_on_error(error)
+            return False
+        self.received += len(messages)
+        return True
+
+    def _on_local_records(self, batch: list[tuple[str, int, bytes]]) -> None:
+        """The per-step messages of the loop nodes of this process (composed stack), handed on
+        by their step recorder: written by the writer's thread; the loop waits here while that
+        is more than the lead behind (``recorder.background``)."""
+        if self.finished or not batch:
+            return
+        if self.plain(batch):
+            self.clock_from(batch)
+            messages = batch
+        else:
+            messages = self._recorded_entries(batch)
+        self._write_entries(messages, batch[-1][1])
 
     def _add_recorded_topic(self, topic: str) -> bool:
         """A topic first met in the step records: its type from the conventions, its QoS as
@@ -291,6 +449,7 @@ class RecorderNode(RunNodeHooks, Node):
         self.get_logger().info(f'recording {topic} [{spec.type_name}] from the step records')
         return True
 
+    # --- subscriptions taken every take period ----------------------------------------------
     def _on_clock(self, data: bytes) -> None:
         stamp = cdr_stamp_ns(data)
         if stamp is not None:
@@ -319,10 +478,10 @@ class RecorderNode(RunNodeHooks, Node):
                     if message is None:
                         break
                     taken.append((message[1].get('received_timestamp') or 0, len(taken),
-                                  handler, message))
+                                  handler, message[0]))
         taken.sort(key=lambda item: item[:2])
-        for _, _, handler, (data, info) in taken:
-            handler(data, info)
+        for _, _, handler, data in taken:
+            handler(data)
 
     def take_step_records(self) -> None:
         """The step records delivered but not yet handed to the executor's callbacks."""
@@ -337,9 +496,8 @@ class RecorderNode(RunNodeHooks, Node):
     def _handler(self, topic: str, stamped: bool):
         write = self.writer.write
         is_clock = topic == self.clock_topic
-        source = self.publish_time == 'source'
 
-        def on_message(data: bytes, info: dict) -> None:
+        def on_message(data: bytes) -> None:
             if self.finished:
                 return
             if is_clock and self.sim_time:
@@ -348,14 +506,14 @@ class RecorderNode(RunNodeHooks, Node):
             if log_time_ns is None:
                 log_time_ns = self.now_ns()
             try:
-                write(topic, log_time_ns, data,
-                      (info.get('source_timestamp') or None) if source else None)
+                write(topic, log_time_ns, data)
             except BagError as error:
                 self.stop_on_error(error)
                 return
             self.received += 1
         return on_message
 
+    # --- the end --------------------------------------------------------------------------
     def flush(self) -> None:
         try:
             self.writer.flush()
@@ -383,8 +541,11 @@ class RecorderNode(RunNodeHooks, Node):
         self.finished = True  # a message still delivered is not written to a closed file
         try:
             info = self.writer.close()
+            waited = getattr(self.writer, 'waited_s', 0.0)
             self.get_logger().info(f'closed {info.path}: {info.message_count} messages on '
-                                   f'{len(info.topics)} topics, {info.duration_s:.1f} s')
+                                   f'{len(info.topics)} topics, {info.duration_s:.1f} s' + (
+                                       f'; the loop waited {waited:.2f} s of wall time in all '
+                                       'for the bag writer' if waited else ''))
         except BagError as error:
             self.get_logger().error(str(error))
             self.exit_code = 1
@@ -395,8 +556,8 @@ class RecorderNode(RunNodeHooks, Node):
         super().destroy_node()
 
 
-def parse_args(argv: list[str]) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog='recorder', description=__doc__.split('\n\n')[0])
+def parse_args(argv: list[str], prog: str = 'recorder') -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split('\n\n')[0])
     parser.add_argument('topics', nargs='*', help='topics to record (default: all)')
     parser.add_argument('-o', '--output', type=Path, default=None,
                         help='bag folder to create (default: runs/rec-<time>)')
@@ -410,16 +571,14 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('--log-time', choices=LOG_TIMES, default='stamp',
                         help="stamp: the suite's stamped topics at their stamp, others on "
                              'receipt (default); receipt: every topic on receipt')
-    parser.add_argument('--publish-time', choices=('source', 'log'), default='source',
-                        help="source: the publisher's source timestamp, as rosbag2 (default); "
-                             'log: the log time')
     parser.add_argument('--take-period', type=float, default=DEFAULT_TAKE_PERIOD_S,
                         help='take what the subscriptions hold this often, s of wall time')
     parser.add_argument('--sim-time', action='store_true',
                         help='the time of unstamped messages: the simulated time of the last '
                              '/clock (as use_sim_time, without its second /clock subscription)')
     parser.add_argument('--custom-data', action='append', default=[], metavar='KEY=VALUE',
-                        help="a string pair for metadata.yaml's custom_data (repeatable)")
+                        help="a string pair for metadata.yaml's custom_data (repeatable; the "
+                             'recorder adds log_time and recorded_utc, when it started)')
     parser.add_argument('--no-step-records', dest='step_records', action='store_false',
                         help="subscribe to the suite's per-step topics one by one, as to any "
                              "other, instead of taking them from the loop nodes' step records "
@@ -434,35 +593,70 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def main(args=None) -> int:
-    argv = remove_ros_args(args if args is not None else sys.argv)[1:]
-    options = parse_args(argv)
+def bag_writer(options: argparse.Namespace) -> BagWriter:
+    """The bag the options ask for; BagError or ValueError naming what is wrong."""
     output = options.output or Path('runs') / datetime.now().strftime('rec-%Y%m%d-%H%M%S')
-    custom_data = {'log_time': options.log_time}
+    custom_data = {'log_time': options.log_time,
+                   'recorded_utc': datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M:%S UTC')}
     for pair in options.custom_data:
         key, sep, value = pair.partition('=')
         if not sep or not key:
-            print(f'error: --custom-data {pair!r} is not KEY=VALUE', file=sys.stderr)
-            return 2
+            raise ValueError(f'--custom-data {pair!r} is not KEY=VALUE')
         custom_data[key] = value
     if not (0.0 < options.take_period <= 1.0):
-        print(f'error: --take-period {options.take_period:g}: must be over 0 and at most 1 s',
-              file=sys.stderr)
-        return 2
+        raise ValueError(f'--take-period {options.take_period:g}: must be over 0 and at most '
+                         '1 s')
+    return BagWriter(output, options.compression, flush_period_s=options.flush_period,
+                     flush_period_log_s=options.flush_period_log, custom_data=custom_data)
+
+
+class InProcessRecorder:
+    """The composed stack's recorder (``ato_stack --record``), to be built after the loop nodes
+    of the process: the recorder's own options (``argv``, as ``recorder`` takes them;
+    ``--sim-time`` implied), its bag written by a thread of its own. ConfigError names a wrong
+    option. Calling it builds the node; ``release`` closes the bag of a node never built."""
+
+    def __init__(self, argv: list[str]):
+        try:
+            self.options = parse_args(argv, prog='ato_stack --record')
+            self.writer = bag_writer(self.options)
+        except (ValueError, BagError) as error:
+            raise ConfigError(str(error)) from None
+        except SystemExit:
+            raise ConfigError(f"the recorder's options {' '.join(argv)} do not parse") from None
+        self.node: RecorderNode | None = None
+
+    def __call__(self) -> RecorderNode:
+        from recorder.background import BackgroundWriter
+        o = self.options
+        writer = BackgroundWriter(self.writer, nanoseconds(LEAD_S))
+        self.node = RecorderNode(writer, o.topics, o.discovery_period, o.log_time, True,
+                                 o.take_period, o.step_records, in_process=True)
+        writer.on_slow = self.node.get_logger().warning
+        return self.node
+
+    def release(self) -> None:
+        if self.node is None and not self.writer.closed:
+            try:
+                self.writer.close()
+            except BagError as error:
+                print(f'error: {error}', file=sys.stderr)
+
+
+def main(args=None) -> int:
+    argv = remove_ros_args(args if args is not None else sys.argv)[1:]
+    options = parse_args(argv)
     if options.background:
         os.setpriority(os.PRIO_PROCESS, 0, BACKGROUND_NICE)  # before any thread is started
     try:
-        writer = BagWriter(output, options.compression, flush_period_s=options.flush_period,
-                           flush_period_log_s=options.flush_period_log,
-                           custom_data=custom_data)
-    except BagError as error:
+        writer = bag_writer(options)
+    except (ValueError, BagError) as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
     try:
         return run_node(lambda: RecorderNode(writer, options.topics, options.discovery_period,
-                                             options.log_time, options.publish_time,
-                                             options.sim_time, options.take_period,
-                                             options.step_records), args)
+                                             options.log_time, options.sim_time,
+                                             options.take_period, options.step_records), args)
     finally:
         if not writer.closed:  # the node never came up
             try:

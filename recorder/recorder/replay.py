@@ -11,6 +11,11 @@ the recording; a recording without ``/clock`` gets one synthesised from the log 
 (``--no-clock`` turns both off). /clock is replayed whatever ``--topics`` selects. Topics are
 renamed with the standard ROS remapping (``--ros-args -r from:=to``), which applies to the
 replay node's publishers.
+
+SIGINT and SIGTERM are taken over first thing (:func:`main` installs its handlers before it
+imports rclpy or opens the bag; this module imports nothing heavy), so a replay stopped at any
+moment, still importing or already playing, exits 0 without a traceback; a replay started with
+SIGINT ignored (a background job of a shell) is stopped by SIGINT all the same.
 """
 
 from __future__ import annotations
@@ -21,18 +26,30 @@ import sys
 import time
 from pathlib import Path
 
-from rclpy.node import Node
-from rclpy.utilities import remove_ros_args
-from rosgraph_msgs.msg import Clock
-
-from ato_ros.lifecycle import RunNodeHooks, make_executor, tear_down
-from ato_ros.messages import to_time
-from recorder.bag import BagError, bag_info, read_messages
-from recorder.ros_io import message_class, replay_qos
-from recorder.rosbag2_format import FormatError
-
 CLOCK_TOPIC = '/clock'
 MATCH_SETTLE_S = 0.5
+
+
+class Stop:
+    """SIGINT and SIGTERM, taken from the first line of :func:`main`: ``requested`` once either
+    came, and the replay told (``replayer.stopped``)."""
+
+    def __init__(self):
+        self.requested = False
+        self.replayer = None
+        signal.signal(signal.SIGINT, self.on_signal)
+        signal.signal(signal.SIGTERM, self.on_signal)
+
+    def on_signal(self, signum, frame) -> None:
+        self.requested = True
+        if self.replayer is not None:
+            self.replayer.stopped = True
+
+    @staticmethod
+    def ignore() -> None:
+        """From here only the teardown: a second signal must not cut it short."""
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
@@ -56,18 +73,31 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     return options
 
 
-class ReplayNode(RunNodeHooks, Node):
-    """The replay's node. It plays in :func:`main`'s own loop rather than under run_node, but
-    ends like every node of the suite (:func:`ato_ros.lifecycle.tear_down`) and declares the same
-    hooks: ``finished`` once the recording has been played, ``exit_code`` 2 when it cannot be
-    read; it writes nothing, so ``close_outputs`` is the default."""
+def node_class():
+    """The replay's node class (rclpy imported only once the signals are taken over)."""
+    from rclpy.node import Node
 
-    def __init__(self):
-        super().__init__('replay')
+    from ato_ros.lifecycle import RunNodeHooks
+
+    class ReplayNode(RunNodeHooks, Node):
+        """The replay's node. It plays in :func:`main`'s own loop rather than under run_node,
+        but ends like every node of the suite (:func:`ato_ros.lifecycle.tear_down`) and
+        declares the same hooks: ``finished`` once the recording has been played,
+        ``exit_code`` 2 when it cannot be read; it writes nothing, so ``close_outputs`` is the
+        default."""
+
+        def __init__(self):
+            super().__init__('replay')
+    return ReplayNode
 
 
 class Replayer:
-    def __init__(self, node: Node, options: argparse.Namespace):
+    def __init__(self, node, options: argparse.Namespace):
+        from rosgraph_msgs.msg import Clock
+
+        from recorder.bag import BagError, bag_info
+        from recorder.ros_io import message_class, replay_qos
+        from recorder.rosbag2_format import FormatError
         self.node = node
         self.options = options
         self.info = bag_info(options.bag)
@@ -103,6 +133,10 @@ class Replayer:
         self.stopped = False  # set by SIGINT or SIGTERM
 
     def play_once(self, executor) -> None:
+        from rosgraph_msgs.msg import Clock
+
+        from ato_ros.messages import to_time
+        from recorder.bag import read_messages
         start_ns = self.info.start_ns + int(self.options.start_offset * 1e9)
         wall_start = time.monotonic()
         last_clock = -1
@@ -127,50 +161,35 @@ class Replayer:
 
 
 def main(args=None) -> int:
-    import rclpy
-    import rclpy.signals
+    stop = Stop()  # before anything else: a signal from here on ends the replay with 0
+    return replay(args, stop)
+
+
+def replay(args, stop: Stop) -> int:
+    from rclpy.utilities import remove_ros_args
     argv = remove_ros_args(args if args is not None else sys.argv)[1:]
     options = parse_args(argv)
-    # Our own handlers: rclpy's would shut the context down under the executor (an
+    if stop.requested:
+        return 0
+    import rclpy
+    import rclpy.signals
+
+    from ato_ros.lifecycle import make_executor
+    from recorder.bag import BagError
+    # Our own handlers stay: rclpy's would shut the context down under the executor (an
     # ExternalShutdownException out of spin_once, exit 1).
     rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    stop = {'requested': False, 'replayer': None}
-
-    def on_signal(signum, frame):
-        stop['requested'] = True
-        if stop['replayer'] is not None:
-            stop['replayer'].stopped = True
-
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
-    node = ReplayNode()
+    node = node_class()()
     executor = make_executor()
     executor.add_node(node)
     try:
+        if stop.requested:
+            return 0
         replayer = Replayer(node, options)
-        stop['replayer'] = replayer
-        replayer.stopped = stop['requested']
+        stop.replayer = replayer
+        replayer.stopped = stop.requested
         node.get_logger().info(f'replaying {len(replayer.topics)} topics of {options.bag}')
-        if options.wait_for_subscribers:
-            publishers = list(replayer.publishers.values()) + [
-                p for p in (replayer.clock_pub,) if p is not None]
-            while rclpy.ok() and not replayer.stopped and any(
-                    p.get_subscription_count() < options.wait_for_subscribers
-                    for p in publishers):
-                executor.spin_once(timeout_sec=0.05)
-            # Matched on the publishers' side; give the subscribers' side the moment it may
-            # need to match too, or a reliable volatile subscriber can miss the first messages.
-            settle = time.monotonic() + MATCH_SETTLE_S
-            while not replayer.stopped and time.monotonic() < settle:
-                executor.spin_once(timeout_sec=0.05)
-        while not replayer.stopped:
-            replayer.play_once(executor)
-            if not options.loop:
-                break
-        # Let reliable subscribers take the last messages before the publishers go away.
-        deadline = time.monotonic() + 1.0
-        while time.monotonic() < deadline and not replayer.stopped:
-            executor.spin_once(timeout_sec=0.05)
+        play(replayer, executor, options)
         node.get_logger().info(f'replayed {replayer.published} messages'
                                + (' (stopped on signal)' if replayer.stopped else ''))
         node.finished = True
@@ -179,14 +198,38 @@ def main(args=None) -> int:
         print(f'error: {error}', file=sys.stderr)
         node.exit_code = 2
         return node.exit_code
-    except KeyboardInterrupt:
-        return 0
     finally:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)  # only the teardown from here
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        Stop.ignore()
+        from ato_ros.lifecycle import tear_down
         tear_down(executor, node)
         if rclpy.ok():
             rclpy.shutdown()
+
+
+def play(replayer: Replayer, executor, options: argparse.Namespace) -> None:
+    """Wait for the subscribers asked for, play (again with ``--loop``) until the end or a
+    signal, and give reliable subscribers a moment to take the last messages."""
+    import rclpy
+    if options.wait_for_subscribers:
+        publishers = list(replayer.publishers.values()) + [
+            p for p in (replayer.clock_pub,) if p is not None]
+        while rclpy.ok() and not replayer.stopped and any(
+                p.get_subscription_count() < options.wait_for_subscribers
+                for p in publishers):
+            executor.spin_once(timeout_sec=0.05)
+        # Matched on the publishers' side; give the subscribers' side the moment it may
+        # need to match too, or a reliable volatile subscriber can miss the first messages.
+        settle = time.monotonic() + MATCH_SETTLE_S
+        while not replayer.stopped and time.monotonic() < settle:
+            executor.spin_once(timeout_sec=0.05)
+    while not replayer.stopped:
+        replayer.play_once(executor)
+        if not options.loop:
+            break
+    # Let reliable subscribers take the last messages before the publishers go away.
+    deadline = time.monotonic() + 1.0
+    while time.monotonic() < deadline and not replayer.stopped:
+        executor.spin_once(timeout_sec=0.05)
 
 
 if __name__ == '__main__':

@@ -9,13 +9,17 @@ which the recording holds them, under their names and types; ``--namespace`` cho
 holds several (``/`` is the root namespace). ``/diagnostics`` is global: in a recording of
 several stacks it mixes their laws' estimates.
 
-The metrics are those ``make demo`` prints (:mod:`ato_common.metrics`): the lead car's true
-state against the reference at each stamp, stopping errors read where the latched target curve
-leaves each stop, traction energy from the applied force.
+The report tells the journey: the scenario and the train (from the plant's recorded identity,
+or ``--scenario``), the metrics ``make demo`` prints (:mod:`ato_common.metrics`: the lead car's
+true state against the reference at each stamp, stopping errors read where the latched target
+curve leaves each stop, the energy from the applied force), each station by name with its
+planned and actual arrival, departure and dwell and its stopping error, each timing point of the
+journey with its window met or missed, what went wrong (ATP and watchdog events), and where the
+run comes from (when it was recorded, from which commit of the suite, when reported).
 
-The plots (``<bag>/report/*.png``, and all of them with the summary table in the single page
-``report.html``): target, actual and permitted speed (the profile's permitted
-speed: static limits and braking curves) with the ATP's interventions and the command
+The plots (``<bag>/report/*.png``, :mod:`recorder.report_plots`, and all of them with the
+tables in the single page ``report.html``): target, actual and permitted speed (the profile's
+permitted speed: static limits and braking curves) with the ATP's interventions and the command
 watchdog's events marked on the time axis (from the plant's and the controller's diagnostics);
 tracking errors; distance to go; the stops with their stopping errors; per car, position, speed
 and applied force (the effort of train/state) for multi-car runs; per actuator, the commanded
@@ -28,44 +32,27 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 from mcap_ros2.decoder import DecoderFactory
 
-from ato_common import units
 from ato_common.conventions import TOPICS, status_in_namespace
 from ato_common.identity import identity_mismatch, parse_identity, scenario_identity
 from ato_common.metrics import RunMetrics, StopSample, compute_metrics, format_summary
-from ato_common.run_events import PLATFORM_TOLERANCE_M, journey_events
+from ato_common.run_events import PLATFORM_TOLERANCE_M, journey_events, timing_points_passed
 from ato_common.scenario import builtin_scenarios, load_scenario
 from ato_common.validation import ConfigError
 from recorder.bag import BagError, bag_info, read_messages
+from recorder.report_plots import plot
 
 REPORTED = ('state', 'reference', 'command', 'curve', 'diagnostics')
 """The keys of the conventions' topics the report needs."""
 OPTIONAL = ('state_measured', 'permitted_speed', 'distance_to_go', 'actuators_commanded',
             'actuators_applied', 'identity')
 """The keys of the topics it plots when the recording holds them."""
-
-# Unit suffixes of the suite's keys (SI, `ato_common.units`) -> how a reader writes them.
-UNITS = (('_n_per_mps2', 'N/(m/s²)'), ('_n_per_mps', 'N/(m/s)'), ('_kg_per_m', 'kg/m'),
-         ('_mps2', 'm/s²'), ('_mps3', 'm/s³'), ('_mps', 'm/s'), ('_kmh', 'km/h'),
-         ('_kwh', 'kWh'), ('_kn', 'kN'), ('_kg', 'kg'), ('_hz', 'Hz'), ('_ms', 'ms'),
-         ('_rad', 'rad'), ('_per_s', '1/s'), ('_n', 'N'), ('_m', 'm'), ('_s', 's'),
-         ('_w', 'W'), ('_j', 'J'), ('_pct', '%'))
-
-
-def label(key: str) -> str:
-    """A raw key as a reader reads it: 'integral_action_mps2' -> 'integral action (m/s²)',
-    'b.gain' -> 'b gain' (no unit when the key names none)."""
-    name = key.replace('.', ' ').strip()
-    for suffix, unit in UNITS:
-        if name.endswith(suffix) and len(name) > len(suffix):
-            return f'{name[:-len(suffix)].replace("_", " ")} ({unit})'
-    return name.replace('_', ' ')
-
 
 def normalise_namespace(namespace: str) -> str:
     """'/train1', 'train1' and 'train1/' are '/train1'; '' and '/' are the root namespace ('')."""
@@ -118,6 +105,23 @@ def resolve_topics(bag: Path, namespace: str | None = None) -> dict[str, str]:
             if key in REPORTED or topic_in(namespace, TOPICS[key].name) in recorded}
 
 
+@dataclass(frozen=True)
+class PlannedStop:
+    """A standstill of the target curve: where, from when (the planned arrival) and until when
+    (``read_s``: the planned departure, or the end of the curve at the last stop, where
+    ``departure_s`` is None); ``name`` the station's where the scenario is known."""
+
+    name: str
+    position_m: float
+    arrival_s: float
+    read_s: float
+    departure_s: float | None
+
+    def sample(self) -> StopSample:
+        """Where the metrics read the stopping error: at the end of the dwell."""
+        return StopSample(self.name, self.position_m, self.read_s)
+
+
 @dataclass
 class RunData:
     stamps_ns: np.ndarray
@@ -129,7 +133,7 @@ class RunData:
     command_times: np.ndarray
     commands: np.ndarray
     laws: list[str]
-    stops: list[StopSample]
+    planned_stops: list[PlannedStop]
     estimates: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
     cars: list[str] = field(default_factory=list)
     car_positions: np.ndarray | None = None  # (samples, cars)
@@ -143,6 +147,11 @@ class RunData:
     actuators_applied: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
     events: list[tuple[float, str, str]] = field(default_factory=list)  # (s, kind, message)
     identity: str = ''  # the plant's identity of its scenario (ato_common.identity), if recorded
+    custom_data: dict[str, str] = field(default_factory=dict)  # the bag's (provenance)
+
+    @property
+    def stops(self) -> list[StopSample]:
+        return [stop.sample() for stop in self.planned_stops]
 
 
 def _decoder():
@@ -163,9 +172,9 @@ def _stamp(header) -> int:
 
 
 def stops_from_curve(times: np.ndarray, positions: np.ndarray, speeds: np.ndarray
-                     ) -> list[StopSample]:
-    """Each standstill of the target curve after the train first moved: the stop error is read
-    at its last instant (the end of the dwell)."""
+                     ) -> list[PlannedStop]:
+    """Each standstill of the target curve after the train first moved: from its first to
+    its last instant (the stop error is read at the last, the end of the dwell)."""
     stops = []
     moving = np.nonzero(speeds > 0.0)[0]
     if moving.size == 0:
@@ -176,91 +185,129 @@ def stops_from_curve(times: np.ndarray, positions: np.ndarray, speeds: np.ndarra
             j = i
             while j + 1 < times.size and speeds[j + 1] == 0.0:
                 j += 1
-            stops.append(StopSample(f'stop at {positions[i]:.0f} m', float(positions[i]),
-                                    float(times[j])))
+            stops.append(PlannedStop(f'stop at {positions[i]:.0f} m', float(positions[i]),
+                                     float(times[i]), float(times[j]),
+                                     float(times[j]) if j + 1 < times.size else None))
             i = j + 1
         else:
             i += 1
     return stops
 
 
+class _Reader:
+    """What ``load_run`` gathers from a recording, topic by topic (``take``)."""
+
+    def __init__(self, topics: dict[str, str]):
+        self.topics = topics
+        # the stack's namespace, from where its state is ('/train1/train/state' -> '/train1')
+        self.namespace = topics['state'][:-len(TOPICS['state'].name) - 1] or '/'
+        self.states: dict[int, tuple] = {}
+        self.cars_of: dict[int, tuple] = {}
+        self.references: dict[int, tuple] = {}
+        self.commands: list[tuple] = []
+        self.estimates: dict[str, list] = {}
+        self.stops: list[PlannedStop] = []
+        self.watch = {'watchdog': 'normal', 'atp_intervention': 'False'}
+        self.extra = RunData(np.array([]), *([np.array([])] * 7), [], [])
+        keys = {name: key for key, name in topics.items()}
+        self.handlers = {name: getattr(self, f'on_{key}') for name, key in keys.items()}
+
+    def take(self, message, msg) -> None:
+        self.handlers[message.topic](msg, message.log_time_ns / 1e9)
+
+    def on_state(self, msg, t_log: float) -> None:
+        p = msg.points[0]
+        self.states[_stamp(msg.header)] = (p.positions[0], p.velocities[0], sum(p.effort))
+        self.cars_of[_stamp(msg.header)] = (tuple(msg.joint_names), tuple(p.positions),
+                                            tuple(p.velocities), tuple(p.effort))
+
+    def on_state_measured(self, msg, t_log: float) -> None:
+        p = msg.points[0]
+        self.extra.measured[_stamp(msg.header)] = (p.positions[0], p.velocities[0])
+
+    def on_permitted_speed(self, msg, t_log: float) -> None:
+        self.extra.permitted.append((t_log, msg.data))
+
+    def on_distance_to_go(self, msg, t_log: float) -> None:
+        self.extra.distance_to_go.append((t_log, msg.data))
+
+    def _forces(self, msg, into: dict) -> None:
+        for name, force in zip(msg.name, msg.effort):
+            into.setdefault(name, []).append((_stamp(msg.header) / 1e9, force))
+
+    def on_actuators_commanded(self, msg, t_log: float) -> None:
+        self._forces(msg, self.extra.actuators_commanded)
+
+    def on_actuators_applied(self, msg, t_log: float) -> None:
+        self._forces(msg, self.extra.actuators_applied)
+
+    def on_identity(self, msg, t_log: float) -> None:
+        self.extra.identity = msg.data
+
+    def on_reference(self, msg, t_log: float) -> None:
+        p = msg.points[0]
+        self.references[_stamp(msg.header)] = (p.positions[0], p.velocities[0])
+
+    def on_command(self, msg, t_log: float) -> None:
+        self.commands.append((_stamp(msg.header), sum(msg.effort), msg.header.frame_id))
+
+    def on_curve(self, msg, t_log: float) -> None:
+        times = np.array([p.time_from_start.sec + p.time_from_start.nanosec * 1e-9
+                          for p in msg.points])
+        self.stops = stops_from_curve(times, np.array([p.positions[0] for p in msg.points]),
+                                      np.array([p.velocities[0] for p in msg.points]))
+
+    def on_diagnostics(self, msg, t_log: float) -> None:
+        for status in msg.status:
+            own = status_in_namespace(status.name, self.namespace)
+            if own is None:
+                continue  # a status of another stack recorded alongside
+            _events(own, status, _stamp(msg.header) / 1e9, self.watch, self.extra.events)
+            for kv in status.values:
+                if kv.key.startswith('estimate.'):
+                    try:
+                        self.estimates.setdefault(kv.key[9:], []).append(
+                            (_stamp(msg.header) / 1e9, float(kv.value)))
+                    except ValueError:
+                        pass
+
+    def run(self, bag: Path) -> RunData:
+        """The run, once every message is taken: the states and references of the same
+        stamps; BagError if there are none."""
+        if not self.states:
+            raise BagError(f'{bag} has no {self.topics["state"]} messages: nothing to report on')
+        stamps = np.array(sorted(k for k in self.states if k in self.references))
+        if stamps.size == 0:
+            raise BagError(f'{bag}: no {self.topics["reference"]} message matches a state stamp')
+        s = np.array([self.states[k] for k in stamps])
+        r = np.array([self.references[k] for k in stamps])
+        commands = sorted(self.commands)
+        data = RunData(stamps, s[:, 0], s[:, 1], s[:, 2], r[:, 0], r[:, 1],
+                       np.array([c[0] for c in commands]) / 1e9,
+                       np.array([c[1] for c in commands]), sorted({c[2] for c in commands}),
+                       self.stops, self.estimates)
+        layouts = {self.cars_of[k][0] for k in stamps}
+        if len(layouts) == 1:
+            (data.cars,) = [list(c) for c in layouts]
+            data.car_positions = np.array([self.cars_of[k][1] for k in stamps])
+            data.car_speeds = np.array([self.cars_of[k][2] for k in stamps])
+            data.car_forces = np.array([self.cars_of[k][3] for k in stamps])
+        for name in ('measured', 'permitted', 'distance_to_go', 'actuators_commanded',
+                     'actuators_applied', 'events', 'identity'):
+            setattr(data, name, getattr(self.extra, name))
+        data.events.sort()
+        return data
+
+
 def load_run(bag: Path, namespace: str | None = None) -> RunData:
     """The run recorded in ``bag``; ``namespace``: see :func:`resolve_topics`."""
     topics = resolve_topics(bag, namespace)
-    # the stack's namespace, from where its state is ('/train1/train/state' -> '/train1')
-    stack_namespace = topics['state'][:-len(TOPICS['state'].name) - 1] or '/'
+    reader = _Reader(topics)
     decode = _decoder()
-    states, references, commands, estimates = {}, {}, [], {}
-    cars_of: dict[int, tuple] = {}
-    extra = RunData(np.array([]), *([np.array([])] * 7), [], [])
-    watch = {'watchdog': 'normal', 'atp_intervention': 'False'}
-    stops: list[StopSample] = []
     for message in read_messages(bag, list(topics.values())):
-        msg = decode(message)
-        t_log = message.log_time_ns / 1e9
-        if message.topic == topics['state']:
-            p = msg.points[0]
-            states[_stamp(msg.header)] = (p.positions[0], p.velocities[0], sum(p.effort))
-            cars_of[_stamp(msg.header)] = (tuple(msg.joint_names), tuple(p.positions),
-                                           tuple(p.velocities), tuple(p.effort))
-        elif message.topic == topics.get('state_measured'):
-            p = msg.points[0]
-            extra.measured[_stamp(msg.header)] = (p.positions[0], p.velocities[0])
-        elif message.topic == topics.get('permitted_speed'):
-            extra.permitted.append((t_log, msg.data))
-        elif message.topic == topics.get('distance_to_go'):
-            extra.distance_to_go.append((t_log, msg.data))
-        elif message.topic in (topics.get('actuators_commanded'), topics.get('actuators_applied')):
-            into = extra.actuators_commanded if message.topic == topics.get(
-                'actuators_commanded') else extra.actuators_applied
-            for name, force in zip(msg.name, msg.effort):
-                into.setdefault(name, []).append((_stamp(msg.header) / 1e9, force))
-        elif message.topic == topics.get('identity'):
-            extra.identity = msg.data
-        elif message.topic == topics['reference']:
-            p = msg.points[0]
-            references[_stamp(msg.header)] = (p.positions[0], p.velocities[0])
-        elif message.topic == topics['command']:
-            commands.append((_stamp(msg.header), sum(msg.effort), msg.header.frame_id))
-        elif message.topic == topics['curve']:
-            times = np.array([p.time_from_start.sec + p.time_from_start.nanosec * 1e-9
-                              for p in msg.points])
-            stops = stops_from_curve(times, np.array([p.positions[0] for p in msg.points]),
-                                     np.array([p.velocities[0] for p in msg.points]))
-        elif message.topic == topics['diagnostics']:
-            for status in msg.status:
-                own = status_in_namespace(status.name, stack_namespace)
-                if own is None:
-                    continue  # a status of another stack recorded alongside
-                _events(own, status, _stamp(msg.header) / 1e9, watch, extra.events)
-                for kv in status.values:
-                    if kv.key.startswith('estimate.'):
-                        try:
-                            estimates.setdefault(kv.key[9:], []).append(
-                                (_stamp(msg.header) / 1e9, float(kv.value)))
-                        except ValueError:
-                            pass
-    if not states:
-        raise BagError(f'{bag} has no {topics["state"]} messages: nothing to report on')
-    stamps = np.array(sorted(k for k in states if k in references))
-    if stamps.size == 0:
-        raise BagError(f'{bag}: no {topics["reference"]} message matches a state stamp')
-    s = np.array([states[k] for k in stamps])
-    r = np.array([references[k] for k in stamps])
-    commands.sort()
-    data = RunData(stamps, s[:, 0], s[:, 1], s[:, 2], r[:, 0], r[:, 1],
-                   np.array([c[0] for c in commands]) / 1e9, np.array([c[1] for c in commands]),
-                   sorted({c[2] for c in commands}), stops, estimates)
-    layouts = {cars_of[k][0] for k in stamps}
-    if len(layouts) == 1:
-        (data.cars,) = [list(c) for c in layouts]
-        data.car_positions = np.array([cars_of[k][1] for k in stamps])
-        data.car_speeds = np.array([cars_of[k][2] for k in stamps])
-        data.car_forces = np.array([cars_of[k][3] for k in stamps])
-    for name in ('measured', 'permitted', 'distance_to_go', 'actuators_commanded',
-                 'actuators_applied', 'events', 'identity'):
-        setattr(data, name, getattr(extra, name))
-    data.events.sort()
+        reader.take(message, decode(message))
+    data = reader.run(bag)
+    data.custom_data = bag_info(bag).custom_data
     return data
 
 
@@ -288,166 +335,6 @@ def run_metrics(data: RunData) -> RunMetrics:
     held = np.append(data.applied[1:], data.applied[-1:])
     return compute_metrics(data.stamps_ns / 1e9, data.positions, data.speeds, held,
                            data.ref_positions, data.ref_speeds, data.stops)
-
-
-def _mark_events(axis, events) -> None:
-    """ATP interventions (red), watchdog or controller events (orange) and missed time windows
-    (blue) on the time axis (a timing point never reached has no time to mark)."""
-    shown = set()
-    for t, kind, _ in events:
-        if not math.isfinite(t):
-            continue
-        colour = 'red' if kind.startswith('ATP') else 'tab:blue' if kind.startswith('missed') \
-            else 'orange'
-        axis.axvline(t, color=colour, lw=1, ls='--', alpha=0.8,
-                     label=kind if kind not in shown else None)
-        shown.add(kind)
-
-
-def energy_over_time(data: RunData) -> np.ndarray:
-    """Traction energy up to each sample, kWh: the metrics' sum, accumulated."""
-    held = np.append(data.applied[1:], data.applied[-1:])
-    work = np.maximum(held[:-1] * np.diff(data.positions), 0.0)
-    return units.joules_to_kwh(np.concatenate([[0.0], np.cumsum(work)]))
-
-
-def plot(data: RunData, folder: Path) -> list[Path]:
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-    folder.mkdir(parents=True, exist_ok=True)
-    t = data.stamps_ns / 1e9
-    written = []
-
-    def save(fig, name):
-        path = folder / name
-        fig.tight_layout()
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        written.append(path)
-
-    fig, (a, b) = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
-    if data.permitted:
-        a.plot([p[0] for p in data.permitted], np.array([p[1] for p in data.permitted]) * 3.6,
-               label='permitted (static limits and braking curves)', lw=1, color='black',
-               alpha=0.7)
-    a.plot(t, data.ref_speeds * 3.6, label='target', lw=2, alpha=0.6)
-    a.plot(t, data.speeds * 3.6, label='train (true)', lw=1)
-    _mark_events(a, data.events)
-    a.set_ylabel('speed (km/h)')
-    a.legend(fontsize=8)
-    b.plot(t, data.ref_positions / 1000, label='target', lw=2, alpha=0.6)
-    b.plot(t, data.positions / 1000, label='train (true)', lw=1)
-    _mark_events(b, data.events)
-    b.set_ylabel('position (km)')
-    b.set_xlabel('time (s)')
-    b.legend(fontsize=8)
-    fig.suptitle('tracking: target, actual and permitted speed; ATP and watchdog events')
-    save(fig, 'tracking.png')
-
-    fig, (a, b) = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
-    a.plot(t, (data.ref_speeds - data.speeds) * 3.6)
-    a.set_ylabel('speed error (km/h)')
-    b.plot(t, data.ref_positions - data.positions)
-    b.set_ylabel('position error (m)')
-    b.set_xlabel('time (s)')
-    fig.suptitle('tracking errors (target minus train)')
-    save(fig, 'errors.png')
-
-    if data.distance_to_go:
-        fig, a = plt.subplots(figsize=(10, 3.5))
-        a.plot([d[0] for d in data.distance_to_go],
-               np.array([d[1] for d in data.distance_to_go]) / 1000)
-        a.set_ylabel('distance to go (km)')
-        a.set_xlabel('time (s)')
-        fig.suptitle('distance to the next target (lower speed limit or stop)')
-        save(fig, 'distance_to_go.png')
-
-    errors = run_metrics(data).stop_errors_m
-    if errors:
-        fig, a = plt.subplots(figsize=(10, 3.5))
-        names = list(errors)
-        a.bar(range(len(names)), [errors[n] for n in names])
-        a.set_xticks(range(len(names)), names, rotation=20, fontsize=8)
-        a.axhline(0.0, color='black', lw=0.8)
-        a.set_ylabel('stopping error (m, + beyond the stop)')
-        fig.suptitle('station stops and their stopping errors')
-        save(fig, 'stops.png')
-
-    fig, a = plt.subplots(figsize=(10, 4))
-    a.plot(data.command_times, data.commands / 1000, label='commanded (ATO, sum)', lw=2,
-           alpha=0.6)
-    a.plot(t, data.applied / 1000, label='applied (plant, sum)', lw=1)
-    a.set_ylabel('force (kN)')
-    a.set_xlabel('time (s)')
-    a.legend(fontsize=8)
-    fig.suptitle(f'traction and braking force ({", ".join(data.laws)})')
-    save(fig, 'commands.png')
-
-    names = sorted(set(data.actuators_commanded) | set(data.actuators_applied))
-    if names:
-        fig, axes = plt.subplots(len(names), 1, figsize=(10, 2.4 * len(names)), sharex=True,
-                                 squeeze=False)
-        for axis, name in zip(axes[:, 0], names):
-            for series, what, style in ((data.actuators_commanded, 'commanded', '-'),
-                                        (data.actuators_applied, 'applied', '--')):
-                values = series.get(name, [])
-                axis.plot([v[0] for v in values], np.array([v[1] for v in values]) / 1000,
-                          style, label=what, lw=1.2)
-            axis.set_ylabel(f'{name}\nforce (kN)', fontsize=8)
-            axis.legend(fontsize=7)
-        axes[-1, 0].set_xlabel('time (s)')
-        fig.suptitle('force per actuator: commanded vs applied')
-        save(fig, 'actuators.png')
-
-    if data.cars and len(data.cars) > 1:
-        fig, axes = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
-        lead = data.car_positions[:, :1]
-        for i, car in enumerate(data.cars):
-            axes[0].plot(t, data.car_positions[:, i] - lead[:, 0], label=car, lw=1)
-            axes[1].plot(t, data.car_speeds[:, i] * 3.6, label=car, lw=1)
-            axes[2].plot(t, data.car_forces[:, i] / 1000, label=car, lw=1)
-        axes[0].set_ylabel('position behind the\nlead car (m)')
-        axes[1].set_ylabel('speed (km/h)')
-        axes[2].set_ylabel('applied force (kN)')
-        axes[2].set_xlabel('time (s)')
-        axes[0].legend(fontsize=7, ncol=min(len(data.cars), 6))
-        fig.suptitle('per car: position, speed and applied force')
-        save(fig, 'cars.png')
-
-    fig, a = plt.subplots(figsize=(10, 3.5))
-    a.plot(t, energy_over_time(data))
-    a.set_ylabel('traction energy (kWh)')
-    a.set_xlabel('time (s)')
-    fig.suptitle('traction energy over time (work of the applied traction force)')
-    save(fig, 'energy.png')
-
-    common = [k for k in data.stamps_ns if int(k) in data.measured]
-    if common:
-        tm = np.array(common) / 1e9
-        index = {int(k): i for i, k in enumerate(data.stamps_ns)}
-        true = np.array([(data.positions[index[int(k)]], data.speeds[index[int(k)]])
-                         for k in common])
-        measured = np.array([data.measured[int(k)] for k in common])
-        fig, (a, b) = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
-        a.plot(tm, (measured[:, 1] - true[:, 1]) * 3.6)
-        a.set_ylabel('speed: measured\nminus true (km/h)')
-        b.plot(tm, measured[:, 0] - true[:, 0])
-        b.set_ylabel('position: measured\nminus true (m)')
-        b.set_xlabel('time (s)')
-        fig.suptitle('the sensors against the true state (lead car)')
-        save(fig, 'measured.png')
-
-    if data.estimates:
-        fig, axes = plt.subplots(len(data.estimates), 1, figsize=(10, 2.2 * len(data.estimates)),
-                                 sharex=True, squeeze=False)
-        for axis, (name, values) in zip(axes[:, 0], sorted(data.estimates.items())):
-            axis.plot([v[0] for v in values], [v[1] for v in values])
-            axis.set_ylabel(label(name), fontsize=8)
-        axes[-1, 0].set_xlabel('time (s)')
-        fig.suptitle('estimates and internal signals of the law')
-        save(fig, 'estimates.png')
-    return written
 
 
 def scenario_of_run(data: RunData, given: str | None, bag: Path):
@@ -507,6 +394,19 @@ def event_rows(metrics: RunMetrics, events, journey=None) -> list[tuple[str, str
     return [row('ATP interventions', atp), row('watchdog brakes', dog), *stops, *windows]
 
 
+#: the energies of the metrics, in the report's order: (attribute, label); a run's metrics show
+#: those they have (braking, regenerated and net energy where ato_common.metrics gives them)
+ENERGIES = (('traction_energy_kwh', 'traction energy, gross (kWh)'),
+            ('braking_energy_kwh', 'braking energy (kWh)'),
+            ('regenerated_energy_kwh', 'regenerated energy (kWh)'),
+            ('net_energy_kwh', 'net energy (kWh)'))
+
+
+def energy_rows(metrics: RunMetrics) -> list[tuple[str, str]]:
+    return [(text, f'{getattr(metrics, name):.2f}') for name, text in ENERGIES
+            if getattr(metrics, name, None) is not None]
+
+
 def summary_rows(metrics: RunMetrics, laws: list[str], events=(), journey=None
                  ) -> list[tuple[str, str]]:
     """The summary table: quantity (with its unit) and value, then what went wrong."""
@@ -517,75 +417,249 @@ def summary_rows(metrics: RunMetrics, laws: list[str], events=(), journey=None
             ('position error, max (m)', f'{metrics.max_position_error_m:.4f}')]
     rows += [(f'stopping error, {station} (m)', f'{error:+.4f}')
              for station, error in metrics.stop_errors_m.items()]
-    rows += [('traction energy (kWh)', f'{metrics.traction_energy_kwh:.2f}'),
-             ('simulated time (s)', f'{metrics.simulated_time_s:.1f}'),
+    rows += energy_rows(metrics)
+    rows += [('simulated time (s)', f'{metrics.simulated_time_s:.1f}'),
              ('samples', str(metrics.samples))]
     return rows + event_rows(metrics, events, journey)
 
 
-def write_html(path: Path, title: str, metrics: RunMetrics, data: RunData,
-               plots: list[Path], journey=None) -> Path:
-    """One self-contained page: the summary table, the events, and every plot embedded (no
-    file beside it needed, no script)."""
-    import base64
+def name_stops(data: RunData, scenario) -> None:
+    """The planned stops named after the scenario's stations where they stand (within a
+    metre); the others keep their position as name."""
+    if scenario is None:
+        return
+    named = []
+    for stop in data.planned_stops:
+        station = min(scenario.line.stations, key=lambda s: abs(s.position_m - stop.position_m))
+        if abs(station.position_m - stop.position_m) <= 1.0:
+            stop = replace(stop, name=station.name)
+        named.append(stop)
+    data.planned_stops = named
+
+
+def _time(value: float | None) -> str:
+    return '-' if value is None else f'{value:.1f}'
+
+
+STOP_COLUMNS = ('station', 'position (m)', 'arrival, planned (s)', 'arrival (s)',
+                'departure, planned (s)', 'departure (s)', 'dwell, planned (s)', 'dwell (s)',
+                'stopping error (m)')
+#: a train stands at a stop while it is this slow, m/s, and this near it, m (a stopping error
+#: beyond is a failed stop, whose times the table does not give)
+STANDSTILL_MPS = 0.01
+STANDSTILL_RANGE_M = 5.0
+
+
+def standstill(times, positions, speeds, position_m: float
+               ) -> tuple[float | None, float | None]:
+    """(arrival, departure) of the train at a stop: the first and last instant of its first
+    standstill near it (None: never, or the run started or ended standing there)."""
+    standing = (np.abs(np.asarray(speeds)) <= STANDSTILL_MPS) & \
+        (np.abs(np.asarray(positions) - position_m) <= STANDSTILL_RANGE_M)
+    found = np.flatnonzero(standing)
+    if found.size == 0:
+        return None, None
+    first = found[0]
+    last = first
+    while last + 1 < standing.size and standing[last + 1]:
+        last += 1
+    return (None if first == 0 else float(times[first]),
+            None if last == standing.size - 1 else float(times[last]))
+
+
+def _dwell(arrival: float | None, departure: float | None) -> float | None:
+    return departure - arrival if arrival is not None and departure is not None else None
+
+
+def stop_rows(data: RunData, metrics: RunMetrics) -> list[tuple[str, ...]]:
+    """Each stop of the target curve: the station, its planned (the curve's standstill) and
+    actual (the train's standstill) arrival, departure and dwell ('-' where the run starts or
+    ends standing) and its stopping error."""
+    times, rows = data.stamps_ns / 1e9, []
+    for stop in data.planned_stops:
+        arrival, departure = standstill(times, data.positions, data.speeds, stop.position_m)
+        error = metrics.stop_errors_m.get(stop.name)
+        rows.append((stop.name, f'{stop.position_m:.1f}', _time(stop.arrival_s), _time(arrival),
+                     _time(stop.departure_s), _time(departure),
+                     _time(_dwell(stop.arrival_s, stop.departure_s)),
+                     _time(_dwell(arrival, departure)),
+                     '-' if error is None else f'{error:+.3f}'))
+    return rows
+
+
+WINDOW_COLUMNS = ('timing point', 'position (m)', 'timed', 'window (s)', 'time (s)', 'window')
+
+
+def window_rows(data: RunData, scenario) -> list[tuple[str, ...]]:
+    """Each timing point of the scenario's journey, its window and whether the run met it."""
+    if scenario is None:
+        return []
+    return [(str(p.index), f'{p.position_m:.1f}', p.what,
+             f'[{_time(p.earliest_s)}, {_time(p.latest_s)}]', _time(p.time_s),
+             'met' if p.met else 'missed' if p.time_s is not None else 'missed (never reached)')
+            for p in timing_points_passed(scenario, data.stamps_ns / 1e9, data.positions)]
+
+
+def journey_facts(data: RunData, scenario, bag: Path) -> list[tuple[str, str]]:
+    """What the run is and where it comes from: the scenario and the train, the recording,
+    when it was recorded and from which commit of the suite, and when this report was made."""
+    if scenario is not None:
+        names = [('scenario', scenario.name), ('train', scenario.train.name)]
+    elif data.identity:
+        names = [('scenario', f'{parse_identity(data.identity)["scenario"]} (a file: give it '
+                              'with --scenario for its stations and windows)'),
+                 ('train', 'unknown')]
+    else:
+        names = [('scenario', 'unknown (no train/identity recorded: --scenario)'),
+                 ('train', 'unknown')]
+    custom = data.custom_data
+    return names + [
+        ('controller', ', '.join(data.laws) or 'none recorded'),
+        ('recording', str(bag)),
+        ('recorded at', custom.get('recorded_utc', 'not recorded')),
+        ('suite commit of the run', custom.get('suite_commit', 'not recorded')),
+        ('report made at', datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC'))]
+
+
+def _table(element_id: str, header: tuple[str, ...], rows) -> str:
     from html import escape
-    rows = ''.join(f'<tr><th scope="row">{escape(k)}</th><td>{escape(v)}</td></tr>'
-                   for k, v in summary_rows(metrics, data.laws, data.events, journey))
-    events = ''.join(f'<tr><td>{f"{t:.2f}" if math.isfinite(t) else "never"}</td>'
-                     f'<td>{escape(kind)}</td><td>{escape(message)}</td></tr>'
-                     for t, kind, message in data.events)
+    head = ''.join(f'<th scope="col">{escape(h)}</th>' for h in header)
+    body = ''.join('<tr>' + ''.join(f'<td>{escape(c)}</td>' for c in row) + '</tr>'
+                   for row in rows)
+    return f'<table id="{element_id}"><tr>{head}</tr>{body}</table>'
+
+
+def _pairs(element_id: str, rows) -> str:
+    from html import escape
+    body = ''.join(f'<tr><th scope="row">{escape(k)}</th><td>{escape(v)}</td></tr>'
+                   for k, v in rows)
+    return f'<table id="{element_id}">{body}</table>'
+
+
+@dataclass
+class Report:
+    """Everything the report says of a run (the text on stdout, ``report.html``)."""
+
+    bag: Path
+    data: RunData
+    scenario: object | None
+    metrics: RunMetrics
+
+    def sections(self) -> list[tuple[str, str]]:
+        """(heading, HTML) of each part of the page but the plots."""
+        data, scenario = self.data, self.scenario
+        events = ''.join(f'<tr><td>{f"{t:.2f}" if math.isfinite(t) else "never"}</td>'
+                         f'<td>{_escape(kind)}</td><td>{_escape(message)}</td></tr>'
+                         for t, kind, message in data.events)
+        windows = window_rows(data, scenario)
+        return [
+            ('The run', _pairs('journey', journey_facts(data, scenario, self.bag))),
+            ('Summary', _pairs('summary', summary_rows(self.metrics, data.laws, data.events,
+                                                       scenario))),
+            ('Stations', _table('stations', STOP_COLUMNS, stop_rows(data, self.metrics))
+             if data.planned_stops else '<p id="stations">no stop in the target curve</p>'),
+            ('Timetable windows', _table('windows', WINDOW_COLUMNS, windows) if windows else
+             '<p id="windows">' + ('the scenario is unknown: not checked (--scenario)'
+                                   if scenario is None else 'the scenario has no timing '
+                                   'points with windows') + '</p>'),
+            ('ATP interventions, watchdog events and missed time windows',
+             f'<table id="events"><tr><th>time (s)</th><th>event</th><th>message</th></tr>'
+             f'{events}</table>' if data.events else '<p id="events">none</p>')]
+
+
+def _escape(text: str) -> str:
+    from html import escape
+    return escape(text)
+
+
+def write_html(path: Path, title: str, report: Report, plots: list[Path]) -> Path:
+    """One self-contained page: the run, the summary, the stations, the windows, the events
+    and every plot embedded (no file beside it needed, no script)."""
+    import base64
     figures = ''.join(
-        f'<figure id="{escape(p.stem)}"><img alt="{escape(p.stem)}" src="data:image/png;base64,'
-        f'{base64.b64encode(p.read_bytes()).decode()}"><figcaption>{escape(p.stem)}'
-        '</figcaption></figure>' for p in plots)
+        f'<figure id="{_escape(p.stem)}"><img alt="{_escape(p.stem)}" '
+        f'src="data:image/png;base64,{base64.b64encode(p.read_bytes()).decode()}">'
+        f'<figcaption>{_escape(p.stem)}</figcaption></figure>' for p in plots)
+    sections = ''.join(f'<h2>{_escape(heading)}</h2>{body}'
+                       for heading, body in report.sections())
     page = (
         '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
-        f'<title>{escape(title)}</title><style>body{{font-family:sans-serif;margin:2em}}'
-        'table{border-collapse:collapse}th,td{border:1px solid #ccc;padding:0.2em 0.6em;'
-        'text-align:left}img{max-width:100%}</style></head><body>'
-        f'<h1>{escape(title)}</h1><h2>Summary</h2><table id="summary">{rows}</table>'
-        '<h2>ATP interventions, watchdog events and missed time windows</h2>'
-        + (f'<table id="events"><tr><th>time (s)</th><th>event</th><th>message</th></tr>'
-           f'{events}</table>' if data.events else '<p id="events">none</p>')
-        + f'<h2>Plots</h2>{figures}</body></html>\n')
+        f'<title>{_escape(title)}</title><style>body{{font-family:sans-serif;margin:2em}}'
+        'table{border-collapse:collapse;margin-bottom:1em}th,td{border:1px solid #ccc;'
+        'padding:0.2em 0.6em;text-align:left}img{max-width:100%}</style></head><body>'
+        f'<h1>{_escape(title)}</h1>{sections}<h2>Plots</h2>{figures}</body></html>\n')
     path.write_text(page, encoding='utf-8')
     return path
+
+
+def build_report(bag: Path, namespace: str | None = None, scenario: str | None = None
+                 ) -> Report:
+    """The run recorded in ``bag`` with its scenario (``scenario``, or the plant's recorded
+    identity's), its stops named and its missed windows among the events; BagError says what
+    is wrong."""
+    data = load_run(bag, namespace)
+    journey = scenario_of_run(data, scenario, bag)
+    name_stops(data, journey)
+    data.events = sorted(data.events + journey_rows(data, journey),
+                         key=lambda e: (not math.isfinite(e[0]), e[0]))
+    return Report(Path(bag), data, journey, run_metrics(data))
+
+
+def write_report(report: Report, folder: Path) -> Path:
+    """The plots and ``report.html`` in ``folder``; the page's path."""
+    plots = plot(report.data, folder, report.metrics.stop_errors_m)
+    title = f'Run report: {report.bag.name}' if report.scenario is None else \
+        f'Run report: {report.scenario.name} ({report.bag.name})'
+    return write_html(folder / 'report.html', title, report, plots)
+
+
+def print_report(report: Report) -> None:
+    data, metrics = report.data, report.metrics
+    facts = journey_facts(data, report.scenario, report.bag)
+    print(format_summary(metrics, facts[0][1], ', '.join(data.laws)))
+    for key, value in facts[1:]:
+        if key != 'controller':
+            print(f'{key + " ":22s}{value}')
+    for key, value in energy_rows(metrics)[1:]:
+        print(f'{key + " ":22s}{value}')
+    for row in stop_rows(data, metrics):
+        print(f'station {row[0]} at {row[1]} m: arrival {row[3]} s (planned {row[2]}), '
+              f'departure {row[5]} s (planned {row[4]}), dwell {row[7]} s (planned {row[6]}), '
+              f'stopping error {row[8]} m')
+    for row in window_rows(data, report.scenario):
+        print(f'timing point {row[0]} at {row[1]} m: {row[2]} at {row[4]} s, window {row[3]} '
+              f's: {row[5]}')
+    for key, value in event_rows(metrics, data.events, report.scenario):
+        print(f'{key + " ":22s}{value}')
+    for t, kind, message in data.events:
+        print(f'event at {t:9.2f} s: {kind}: {message}' if math.isfinite(t)
+              else f'event (never):    {kind}: {message}')
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog='report', description=__doc__.split('\n\n')[0])
     parser.add_argument('bag', type=Path)
     parser.add_argument('--output', type=Path, default=None,
-                        help='folder for the plots (default: <bag>/report)')
+                        help='folder for the plots and report.html (default: <bag>/report)')
     parser.add_argument('--namespace', default=None,
                         help="namespace the stack ran in (-r __ns:=...), '/' for the root "
                              "(default: the one namespace holding the suite's topics)")
     parser.add_argument('--scenario', default=None,
-                        help='the scenario the run simulated (a name or a file), to check its '
-                             "journey's time windows (default: the built-in scenario the "
-                             "plant's recorded identity names; checked against it)")
+                        help='the scenario the run simulated (a name or a file), for its '
+                             "stations' names and its journey's time windows (default: the "
+                             "built-in scenario the plant's recorded identity names; checked "
+                             'against it)')
     options = parser.parse_args(argv)
     try:
-        data = load_run(options.bag, options.namespace)
-        journey = scenario_of_run(data, options.scenario, options.bag)
+        report = build_report(options.bag, options.namespace, options.scenario)
     except BagError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
-    data.events = sorted(data.events + journey_rows(data, journey),
-                         key=lambda e: (not math.isfinite(e[0]), e[0]))
-    metrics = run_metrics(data)
-    print(format_summary(metrics, str(options.bag), ', '.join(data.laws)))
-    for label, value in event_rows(metrics, data.events, journey):
-        print(f'{label:22s}{value}')
-    for t, kind, message in data.events:
-        print(f'event at {t:9.2f} s: {kind}: {message}' if math.isfinite(t)
-              else f'event (never):    {kind}: {message}')
+    print_report(report)
     folder = options.output or Path(options.bag) / 'report'
-    plots = plot(data, folder)
-    for path in plots:
+    page = write_report(report, folder)
+    for path in sorted(folder.glob('*.png')):
         print(f'plot: {path}')
-    page = write_html(folder / 'report.html', f'Run report: {Path(options.bag).name}', metrics,
-                      data, plots, journey)
     print(f'html: {page}')
     return 0
 

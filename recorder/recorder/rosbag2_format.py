@@ -172,6 +172,20 @@ def bag_metadata(*, start_ns: int, end_ns: int, relative_path: str,
     }
 
 
+def opening_metadata(relative_path: str, custom_data: dict[str, str] | None) -> dict:
+    """The ``rosbag2_bagfile_information`` rosbag2 Jazzy's writer stores in the ``rosbag2``
+    record when it opens a bag (``SequentialWriter::open``: no topic and no message yet, the
+    starting times at their "none yet" value, the largest time point, the custom data given)."""
+    metadata = bag_metadata(start_ns=NOT_STARTED_NS, end_ns=NOT_STARTED_NS,
+                            relative_path=relative_path, topics=[], custom_data=custom_data)
+    return metadata
+
+
+#: the starting time of a bag with no message yet, as rosbag2 initialises it (the largest
+#: nanosecond time point)
+NOT_STARTED_NS = 2 ** 63 - 1
+
+
 # Type hashes ------------------------------------------------------------------------------
 
 @lru_cache(maxsize=None)

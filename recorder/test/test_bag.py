@@ -1,7 +1,9 @@
 """Round trips of the bag core in a temporary folder: write, read back with independent readers,
 break the file, recover it."""
 
+import os
 import shutil
+from functools import lru_cache
 
 import pytest
 import yaml
@@ -22,7 +24,10 @@ from recorder.ros_io import offered_profiles, replay_qos
 STATE_TYPE = 'trajectory_msgs/msg/JointTrajectory'
 
 
+@lru_cache(maxsize=None)
 def state_bytes(k: int) -> bytes:
+    """The bytes of state ``k``, the same bytes each time (rclpy leaves the alignment padding of
+    a serialised message as it finds it in memory: two serialisations may differ there)."""
     state = TrainState(k * 100_000_000, ('car_1', 'car_2'), (k * 1.0, k * 1.0 - 25.0),
                        (k * 0.5, k * 0.5), (0.1, 0.1), (1000.0 * k, 0.0))
     return serialize_message(state_to_msg(state))
@@ -129,6 +134,35 @@ def test_truncated_file_names_the_problem_and_recover_restores_what_it_holds(tmp
     assert bag_info(tmp_path / 'run').message_count == len(recovered)
 
 
+def test_recover_leaves_an_intact_bag_alone_and_says_so(tmp_path, capsys):
+    write_bag(tmp_path / 'run', count=50).close()
+    file = bag_file(tmp_path / 'run')
+    before = file.read_bytes(), (tmp_path / 'run' / 'metadata.yaml').read_text()
+    result = recover(tmp_path / 'run')
+    assert result.intact and result.lost_bytes == 0 and result.info.message_count == 50
+    assert recover_main([str(tmp_path / 'run')]) == 0
+    out = capsys.readouterr().out
+    assert 'is intact' in out and 'nothing to recover' in out and 'could not be read' not in out
+    assert (file.read_bytes(), (tmp_path / 'run' / 'metadata.yaml').read_text()) == before
+    assert sorted(p.name for p in (tmp_path / 'run').iterdir()) == ['metadata.yaml', file.name]
+
+
+def test_a_killed_recording_keeps_its_custom_data_and_log_time(tmp_path):
+    writer = write_bag(tmp_path / 'run', count=30, custom_data={'log_time': 'stamp',
+                                                                'operator': 'lab3'})
+    writer.flush()
+    killed = tmp_path / 'killed'
+    killed.mkdir()
+    shutil.copy(writer.path, killed / 'killed_0.mcap')  # as a SIGKILL leaves it: no metadata.yaml
+    writer.close()
+    info = recover(killed).info
+    assert info.message_count == 30
+    assert info.custom_data == {'log_time': 'stamp', 'operator': 'lab3'}
+    metadata = yaml.safe_load((killed / 'metadata.yaml').read_text())
+    assert metadata['rosbag2_bagfile_information']['custom_data'] == info.custom_data
+    assert bag_info(killed).custom_data == info.custom_data
+
+
 def test_an_unclosed_recording_keeps_what_was_flushed(tmp_path):
     writer = write_bag(tmp_path / 'run', count=300, chunk_size=1 << 20)
     writer.flush()  # what the recorder does every flush period
@@ -139,8 +173,7 @@ def test_an_unclosed_recording_keeps_what_was_flushed(tmp_path):
     shutil.copy(writer.path, killed / 'killed_0.mcap')  # the file as a SIGKILL leaves it
     with pytest.raises(BagError):
         list(read_messages(killed))
-    info, _ = recover(killed)
-    assert info.message_count >= 300
+    assert recover(killed).info.message_count >= 300
 
 
 def test_offered_qos_round_trip_keeps_latched_topics_latched():
@@ -163,17 +196,30 @@ def test_a_corrupt_chunk_gives_a_clear_error_and_recover_keeps_the_original_safe
     file.write_bytes(bytes(data))
     with pytest.raises(BagError, match='(truncated or corrupt|is damaged).*recover'):
         list(read_messages(tmp_path / 'run'))
-    info, _ = recover(tmp_path / 'run')
+    info = recover(tmp_path / 'run').info
     assert 0 < info.message_count < 2000
     assert (file.parent / (file.name + '.damaged')).read_bytes() == bytes(data)
     assert len(list(read_messages(tmp_path / 'run'))) == info.message_count
 
 
-def test_a_full_disk_stops_the_recording_with_a_clear_error_and_no_valid_looking_bag(tmp_path):
-    import os
+def descriptor_of(path) -> int:
+    """This process's file descriptor open on ``path``."""
+    (found,) = [int(fd) for fd in os.listdir('/proc/self/fd')
+                if os.path.realpath(f'/proc/self/fd/{fd}') == str(path)]
+    return found
+
+
+def test_a_full_disk_stops_the_recording_with_a_clear_error_and_no_valid_looking_bag(
+        tmp_path, monkeypatch):
+    from collections import namedtuple
+
+    from recorder import bag
     writer = write_bag(tmp_path / 'run', count=10, chunk_size=1 << 20)
     full = os.open('/dev/full', os.O_WRONLY)
-    os.dup2(full, writer._file.fileno())  # from now on every write fails with ENOSPC
+    os.dup2(full, descriptor_of(writer.path))  # from now on every write fails with ENOSPC
+    # and the disk says it is full, as a full one would
+    usage = namedtuple('usage', 'total used free')
+    monkeypatch.setattr(bag.shutil, 'disk_usage', lambda path: usage(1 << 30, 1 << 30, 0))
     os.close(full)
     with pytest.raises(BagError, match='No space left on device.*recover'):
         for k in range(10, 20000):
@@ -201,17 +247,15 @@ def test_chunks_are_flushed_by_log_time_as_well_as_by_wall_time(tmp_path):
     # No wall-clock flush within the test; 0.25 s of log time between flushes.
     writer = write_bag(tmp_path / 'run', count=0, chunk_size=1 << 24, flush_period_s=3600.0,
                        flush_period_log_s=0.25)
-    sizes = []
+    kept = []
     for k in range(20):  # 0.1 s of log time apart
         writer.write('/train/state', k * 100_000_000, state_bytes(k))
-        sizes.append(writer.path.stat().st_size)
-    grew = [k for k in range(1, 20) if sizes[k] > sizes[k - 1]]
-    assert grew == [3, 6, 9, 12, 15, 18]  # every 0.3 s: the first write at or past 0.25 s
-    killed = tmp_path / 'killed'
-    killed.mkdir()
-    shutil.copy(writer.path, killed / 'killed_0.mcap')  # the file as a SIGKILL leaves it
-    info, _ = recover(killed)
-    assert info.message_count == 19  # all but the one written after the last flush
+        killed = tmp_path / f'killed{k}'
+        killed.mkdir()
+        shutil.copy(writer.path, killed / f'killed{k}_0.mcap')  # as a SIGKILL leaves it
+        kept.append(recover(killed).info.message_count)
+    # a chunk closed every 0.3 s: at the first write at or past 0.25 s since the last one
+    assert kept == [0, 0, 0, 4, 4, 4, 7, 7, 7, 10, 10, 10, 13, 13, 13, 16, 16, 16, 19, 19]
 
 
 @pytest.mark.parametrize('period', [0.0, -1.0, float('nan'), float('inf')])
@@ -241,3 +285,21 @@ def test_the_stamp_is_read_from_the_cdr_bytes_of_stamped_types():
     clock = serialize_message(Clock(clock=Time(sec=12, nanosec=345)))
     assert cdr_stamp_ns(clock) == 12_000_000_345
     assert cdr_stamp_ns(serialize_message(Float64(data=1.0))[:8]) is None  # too short
+
+
+def test_a_topic_without_a_message_is_left_out_so_that_rosbags_converts_the_bag(tmp_path):
+    """The SDK's writer has no channel (so no schema) for a topic without a message; listing it
+    in metadata.yaml would leave rosbags without its type."""
+    from rosbags.convert import convert
+    writer = write_bag(tmp_path / 'run', count=5)
+    writer.add_topic('/parameter_events', 'rcl_interfaces/msg/ParameterEvent')
+    info = writer.close()
+    assert sorted(info.topics) == ['/train/state']
+    metadata = yaml.safe_load((tmp_path / 'run' / 'metadata.yaml').read_text())
+    assert [t['topic_metadata']['name'] for t in
+            metadata['rosbag2_bagfile_information']['topics_with_message_count']] == \
+        ['/train/state']
+    convert([tmp_path / 'run'], tmp_path / 'converted', dst_storage='mcap', dst_version=9,
+            compress=None, compress_mode='file', default_typestore=None, typestore=None,
+            exclude_topics=(), include_topics=(), exclude_msgtypes=(), include_msgtypes=())
+    assert bag_info(tmp_path / 'converted').topics['/train/state'].message_count == 5

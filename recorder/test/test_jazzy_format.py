@@ -82,7 +82,7 @@ def bag(tmp_path):
     writer.add_topic('/train/state', STATE_TYPE, offered_profiles([STREAM]))
     writer.add_topic('/rosout', LOG_TYPE, offered_profiles([ROSOUT]))
     for k in range(1, 51):
-        writer.write('/train/state', k * 100_000_000, state(k), publish_time_ns=k + 7)
+        writer.write('/train/state', k * 100_000_000, state(k))
         if k % 5 == 0:
             writer.write('/rosout', k * 100_000_000, serialize_message(Log(msg=f'{k}')))
     writer.close()
@@ -139,30 +139,58 @@ def test_mcap_records_are_those_of_jazzys_storage_plugin(bag):
             assert yaml.safe_load(channel.metadata['offered_qos_profiles']) == \
                 expected['offered_qos_profiles']
         messages = [(c.topic, m) for _, c, m in reader.iter_messages()]
-        assert {m.sequence for _, m in messages} == {JAZZY_MCAP['message_sequence']}
-        assert [m.publish_time for t, m in messages if t == '/train/state'] == \
-            [k + 7 for k in range(1, 51)]
+        # The two fields of a message that are the SDK writer's, not rosbag2's (recorder.bag):
+        # the sequence counts each channel's messages (Jazzy: 0), the publish time is the log
+        # time (Jazzy: the publisher's send time).
+        for topic in ('/train/state', '/rosout'):
+            mine = [m for t, m in messages if t == topic]
+            assert [m.sequence for m in mine] == list(range(1, len(mine) + 1))
+            assert all(m.publish_time == m.log_time for m in mine)
         records = list(reader.iter_metadata())
-    assert [r.name for r in records] == [JAZZY_MCAP['metadata_record']['name']]
-    assert sorted(records[0].metadata) == JAZZY_MCAP['metadata_record']['keys']
-    serialized = yaml.safe_load(records[0].metadata['serialized_metadata'])
-    assert same_shape(JAZZY_METADATA['rosbag2_bagfile_information'], serialized) == []
-    assert serialized == yaml.safe_load((bag / 'metadata.yaml').read_text())[
+    assert [r.name for r in records] == [JAZZY_MCAP['metadata_record']['name']] * len(
+        JAZZY_MCAP['metadata_records_written'])
+    for record in records:
+        assert sorted(record.metadata) == JAZZY_MCAP['metadata_record']['keys']
+    at_open, at_close = (yaml.safe_load(r.metadata['serialized_metadata']) for r in records)
+    assert same_shape(JAZZY_METADATA['rosbag2_bagfile_information'], at_close) == []
+    assert at_close == yaml.safe_load((bag / 'metadata.yaml').read_text())[
         'rosbag2_bagfile_information']
+    assert_as_at_open(at_open, at_close)
+
+
+def assert_as_at_open(at_open: dict, at_close: dict) -> None:
+    """The record of the open: as rosbag2 Jazzy's writer fills it before any topic (the keys of
+    the closing one, in its order; no topic, no message; the same file, custom data and
+    distribution)."""
+    expected = JAZZY_MCAP['at_open']
+    assert list(at_open) == list(at_close)
+    for key in ('starting_time', 'duration', 'message_count', 'topics_with_message_count'):
+        assert at_open[key] == expected[key], key
+    (file,) = at_open['files']
+    assert file == {'path': at_close['files'][0]['path'],
+                    'starting_time': expected['starting_time'],
+                    'duration': expected['duration'],
+                    'message_count': expected['files_message_count']}
+    for key in ('version', 'storage_identifier', 'relative_file_paths', 'custom_data',
+                'ros_distro', 'compression_format', 'compression_mode'):
+        assert at_open[key] == at_close[key], key
 
 
 def test_recover_writes_the_same_records(bag):
     file = bag_file(bag)
     data = file.read_bytes()
     file.write_bytes(data[: len(data) - 200])  # the summary gone
-    info, _ = recover(bag)
-    assert info.message_count == 60
+    info = recover(bag).info
+    assert info.message_count == 60 and info.custom_data == {'log_time': 'stamp'}
     written = yaml.safe_load((bag / 'metadata.yaml').read_text())
     assert same_shape(JAZZY_METADATA, written) == []
     assert written['rosbag2_bagfile_information']['topics_with_message_count'] == \
         JAZZY_METADATA['rosbag2_bagfile_information']['topics_with_message_count']
     with open(file, 'rb') as stream:
-        assert [r.name for r in make_reader(stream).iter_metadata()] == ['rosbag2']
+        records = list(make_reader(stream).iter_metadata())
+    assert [r.name for r in records] == ['rosbag2', 'rosbag2']
+    at_open, at_close = (yaml.safe_load(r.metadata['serialized_metadata']) for r in records)
+    assert_as_at_open(at_open, at_close)
 
 
 VERSION_8 = '''- history: 3

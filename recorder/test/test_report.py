@@ -89,8 +89,10 @@ def test_a_namespace_without_the_topics_or_a_recording_without_any_says_where_th
     bag = record(tmp_path / 'run', {'/train1': 0.0})
     with pytest.raises(BagError, match=r'in namespace /train9; it holds them in /train1'):
         load_run(bag, '/train9')
+    from std_msgs.msg import String
     other = BagWriter(tmp_path / 'other')
     other.add_topic('/chatter', 'std_msgs/msg/String')
+    other.write('/chatter', 1, serialize_message(String(data='hello')))
     other.close()
     with pytest.raises(BagError, match=r"none of the suite's topics \(train/state, "
                                        r'ato/reference, .*\) in any namespace; it has /chatter'):
@@ -98,7 +100,7 @@ def test_a_namespace_without_the_topics_or_a_recording_without_any_says_where_th
 
 
 def test_labels_name_the_quantity_and_its_unit():
-    from recorder.report import label
+    from recorder.report_plots import label
     assert label('integral_action_mps2') == 'integral action (m/s²)'
     assert label('mass_kg') == 'mass (kg)'
     assert label('davis_b_n_per_mps') == 'davis b (N/(m/s))'
@@ -330,3 +332,150 @@ def test_a_scenario_that_is_not_the_recorded_plant_s_is_refused_and_none_is_not_
     assert main([str(bag), '--output', str(tmp_path / 'plots2')]) == 0
     assert 'missed time windows   not checked (the scenario is unknown: --scenario)' in \
         capsys.readouterr().out
+
+
+STOPPING_LINE = '''name: stopping_line
+description: 90 m, a halt at 50 m
+source: test
+train:
+  preset: crh3_luo_xu
+line:
+  name: stopping_line
+  length_m: 100
+  stations:
+    - {name: Origin, position_m: 0, dwell_s: 0}
+    - {name: Halt, position_m: 50, dwell_s: 3}
+    - {name: End, position_m: 90, dwell_s: 0}
+  speed_limits:
+    - {start_m: 0, speed_kmh: 100}
+  gradients:
+    - {start_m: 0, per_mille: 0}
+planning:
+  max_acceleration_mps2: 0.4
+  service_deceleration_mps2: 0.5
+  max_jerk_mps3: 0.1
+run:
+  controller_rate_hz: 1
+  settle_time_s: 1
+'''
+#: position of the target (and of a train that follows it exactly) each second: 10 m/s from
+#: Origin, 3 s at Halt (5 to 8 s), on to End (12 s), standing there
+STOPPING_POSITIONS = (0, 10, 20, 30, 40, 50, 50, 50, 50, 60, 70, 80, 90, 90, 90)
+
+
+def stopping_run(tmp_path, lag_m: float = 0.0):
+    """A recording of ``STOPPING_LINE`` (identity, target curve, a train ``lag_m`` behind),
+    with the provenance run_scenario's recorder writes."""
+    from std_msgs.msg import String
+
+    from ato_common.identity import scenario_identity
+    from ato_common.scenario import load_scenario
+    scenario = tmp_path / 'stopping.yaml'
+    scenario.write_text(STOPPING_LINE)
+    writer = BagWriter(tmp_path / 'run', custom_data={
+        'log_time': 'stamp', 'recorded_utc': '2026-12-03 12:00 UTC',
+        'suite_commit': 'abc123def456'})
+    for key in ('state', 'reference', 'command', 'curve', 'identity'):
+        writer.add_topic('/' + TOPICS[key].name, TOPICS[key].type_name)
+    writer.write('/train/identity', 0, serialize_message(String(
+        data=scenario_identity(load_scenario(str(scenario))))))
+    speeds = [10.0 if b > a else 0.0 for a, b in zip(STOPPING_POSITIONS,
+                                                      STOPPING_POSITIONS[1:])] + [0.0]
+    curve = Reference(0, tuple(ReferencePoint(float(k), x, v, 0.0) for k, (x, v) in
+                               enumerate(zip(STOPPING_POSITIONS, speeds))))
+    writer.write('/ato/reference/curve', 0, serialize_message(reference_to_msg(curve)))
+    for k, (x, v) in enumerate(zip(STOPPING_POSITIONS, speeds)):
+        stamp = k * 1_000_000_000
+        state = TrainState(stamp, ('car_1',), (x - lag_m,), (v,), (0.0,), (1000.0 * v,))
+        reference = Reference(stamp, (ReferencePoint(float(k), x, v, 0.0),))
+        writer.write('/train/state', stamp, serialize_message(state_to_msg(state)))
+        writer.write('/ato/reference', stamp, serialize_message(reference_to_msg(reference)))
+        writer.write('/ato/command', stamp, serialize_message(command_to_msg(
+            Command(stamp, ('car_1',), (1000.0 * v,), 'pid'))))
+    writer.close()
+    return tmp_path / 'run', scenario
+
+
+def test_the_report_tells_the_journey(tmp_path, capsys):
+    """Issue 31, defect 6: the scenario and the train by name, each station by name with its
+    planned and actual arrival, departure and dwell and its stopping error, the energy, and
+    where the run comes from; the same in report.html."""
+    bag, scenario = stopping_run(tmp_path, lag_m=0.25)
+    assert main([str(bag), '--scenario', str(scenario), '--output', str(tmp_path / 'out')]) == 0
+    from recorder.report import build_report, stop_rows
+    report = build_report(bag, scenario=str(scenario))
+    late = replace(report.data, speeds=report.data.speeds.copy())
+    late.speeds[5] = 0.5  # still rolling at 5 s: it arrives at 6 s
+    assert stop_rows(late, report.metrics)[0][3] == '6.0'
+    out = capsys.readouterr().out
+    assert 'scenario              stopping_line\n' in out
+    assert 'train                 crh3_luo_xu' in out
+    assert f'recording             {bag}\n' in out
+    assert 'recorded at           2026-12-03 12:00 UTC' in out
+    assert 'suite commit of the run abc123def456' in out
+    assert 'report made at' in out
+    # the target and the train 0.25 m behind it stand still at Halt from 5 s to 7 s (at 8 s
+    # they have the speed they leave with), at End from 12 s to the end of the run
+    assert ('station Halt at 50.0 m: arrival 5.0 s (planned 5.0), departure 7.0 s (planned '
+            '7.0), dwell 2.0 s (planned 2.0), stopping error -0.250 m') in out
+    assert ('station End at 90.0 m: arrival 12.0 s (planned 12.0), departure - s (planned -), '
+            'dwell - s (planned -)') in out
+    assert 'stop at' not in out  # stations by name
+    assert 'traction energy' in out
+    assert 'stop errors beyond 0.5 m 0\n' in out  # the label and its value apart
+    page = (tmp_path / 'out' / 'report.html').read_text()
+    for text in ('id="journey"', 'stopping_line', 'crh3_luo_xu', 'id="stations"', 'Halt',
+                 'abc123def456', 'traction energy, gross (kWh)', 'id="windows"'):
+        assert text in page, text
+
+
+def test_the_energies_the_metrics_have_are_shown():
+    from dataclasses import dataclass
+
+    from ato_common.metrics import RunMetrics
+    from recorder.report import energy_rows
+    metrics = RunMetrics(samples=2, simulated_time_s=1.0, rms_speed_error_kmh=0.0,
+                         max_speed_error_kmh=0.0, rms_position_error_m=0.0,
+                         max_position_error_m=0.0, stop_errors_m={}, traction_energy_kwh=3.0)
+    assert energy_rows(metrics) == [('traction energy, gross (kWh)', '3.00')]
+
+    @dataclass(frozen=True)
+    class Fuller(RunMetrics):  # as ato_common.metrics gives them, once it does
+        braking_energy_kwh: float = 1.5
+        regenerated_energy_kwh: float = 0.5
+        net_energy_kwh: float = 2.5
+    fuller = Fuller(**metrics.__dict__)
+    assert [label for label, _ in energy_rows(fuller)] == [
+        'traction energy, gross (kWh)', 'braking energy (kWh)', 'regenerated energy (kWh)',
+        'net energy (kWh)']
+
+
+def test_the_timetable_windows_are_listed_met_or_missed(tmp_path, capsys):
+    bag, scenario_file, length = journey_run(tmp_path, [(0, 5), (None, 10), (None, None)])
+    assert main([str(bag), '--scenario', str(scenario_file), '--output',
+                 str(tmp_path / 'plots')]) == 0
+    out = capsys.readouterr().out
+    passing = math.ceil(length / 2 / 20.0)
+    assert 'timing point 0 at 0.0 m: departure at 0.0 s, window [0.0, 5.0] s: met' in out
+    assert (f'timing point 1 at {length / 2:.1f} m: passing at {passing:.1f} s, window '
+            '[-, 10.0] s: missed') in out
+    page = (tmp_path / 'plots' / 'report.html').read_text()
+    assert page.count('<td>met</td>') == 2 and page.count('<td>missed</td>') == 1
+
+
+def test_the_tracking_legend_covers_no_curve(tmp_path):
+    """The legends of the tracking plot sit beside its axes: none covers the start of a
+    curve (nor any other part of the plotting area)."""
+    from recorder.report import build_report
+    from recorder.report_plots import tracking_figure
+    bag, scenario = stopping_run(tmp_path)
+    fig = tracking_figure(build_report(bag, scenario=str(scenario)).data)
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    for axis in fig.axes:
+        legend = axis.get_legend().get_window_extent(renderer)
+        area = axis.get_window_extent(renderer)
+        assert not legend.overlaps(area), (legend, area)
+        for line in axis.get_lines()[:3]:
+            start = axis.transData.transform(line.get_xydata()[:3])
+            assert not any(legend.contains(x, y) for x, y in start)

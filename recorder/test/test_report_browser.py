@@ -11,7 +11,7 @@ from pathlib import Path
 from urllib.request import Request, urlopen
 
 import pytest
-from test_report import record
+from test_report import stopping_run
 from tornado.websocket import websocket_connect
 
 from recorder.report import main
@@ -21,6 +21,9 @@ CHROMIUM = shutil.which('chromium') or shutil.which('chromium-browser')
 PAGE_CHECK = """JSON.stringify({
   title: document.title,
   summaryRows: document.querySelectorAll('#summary tr').length,
+  tables: Array.from(document.querySelectorAll('table')).map(t => t.id),
+  stations: Array.from(document.querySelectorAll('#stations tr td:first-child')).map(
+    c => c.textContent),
   images: Array.from(document.images).map(i => ({
     alt: i.alt, complete: i.complete, width: i.naturalWidth, height: i.naturalHeight,
     shown: i.getBoundingClientRect().width})),
@@ -95,8 +98,9 @@ async def open_page(port: int, url: str) -> tuple[dict, list[str]]:
 def test_the_html_report_renders_every_plot_in_chromium(tmp_path):
     assert CHROMIUM, 'Chromium is not installed: `make setup` installs it (apt-get install ' \
                      'chromium) for this test'
-    bag = record(tmp_path / 'run', {'': 0.25})
-    assert main([str(bag), '--output', str(tmp_path / 'report')]) == 0
+    bag, scenario = stopping_run(tmp_path, lag_m=0.25)
+    assert main([str(bag), '--scenario', str(scenario), '--output',
+                 str(tmp_path / 'report')]) == 0
     pngs = sorted(p.stem for p in (tmp_path / 'report').glob('*.png'))
     browser, port = start_browser(tmp_path / 'profile')
     try:
@@ -109,8 +113,10 @@ def test_the_html_report_renders_every_plot_in_chromium(tmp_path):
         except subprocess.TimeoutExpired:
             browser.kill()
     assert errors == []
-    assert page['title'] == 'Run report: run'
+    assert page['title'] == 'Run report: stopping_line (run)'
     assert page['summaryRows'] >= 5
+    assert page['tables'] == ['journey', 'summary', 'stations']  # no windows, no events: text
+    assert page['stations'] == ['Halt', 'End']
     assert sorted(i['alt'] for i in page['images']) == pngs and 'tracking' in pngs
     for image in page['images']:
         assert image['complete'] and image['width'] > 100 and image['height'] > 100, image
