@@ -55,6 +55,8 @@ from ato_controller_node.laws import LAWS
 from ato_ros.middleware import with_middleware_defaults
 from ato_simulation.loop import run_offline
 from ato_simulation.plans import clear_plan_cache
+from profile_node.oracle import LegOracle, Physics
+from profile_node.planner import leg_limits
 from recorder.bag import bag_info
 from train_plant_node.accuracy import accuracy_scenario, worst_speed_error
 from train_plant_node.simulation import TrainSimulation
@@ -528,12 +530,51 @@ def planning_times() -> list[str]:
     return rows
 
 
+# The oracle's grid in the bench's timetable table: stages of a leg's length / this many, within
+# the bounds below (the built-in scenarios' legs are from a few to hundreds of km), and a step
+# of e = v^2/2 of this share of the stage's length (the tests' grid: 100 m x 2 m^2/s^2;
+# profile_node/test/test_oracle.py measures how the optimum moves with the grid).
+BENCH_ORACLE_STAGES = 150
+BENCH_ORACLE_DX_BOUNDS_M = (50.0, 200.0)
+BENCH_ORACLE_DE_PER_M = 0.02
+
+
+def oracle_kwh(scenario, plan, objective: str) -> float:
+    """The oracle's least energy (``profile_node.oracle``; ``objective`` 'gross' or 'net')
+    summed over the plan's legs, each at the running time the plan gives it; nan where the
+    oracle finds no way through a leg."""
+    total = 0.0
+    for k, leg in enumerate(plan.legs):
+        limits = leg_limits(scenario, k)
+        low, high = BENCH_ORACLE_DX_BOUNDS_M
+        dx = min(max((limits.end_m - limits.start_m) / BENCH_ORACLE_STAGES, low), high)
+        oracle = LegOracle(Physics.of(scenario), limits, limits.start_m, limits.end_m,
+                           objective, dx, BENCH_ORACLE_DE_PER_M * dx,
+                           scenario.planning.max_jerk_mps3)
+        try:
+            optimum = oracle.at_time(leg.planned_arrival_s - leg.departure_s)
+        except ValueError:
+            return math.nan
+        total += optimum.energy_j(objective)
+    return total / 3.6e6
+
+
+def _arrival_s(run, end_m: float) -> float:
+    standing = (np.abs(run.positions - end_m) < 1.0) & (np.abs(run.speeds) < 0.01)
+    return float(run.times_s[np.argmax(standing)]) if standing.any() else math.nan
+
+
 def timetable_against_fastest() -> list[str]:
     """Both strategies in closed loop offline on every built-in scenario (PID, nominal
-    plant): the last arrival against its target and the traction energy."""
-    rows = ['| scenario | fastest: arrival | fastest: traction energy | timetable (7 %): '
-            'target arrival | timetable: arrival | timetable: traction energy | saving |',
-            '|---|---|---|---|---|---|---|']
+    plant): the last arrival against its target; the gross and the net energy at the wheel
+    (``ato_common.metrics``) of the runs and of the timetable plan's forecast, and the
+    oracle's least energy at the plan's running times (net where the train regenerates, else
+    gross), beside it."""
+    rows = ['| scenario | fastest: arrival | fastest: gross energy | timetable (7 %): '
+            'target arrival | timetable: arrival | timetable: gross energy | '
+            'timetable: net energy | plan: gross / net energy | oracle at the plan\'s times | '
+            'plan over oracle | saving (gross) |',
+            '|---|---|---|---|---|---|---|---|---|---|---|']
     for name in builtin_scenarios():
         scenario = load_scenario(name)
         runs = {}
@@ -542,19 +583,41 @@ def timetable_against_fastest() -> list[str]:
                 scenario.timetable, strategy=strategy, supplement_percent=7.0))
             runs[strategy] = run_offline(variant, 'pid')
         end = scenario.line.stations[-1].position_m
-        arrivals = {}
-        for strategy, run in runs.items():
-            standing = (np.abs(run.positions - end) < 1.0) & (np.abs(run.speeds) < 0.01)
-            arrivals[strategy] = float(run.times_s[np.argmax(standing)]) if standing.any() \
-                else math.nan
-        energy = {k: r.metrics().traction_energy_kwh for k, r in runs.items()}
-        target = runs['timetable'].plan.legs[-1].target_arrival_s
-        rows.append(f'| {name} | {arrivals["fastest"]:.1f} s | {energy["fastest"]:.0f} kWh | '
-                    f'{target:.1f} s | {arrivals["timetable"]:.1f} s | '
-                    f'{energy["timetable"]:.0f} kWh | '
-                    f'{100 * (1 - energy["timetable"] / energy["fastest"]):.1f} % |')
+        arrivals = {strategy: _arrival_s(run, end) for strategy, run in runs.items()}
+        metrics = {k: r.metrics() for k, r in runs.items()}
+        plan = runs['timetable'].plan
+        objective = 'net' if scenario.train.regenerative_efficiency > 0.0 else 'gross'
+        optimum = oracle_kwh(runs['timetable'].scenario, plan, objective)
+        planned = plan.forecast.kwh()
+        stated = planned['net_energy_kwh' if objective == 'net' else 'traction_energy_kwh']
+        gross = {k: m.traction_energy_kwh for k, m in metrics.items()}
+        rows.append(f'| {name} | {arrivals["fastest"]:.1f} s | {gross["fastest"]:.0f} kWh | '
+                    f'{plan.legs[-1].target_arrival_s:.1f} s | {arrivals["timetable"]:.1f} s | '
+                    f'{gross["timetable"]:.0f} kWh | '
+                    f'{metrics["timetable"].net_energy_kwh:.0f} kWh | '
+                    f'{planned["traction_energy_kwh"]:.0f} / {planned["net_energy_kwh"]:.0f} '
+                    f'kWh | {optimum:.0f} kWh ({objective}) | '
+                    f'{100 * (stated / optimum - 1):+.1f} % | '
+                    f'{100 * (1 - gross["timetable"] / gross["fastest"]):.1f} % |')
         print(rows[-1], flush=True)
     return rows
+
+
+def timetable_section_intro() -> list[str]:
+    """The heading and the definitions of the timetable table (``timetable_against_fastest``)."""
+    return [
+        '## Timetable against fastest, closed loop', '',
+        'Offline loop, PID law, nominal plant; arrival: the train standing within 1 m of the '
+        'last stopping point; the energies at the wheel as `ato_common.metrics` defines them: '
+        'gross = the work of the positive traction force, net = gross - regenerated (the '
+        'braking work times the train\'s regenerative efficiency, within its power). Plan: '
+        'the timetable plan\'s forecast. Oracle: `profile_node.oracle`\'s least energy for '
+        'each leg at the plan\'s running time (the energy the plan optimises: net where the '
+        'train regenerates, else gross), on stages of a leg\'s length / '
+        f'{BENCH_ORACLE_STAGES} within {BENCH_ORACLE_DX_BOUNDS_M[0]:.0f}-'
+        f'{BENCH_ORACLE_DX_BOUNDS_M[1]:.0f} m and a step of v^2/2 of '
+        f'{BENCH_ORACLE_DE_PER_M:g} m/s^2 x the stage; plan over oracle: the plan\'s forecast '
+        'of that energy against it.', '']
 
 
 def campaign_throughput(scenario: str) -> list[str]:
@@ -707,10 +770,7 @@ def measure(args: argparse.Namespace) -> int:
         'of 3; the '
         'timetable strategy with a 7 % running-time supplement), '
         'docs/guide/target-curve.md.', '']
-    comparison_section = [
-        '## Timetable against fastest, closed loop', '',
-        'Offline loop, PID law, nominal plant; arrival: the train standing within 1 m of the '
-        'last stopping point; traction energy: the work of the positive traction force.', '']
+    comparison_section = timetable_section_intro()
     if args.only == 'campaign':
         page.add(f'Scenario `{args.scenario}`.', '', *campaign_section)
         page.add(*campaign_throughput(args.scenario))

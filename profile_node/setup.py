@@ -19,7 +19,7 @@ setup(
         ' from a line description and streams it.'
     ),
     license='Apache-2.0',
-    tests_require=['pytest', 'numpy', 'PyYAML'],
+    tests_require=['pytest', 'numpy', 'PyYAML', 'grimp'],
     entry_points={
         'console_scripts': [
             'profile_node = profile_node.entry:main'

@@ -78,7 +78,9 @@ def test_profile_follows_the_clock_and_a_late_subscriber_gets_the_whole_curve(tm
         assert values['strategy'] == 'fastest'
         assert float(values['stop.Terminus.arrival_s']) == float(
             f'{plan.stops[-1].arrival_s:.9g}')
-        assert float(values['forecast_energy_kwh']) > 0.0
+        assert float(values['forecast.traction_energy_kwh']) > 0.0
+        assert float(values['forecast.net_energy_kwh']) == float(
+            values['forecast.traction_energy_kwh'])   # a preset regenerates nothing
 
         # A subscriber that joins now still receives the curve published at start-up.
         curves = []

@@ -248,7 +248,8 @@ def judged(scenario: Scenario, config: StackConfig, samples: list[tuple[int, Sam
     metrics = compute_metrics(times, [s.positions[0] for _, s in samples],
                               [s.speeds[0] for _, s in samples], applied[1:] + applied[-1:],
                               [r[0] for r in references], [r[1] for r in references],
-                              stop_samples(plan))
+                              stop_samples(plan), scenario.train.regenerative_efficiency,
+                              scenario.train.regenerative_power_w)
     laws = sorted({s.law for _, s in samples if s.law} or laws_in(diagnostics))
     if not laws and config.controller_command:
         laws = [f'external ({config.controller_command})']

@@ -7,6 +7,7 @@ until the next entry starts.
 
 from __future__ import annotations
 
+import math
 from bisect import bisect_right
 from dataclasses import dataclass
 
@@ -15,6 +16,12 @@ from ato_common.validation import ConfigError, Fields
 
 CURVE_RESISTANCE_N_PER_KN_M = 600.0        # w_c = 600 / R  [N/kN], R in m
 TUNNEL_RESISTANCE_N_PER_KN_PER_M = 0.00013  # w_t = 0.00013 L_t  [N/kN], L_t in m
+# The steepest gradient a file may give, per mille (either sign): steeper than any line worked
+# by adhesion. The steepest in service is a Lisbon tramway's (Calcada de Sao Francisco, about
+# 138 per mille, with every axle powered); main lines stay under 80 per mille (Uetlibergbahn
+# 79) and high-speed lines under 40 (the list of the steepest gradients on adhesion railways,
+# e.g. Wikipedia's). A steeper grade is a rack or cable railway, or a wrong figure or unit.
+MAX_GRADIENT_PER_MILLE = 140.0
 
 
 @dataclass(frozen=True)
@@ -27,7 +34,10 @@ class Station:
 @dataclass(frozen=True)
 class Curve:
     """A curve of constant radius, or, with ``end_radius_m``, a transition (clothoid) whose
-    curvature 1/R varies linearly from 1/radius_m to 1/end_radius_m (inf: straight)."""
+    curvature 1/R varies linearly from 1/radius_m to 1/end_radius_m (inf: straight). Radii are
+    signed as TTOBench signs them: positive a right-hand curve, negative a left-hand one
+    (in the running direction); a transition from one to the other passes through straight.
+    The resistance takes the magnitude of the curvature."""
 
     start_m: float
     length_m: float
@@ -35,12 +45,26 @@ class Curve:
     end_radius_m: float | None = None
 
     def curvature_at(self, position: float) -> float:
-        """1/R at a position inside the curve, 1/m."""
+        """1/R at a position inside the curve (signed as the radii), 1/m."""
         start = 1.0 / self.radius_m
         if self.end_radius_m is None:
             return start
         share = (position - self.start_m) / self.length_m
         return start + share * (1.0 / self.end_radius_m - start)
+
+
+def signed_curves(start_m: float, length_m: float, radius_m: float,
+                  end_radius_m: float | None = None) -> tuple[Curve, ...]:
+    """A curve as ``Curve``s whose curvature keeps one sign: a transition from a right-hand
+    to a left-hand radius (or back) is cut where it passes through straight, so that the
+    resistance (the magnitude of the curvature) stays linear in position along each."""
+    if end_radius_m is None or (radius_m > 0.0) == (end_radius_m > 0.0):
+        return (Curve(start_m, length_m, radius_m, end_radius_m),)
+    first, last = 1.0 / radius_m, 1.0 / end_radius_m
+    straight = length_m * first / (first - last)
+    return (Curve(start_m, straight, radius_m, math.copysign(math.inf, radius_m)),
+            Curve(start_m + straight, length_m - straight, math.copysign(math.inf, end_radius_m),
+                  end_radius_m))
 
 
 @dataclass(frozen=True)
@@ -90,7 +114,7 @@ class Line:
         per_kn = 0.0
         for curve in self.curves:
             if curve.start_m <= position < curve.start_m + curve.length_m:
-                per_kn += CURVE_RESISTANCE_N_PER_KN_M * curve.curvature_at(position)
+                per_kn += CURVE_RESISTANCE_N_PER_KN_M * abs(curve.curvature_at(position))
         for tunnel in self.tunnels:
             if tunnel.start_m <= position < tunnel.start_m + tunnel.length_m:
                 per_kn += TUNNEL_RESISTANCE_N_PER_KN_PER_M * tunnel.length_m
@@ -101,6 +125,15 @@ def _ascending(starts: list[float], where: str) -> None:
     for previous, current in zip(starts, starts[1:]):
         if current <= previous:
             raise ConfigError(f'{where}: start_m must increase, got {previous:g} then {current:g}')
+
+
+def _radius(item: Fields, key: str) -> float:
+    """A signed curve radius (``Curve``): any number but 0."""
+    radius = item.number(key)
+    if radius == 0.0:
+        raise ConfigError(f'{item.where}.{key}: a radius of 0 m is not a curve (the sign gives '
+                          'the direction: positive right, negative left)')
+    return radius
 
 
 def _balise_groups(f: Fields, length: float, where: str) -> tuple[float, ...]:
@@ -150,8 +183,8 @@ def parse_line(data, where: str = 'line') -> Line:
     grade_starts, grades = [], []
     for item in f.items('gradients'):
         grade_starts.append(item.number('start_m', minimum=0.0, maximum=length))
-        grades.append(units.per_mille_to_sine(item.number('per_mille', minimum=-100.0,
-                                                          maximum=100.0)))
+        grades.append(units.per_mille_to_sine(item.number(
+            'per_mille', minimum=-MAX_GRADIENT_PER_MILLE, maximum=MAX_GRADIENT_PER_MILLE)))
         item.reject_unknown()
     if not grade_starts or grade_starts[0] > 0.0:  # level until the first given grade
         grade_starts.insert(0, 0.0)
@@ -162,10 +195,9 @@ def parse_line(data, where: str = 'line') -> Line:
     for item in f.items('curves'):
         start = item.number('start_m', minimum=0.0, maximum=length)
         curve_length = item.number('length_m', minimum=0.0, exclusive_minimum=True)
-        radius = item.number('radius_m', minimum=0.0, exclusive_minimum=True)
-        end_radius = (item.number('end_radius_m', minimum=0.0, exclusive_minimum=True)
-                      if item.has('end_radius_m') else None)
-        curves.append(Curve(start, curve_length, radius, end_radius))
+        radius = _radius(item, 'radius_m')
+        end_radius = _radius(item, 'end_radius_m') if item.has('end_radius_m') else None
+        curves.extend(signed_curves(start, curve_length, radius, end_radius))
         item.reject_unknown()
     tunnels = []
     for item in f.items('tunnels'):

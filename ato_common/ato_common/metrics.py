@@ -5,13 +5,20 @@ The same definitions serve ``make demo``, the tests and reports from recordings:
 - the stopping error at a stop is the lead car's position minus the station position at the end
   of the dwell (at the arrival for the last stop); a stop later than the run's end (a run over
   a window of the scenario) has none;
-- traction energy is the work of the traction force: the sum over control intervals of
-  max(F dx, 0), F the force applied (held) from one sample to the next and dx the distance run
-  meanwhile (exact for a held force; braking work is not counted).
+- the energies at the wheel (``wheel_energy``), F the force applied (held) from one sample to
+  the next, dx the distance and dt the time run meanwhile (exact for a held force):
+  **traction energy** (gross) = the sum of max(F dx, 0), the work of the traction force;
+  **braking energy** = the sum of max(-F dx, 0), the work of the brake;
+  **regenerated energy** = the train's regenerative efficiency times the braking work its
+  regenerative brake takes, at most its power (``TrainParameters.regenerative_efficiency``
+  and ``regenerative_power_w``) times dt in each interval;
+  **net energy** = traction - regenerated.
+  The plan's forecast (``profile_node``) and the bench use the same function and labels.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,12 +42,60 @@ class RunMetrics:
     rms_position_error_m: float
     max_position_error_m: float
     stop_errors_m: dict[str, float]
-    traction_energy_kwh: float
+    traction_energy_kwh: float        # gross, at the wheel (module docstring)
+    braking_energy_kwh: float = 0.0
+    regenerated_energy_kwh: float = 0.0
+    net_energy_kwh: float = math.nan  # traction - regenerated (computed when not given)
+
+    def __post_init__(self) -> None:
+        if math.isnan(self.net_energy_kwh):
+            object.__setattr__(self, 'net_energy_kwh',
+                               self.traction_energy_kwh - self.regenerated_energy_kwh)
+
+
+@dataclass(frozen=True)
+class WheelEnergy:
+    """The energies at the wheel, J (module docstring)."""
+
+    traction_j: float
+    braking_j: float
+    regenerated_j: float
+
+    @property
+    def net_j(self) -> float:
+        return self.traction_j - self.regenerated_j
+
+    def kwh(self) -> dict[str, float]:
+        """The four energies in kWh, by their labels (``ENERGY_LABELS``)."""
+        return {'traction_energy_kwh': units.joules_to_kwh(self.traction_j),
+                'braking_energy_kwh': units.joules_to_kwh(self.braking_j),
+                'regenerated_energy_kwh': units.joules_to_kwh(self.regenerated_j),
+                'net_energy_kwh': units.joules_to_kwh(self.net_j)}
+
+
+#: field name -> label of each energy, as the summary, the report and the bench print them
+ENERGY_LABELS = {'traction_energy_kwh': 'gross traction energy',
+                 'braking_energy_kwh': 'braking energy',
+                 'regenerated_energy_kwh': 'regenerated energy',
+                 'net_energy_kwh': 'net energy'}
+
+
+def wheel_energy(forces, distances, durations, regenerative_efficiency: float = 0.0,
+                 regenerative_power_w: float = math.inf) -> WheelEnergy:
+    """The energies at the wheel of a force ``forces[k]`` (N) held over ``distances[k]`` (m)
+    and ``durations[k]`` (s); module docstring."""
+    work = np.asarray(forces, dtype=float) * np.asarray(distances, dtype=float)
+    braking = np.maximum(-work, 0.0)
+    taken = np.minimum(braking, regenerative_power_w * np.asarray(durations, dtype=float))
+    return WheelEnergy(float(np.sum(np.maximum(work, 0.0))), float(np.sum(braking)),
+                       regenerative_efficiency * float(np.sum(taken)))
 
 
 def compute_metrics(times_s, positions, speeds, forces, ref_positions, ref_speeds,
-                    stops: list[StopSample]) -> RunMetrics:
-    """``forces[k]``: the force applied from sample k to sample k+1."""
+                    stops: list[StopSample], regenerative_efficiency: float = 0.0,
+                    regenerative_power_w: float = math.inf) -> RunMetrics:
+    """``forces[k]``: the force applied from sample k to sample k+1; the regenerative brake's
+    efficiency and power: the train's (``TrainParameters``; 0: none)."""
     t = np.asarray(times_s, dtype=float)
     x = np.asarray(positions, dtype=float)
     v = np.asarray(speeds, dtype=float)
@@ -49,7 +104,8 @@ def compute_metrics(times_s, positions, speeds, forces, ref_positions, ref_speed
     ex = np.asarray(ref_positions, dtype=float) - x
     if t.size == 0:
         raise ValueError('no samples to compute metrics from')
-    energy = float(np.sum(np.maximum(f[:-1] * np.diff(x), 0.0))) if t.size > 1 else 0.0
+    energy = wheel_energy(f[:-1], np.diff(x), np.diff(t), regenerative_efficiency,
+                          regenerative_power_w).kwh()
     stop_errors = {}
     for stop in stops:
         if stop.time_s > t[-1] + 1e-9:
@@ -62,8 +118,7 @@ def compute_metrics(times_s, positions, speeds, forces, ref_positions, ref_speed
         max_speed_error_kmh=units.mps_to_kmh(float(np.max(np.abs(ev)))),
         rms_position_error_m=float(np.sqrt(np.mean(ex ** 2))),
         max_position_error_m=float(np.max(np.abs(ex))),
-        stop_errors_m=stop_errors,
-        traction_energy_kwh=units.joules_to_kwh(energy))
+        stop_errors_m=stop_errors, **energy)
 
 
 def format_summary(metrics: RunMetrics, scenario: str, controller: str,
@@ -81,7 +136,7 @@ def format_summary(metrics: RunMetrics, scenario: str, controller: str,
     for station, error in metrics.stop_errors_m.items():
         lines.append(f'stopping error        {station}: {error:+.4f} m')
     lines += [
-        f'traction energy       {metrics.traction_energy_kwh:.2f} kWh',
+        *(f'{ENERGY_LABELS[key]:<22}{getattr(metrics, key):.2f} kWh' for key in ENERGY_LABELS),
         f'simulated time        {metrics.simulated_time_s:.1f} s ({metrics.samples} steps)',
     ]
     if wall_time_s is not None and wall_time_s > 0.0:

@@ -17,7 +17,6 @@ from it; a single run (the nodes, ``make demo``, ``make compare``) never reads i
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
@@ -70,17 +69,13 @@ class Timetable:
     time is its shortest one plus this share. ``run_infeasible``: a journey whose windows cannot
     all be met is refused unless this is true (then it is run as close as possible).
     ``replan_delay_s``: the rest of the leg is planned again from the measured state once the
-    train is this far behind the plan (0: never). ``regenerative_efficiency``: the share of the
-    braking work the regenerative brake recovers, up to ``regenerative_power_w`` (the TTOBench
-    train's ``efficiency reg brake`` and ``max reg braking power`` where it gives them, else 0:
-    every braking loses its energy); the plan's energy is the traction work net of it."""
+    train is this far behind the plan (0: never). The regenerative brake's efficiency, which
+    the plan values braking at, is the train's (``TrainParameters.regenerative_efficiency``)."""
 
     strategy: str = 'fastest'
     supplement_percent: float = DEFAULT_SUPPLEMENT_PERCENT
     run_infeasible: bool = False
     replan_delay_s: float = DEFAULT_REPLAN_DELAY_S
-    regenerative_efficiency: float = 0.0
-    regenerative_power_w: float = math.inf
 
 
 @dataclass(frozen=True)
@@ -152,19 +147,29 @@ def _parse_train(f: Fields, base: Path) -> tuple[TrainParameters, ttobench.TTOBe
                           f"{', '.join(trains.RAIL_CONDITIONS)}")
     if fields.has('ttobench'):
         loaded = ttobench.load_train(_file(fields, 'ttobench', base), rail)
+        train = _regeneration(fields, loaded.parameters)
         fields.reject_unknown()
-        return loaded.parameters, loaded
+        return train, loaded
     preset = fields.text('preset')
     if preset not in TRAIN_PRESETS:
         raise ConfigError(f"{fields.where}.preset: unknown train '{preset}'; valid: "
                           f"{', '.join(sorted(TRAIN_PRESETS))}")
+    train = _regeneration(fields, train_preset(preset))
     fields.reject_unknown()
-    train = train_preset(preset)
     if rail == 'dry':
         return train, None  # every preset is within the dry-rail bound (a test checks it)
     # A preset gives only its equivalent mass: adhesion is taken on it.
     bounded = trains.bound_braking(train.traction, train.mass_kg, rail)
     return replace(train, traction=bounded.traction), None
+
+
+def _regeneration(fields: Fields, train: TrainParameters) -> TrainParameters:
+    """The train with the section's ``regenerative_efficiency`` if it gives one (default:
+    the train's: a TTOBench file's ``efficiency reg brake``, 0 for a preset)."""
+    if not fields.has('regenerative_efficiency'):
+        return train
+    return replace(train, regenerative_efficiency=fields.number(
+        'regenerative_efficiency', minimum=0.0, maximum=1.0))
 
 
 def _parse_line(f: Fields, base: Path) -> tuple[Line, ttobench.TTOBenchJourney | None]:
@@ -241,8 +246,7 @@ def _journey_gives_times(journey: ttobench.TTOBenchJourney | None) -> bool:
         p.earliest_s is not None or p.latest_s is not None for p in journey.timing_points[1:])
 
 
-def _parse_timetable(f: Fields, journey: ttobench.TTOBenchJourney | None,
-                     loaded: ttobench.TTOBenchTrain | None) -> Timetable:
+def _parse_timetable(f: Fields, journey: ttobench.TTOBenchJourney | None) -> Timetable:
     t = f.section('timetable')
     default = 'timetable' if _journey_gives_times(journey) else 'fastest'
     strategy = t.text('strategy', default)
@@ -258,14 +262,7 @@ def _parse_timetable(f: Fields, journey: ttobench.TTOBenchJourney | None,
                                     minimum=0.0, maximum=100.0),
         run_infeasible=bool(flag),
         replan_delay_s=t.number('replan_delay_s', DEFAULT_REPLAN_DELAY_S, minimum=0.0,
-                                maximum=3600.0),
-        regenerative_efficiency=t.number(
-            'regenerative_efficiency',
-            (loaded.efficiency_regenerative_brake or 0.0) if loaded is not None
-            and loaded.max_regenerative_braking_power_w > 0.0 else 0.0,
-            minimum=0.0, maximum=1.0),
-        regenerative_power_w=(loaded.max_regenerative_braking_power_w
-                              if loaded is not None else math.inf))
+                                maximum=3600.0))
     t.reject_unknown()
     return timetable
 
@@ -308,7 +305,7 @@ def parse_scenario(data, origin: str = '<memory>', base: Path | None = None) -> 
         source=f.text('source', 'suite'), origin=origin, train=train, line=line,
         planning=planning, run=run, supervision=_parse_supervision(f, train, loaded_train),
         plant=parse_plant_setup(f.raw('plant'), train, 'plant'), journey=journey,
-        timetable=_parse_timetable(f, journey, loaded_train),
+        timetable=_parse_timetable(f, journey),
         uncertainty=(None if f.raw('uncertainty') is None
                      else parse_uncertainty(f.raw('uncertainty'), 'uncertainty')))
     f.reject_unknown()

@@ -172,6 +172,11 @@ class TrainParameters:
     # Design maximum speed: bounds every speed limit the supervision applies (a train is never
     # permitted faster, whatever the line allows). Every preset cites it in ``sources``.
     max_speed_mps: float = math.inf
+    # The share of the braking work at the wheel the regenerative brake returns, up to its
+    # power (ato_common.metrics' regenerated energy; 0: every braking loses its energy, as for
+    # the presets, whose papers give none). A TTOBench train gives both.
+    regenerative_efficiency: float = 0.0
+    regenerative_power_w: float = math.inf
 
 
 def _crh3_luo_xu() -> TrainParameters:

@@ -43,7 +43,15 @@ from typing import Any
 
 from ato_common import units
 from ato_common.files import load_json
-from ato_common.line import Curve, Line, PiecewiseConstant, Station, Tunnel
+from ato_common.line import (
+    MAX_GRADIENT_PER_MILLE,
+    Curve,
+    Line,
+    PiecewiseConstant,
+    Station,
+    Tunnel,
+    signed_curves,
+)
 from ato_common.trains import (
     DavisResistance,
     TractionCharacteristic,
@@ -259,74 +267,20 @@ def load_track(path: str | Path, dwell_s: float = 0.0) -> TTOBenchTrack:
     reader.only(TRACK_FIELDS)
     identifier = _metadata_id(reader)
     reader.scalar('altitude', 'length', required=False)
-    stops = [row[0] for row in reader.table('stops', [('position', 'length')])]
-    if len(stops) < 2:
-        raise reader.fail('stops.values', 'at least two stops (origin and destination) are '
-                          'needed')
-    if stops[0] != 0.0:
-        raise reader.fail('stops.values[0]', f'the first stop must be at 0 m, got {stops[0]:g}')
-    _increasing(reader, 'stops', stops)
+    stops = _stops(reader)
     length = stops[-1]
-
-    def sections(key: str, quantity: str, required: bool):
-        rows = reader.table(key, [('position', 'length'), (quantity_name[key], quantity)],
-                            required)
-        if rows is None:
-            return None
-        positions = [r[0] for r in rows]
-        if not rows:
-            raise reader.fail(f'{key}.values', 'must not be empty')
-        if positions[0] != 0.0:
-            raise reader.fail(f'{key}.values[0]', f'the first entry must start at 0 m, got '
-                              f'{positions[0]:g}')
-        _increasing(reader, key, positions)
-        if positions[-1] >= length:
-            raise reader.fail(f'{key}.values[{len(rows) - 1}]', f'starts at {positions[-1]:g} m, '
-                              f'not before the end of the track ({length:g} m)')
-        return rows
-
-    quantity_name = {'speed limits': 'velocity', 'gradients': 'slope'}
-    limits = sections('speed limits', 'speed', True)
+    limits = _sections(reader, 'speed limits', 'velocity', 'speed', length, True)
     for i, (_, speed) in enumerate(limits):
         if speed <= 0.0:
             raise reader.fail(f'speed limits.values[{i}]', 'the speed limit must be > 0')
-    grades = sections('gradients', 'slope', False) or [[0.0, 0.0]]
-
-    curves = []
-    curvature_rows = reader.table('curvatures', [('position', 'length'), ('radius at start',
-                                                 'length'), ('radius at end', 'length')],
-                                  required=False)
-    if curvature_rows:
-        positions = [r[0] for r in curvature_rows]
-        if positions[0] != 0.0:
-            raise reader.fail('curvatures.values[0]', 'the first entry must start at 0 m')
-        _increasing(reader, 'curvatures', positions)
-        ends = positions[1:] + [length]
-        for i, ((start, r_start, r_end), end) in enumerate(zip(curvature_rows, ends)):
-            if r_start == 0.0 or r_end == 0.0:
-                raise reader.fail(f'curvatures.values[{i}]', 'a radius of 0 m is not a curve')
-            if start >= length:
-                raise reader.fail(f'curvatures.values[{i}]', 'starts beyond the end of the track')
-            if math.isinf(r_start) and math.isinf(r_end):
-                continue  # straight
-            curves.append(Curve(start, end - start, abs(r_start),
-                                end_radius_m=abs(r_end)))
-
-    tunnels = []
-    tunnel_rows = reader.table('tunnels', [('position', 'length'), ('length', 'length'),
-                                           ('cross section', 'area')], required=False)
-    if tunnel_rows:
-        _increasing(reader, 'tunnels', [r[0] for r in tunnel_rows])
-        for i, (start, tunnel_length, section) in enumerate(tunnel_rows):
-            if tunnel_length < 0.0 or section <= 0.0:
-                raise reader.fail(f'tunnels.values[{i}]', 'the length must be >= 0 and the cross '
-                                  'section > 0')
-            if start + tunnel_length > length:
-                raise reader.fail(f'tunnels.values[{i}]', f'ends at {start + tunnel_length:g} m, '
-                                  f'beyond the end of the track ({length:g} m)')
-            if tunnel_length > 0.0:
-                tunnels.append(Tunnel(start, tunnel_length, cross_section_m2=section))
-
+    grades = _sections(reader, 'gradients', 'slope', 'slope', length, False) or [[0.0, 0.0]]
+    steepest = units.per_mille_to_sine(MAX_GRADIENT_PER_MILLE)
+    for i, (_, sine) in enumerate(grades):
+        if abs(sine) > steepest:
+            per_mille = 1000.0 * math.tan(math.asin(sine))
+            raise reader.fail(f'gradients.values[{i}]', f'{per_mille:g} per mille is steeper '
+                              f'than any line worked by adhesion (at most '
+                              f'{MAX_GRADIENT_PER_MILLE:g} per mille: ato_common.line)')
     m_nvavadh = kt_int = None
     etcs = reader.get('ETCS braking data', required=False)
     if etcs is not None:
@@ -340,8 +294,81 @@ def load_track(path: str | Path, dwell_s: float = 0.0) -> TTOBenchTrack:
     line = Line(identifier, length, stations,
                 PiecewiseConstant([r[0] for r in limits], [r[1] for r in limits]),
                 PiecewiseConstant([r[0] for r in grades], [r[1] for r in grades]),
-                tuple(curves), tuple(tunnels))
+                _curves(reader, length), _tunnels(reader, length))
     return TTOBenchTrack(identifier, line, tuple(stops), m_nvavadh, kt_int)
+
+
+def _stops(reader: _Reader) -> list[float]:
+    stops = [row[0] for row in reader.table('stops', [('position', 'length')])]
+    if len(stops) < 2:
+        raise reader.fail('stops.values', 'at least two stops (origin and destination) are '
+                          'needed')
+    if stops[0] != 0.0:
+        raise reader.fail('stops.values[0]', f'the first stop must be at 0 m, got {stops[0]:g}')
+    _increasing(reader, 'stops', stops)
+    return stops
+
+
+def _sections(reader: _Reader, key: str, column: str, quantity: str, length: float,
+              required: bool) -> list[list[Any]] | None:
+    """The rows of a piecewise quantity of the track: from 0 m, increasing, each starting
+    before the end of the track."""
+    rows = reader.table(key, [('position', 'length'), (column, quantity)], required)
+    if rows is None:
+        return None
+    positions = [r[0] for r in rows]
+    if not rows:
+        raise reader.fail(f'{key}.values', 'must not be empty')
+    if positions[0] != 0.0:
+        raise reader.fail(f'{key}.values[0]', f'the first entry must start at 0 m, got '
+                          f'{positions[0]:g}')
+    _increasing(reader, key, positions)
+    if positions[-1] >= length:
+        raise reader.fail(f'{key}.values[{len(rows) - 1}]', f'starts at {positions[-1]:g} m, '
+                          f'not before the end of the track ({length:g} m)')
+    return rows
+
+
+def _curves(reader: _Reader, length: float) -> tuple[Curve, ...]:
+    """The curvatures as curves, their radii signed as the file signs them (``Curve``)."""
+    rows = reader.table('curvatures', [('position', 'length'), ('radius at start', 'length'),
+                                       ('radius at end', 'length')], required=False)
+    if not rows:
+        return ()
+    positions = [r[0] for r in rows]
+    if positions[0] != 0.0:
+        raise reader.fail('curvatures.values[0]', 'the first entry must start at 0 m')
+    _increasing(reader, 'curvatures', positions)
+    curves: list[Curve] = []
+    ends = positions[1:] + [length]
+    for i, ((start, r_start, r_end), end) in enumerate(zip(rows, ends)):
+        if r_start == 0.0 or r_end == 0.0:
+            raise reader.fail(f'curvatures.values[{i}]', 'a radius of 0 m is not a curve')
+        if start >= length:
+            raise reader.fail(f'curvatures.values[{i}]', 'starts beyond the end of the track')
+        if math.isinf(r_start) and math.isinf(r_end):
+            continue  # straight
+        curves.extend(signed_curves(start, end - start, r_start, r_end))
+    return tuple(curves)
+
+
+def _tunnels(reader: _Reader, length: float) -> tuple[Tunnel, ...]:
+    rows = reader.table('tunnels', [('position', 'length'), ('length', 'length'),
+                                    ('cross section', 'area')], required=False)
+    if not rows:
+        return ()
+    _increasing(reader, 'tunnels', [r[0] for r in rows])
+    tunnels = []
+    for i, (start, tunnel_length, section) in enumerate(rows):
+        if tunnel_length < 0.0 or section <= 0.0:
+            raise reader.fail(f'tunnels.values[{i}]', 'the length must be >= 0 and the cross '
+                              'section > 0')
+        if start + tunnel_length > length:
+            raise reader.fail(f'tunnels.values[{i}]', f'ends at {start + tunnel_length:g} m, '
+                              f'beyond the end of the track ({length:g} m)')
+        if tunnel_length > 0.0:
+            tunnels.append(Tunnel(start, tunnel_length, cross_section_m2=section))
+    return tuple(tunnels)
 
 
 @dataclass(frozen=True)
@@ -391,61 +418,145 @@ def _bounded_table(table: tuple[tuple[float, float], ...], bound_mps2: float
     return tuple((speed, min(deceleration, bound_mps2)) for speed, deceleration in table)
 
 
-def load_train(path: str | Path, rail: str = 'dry') -> TTOBenchTrain:
-    """A TTOBench train. Its braking is bounded by wheel-rail adhesion on a ``rail`` ('dry' or
-    'wet') rail and by its ETCS decelerations where it has them (``trains.bound_braking``);
-    each figure a bound lowers is a DataWarning naming the file, the figure and the bound."""
-    path, data = _read_json(path)
-    reader = _Reader(path, data)
-    reader.only(TRAIN_FIELDS)
-    identifier = _metadata_id(reader)
+# Plausibility of a train's figures: load_train refuses a file outside these bounds, naming the
+# figure. Wide enough for every real train from a tram to a heavy-haul freight train, narrow
+# enough that a unit read wrong (t for kg, N for kN, W for kW: a factor of 1000) falls outside.
+#: static mass per metre of train, t/m: EMUs about 2, locomotive-hauled trains 2-4, freight
+#: wagons up to 8.8 (EN 15528's heaviest line category), heavy haul at 40 t per axle about 15
+MASS_PER_METRE_T = (0.3, 20.0)
+#: a force (the traction force; the service braking force) over the static weight: no
+#: wheel-rail contact transmits twice the weight (adhesion is about 0.4 at best; braking data
+#: of real files reach about 1, bounded later by adhesion), and a heavy freight train's
+#: tractive effort is about 1 % of its weight
+FORCE_OVER_WEIGHT = (0.002, 2.0)
+#: traction power per tonne of static mass, kW/t: heavy freight about 1, EMUs 10-25
+POWER_PER_TONNE_KW = (0.2, 100.0)
+#: the running resistance at the maximum speed over the static weight: a few per cent on real
+#: trains (at most)
+RESISTANCE_OVER_WEIGHT_AT_MAX_SPEED = 0.2
+
+
+@dataclass(frozen=True)
+class _TrainFigures:
+    """A train file's scalar figures, in SI."""
+
+    mass: float
+    equivalent_mass: float
+    power: float
+    traction_force: float
+    regenerative_power: float
+    service_force: float
+    max_speed: float
+    davis: DavisResistance
+    efficiency_traction: float | None
+    efficiency_brake: float | None
+    length: float
+    length_source: str
+    max_acceleration: float | None
+    max_deceleration: float | None
+
+
+def _train_figures(reader: _Reader) -> _TrainFigures:
     reader.scalar('num seats', 'count', required=False, minimum=0.0)
     mass = reader.scalar('mass', 'mass', minimum=0.0, exclusive=True)
     rho = reader.scalar('rho', 'fraction', required=False, minimum=0.0) or 0.0
-    equivalent_mass = mass * (1.0 + rho)
-    power = reader.scalar('max traction power', 'power', minimum=0.0, exclusive=True)
-    traction_force = reader.scalar('max traction force', 'force', minimum=0.0, exclusive=True)
-    regenerative_power = reader.scalar('max reg braking power', 'power', minimum=0.0)
     regenerative_force = reader.scalar('max reg braking force', 'force', minimum=0.0)
     pneumatic_force = reader.scalar('max pn braking force', 'force', required=False,
                                     minimum=0.0) or 0.0
-    service_force = regenerative_force + pneumatic_force
-    if service_force <= 0.0:
+    if regenerative_force + pneumatic_force <= 0.0:
         raise reader.fail('max reg braking force', 'the train has no braking force (regenerative '
                           'plus pneumatic is 0)')
-    max_speed = reader.scalar('max speed', 'speed', minimum=0.0, exclusive=True)
-    r0 = reader.scalar('rolling resistance r0', 'force', minimum=0.0)
-    r1 = reader.scalar('rolling resistance r1', 'linear resistance')
-    r2 = reader.scalar('rolling resistance r2', 'quadratic resistance', minimum=0.0)
-    efficiency_traction = reader.scalar('efficiency traction', 'fraction', required=False,
-                                        minimum=0.0, exclusive=True)
-    efficiency_brake = reader.scalar('efficiency reg brake', 'fraction', required=False,
-                                     minimum=0.0)
     length = reader.scalar('length', 'length', required=False, minimum=0.0, exclusive=True)
     coaches = reader.scalar('num coaches', 'count', required=False, minimum=1.0)
-    tunnel = reader.table('tunnel resistance', [('cross section', 'area'),
-                                                ('coefficient', 'quadratic resistance')],
-                          required=False) or []
-    braking = None
+    if length is not None:
+        length_source = f'{reader.path.name}: length'
+    else:
+        # The format makes the length optional; 25 m per coach, else a 200 m unit.
+        length = 25.0 * coaches if coaches else 200.0
+        length_source = ('not in the file: 25 m per coach' if coaches else
+                         'not in the file: suite default 200 m')
+    return _TrainFigures(
+        mass=mass, equivalent_mass=mass * (1.0 + rho),
+        power=reader.scalar('max traction power', 'power', minimum=0.0, exclusive=True),
+        traction_force=reader.scalar('max traction force', 'force', minimum=0.0,
+                                     exclusive=True),
+        regenerative_power=reader.scalar('max reg braking power', 'power', minimum=0.0),
+        service_force=regenerative_force + pneumatic_force,
+        max_speed=reader.scalar('max speed', 'speed', minimum=0.0, exclusive=True),
+        davis=DavisResistance(
+            reader.scalar('rolling resistance r0', 'force', minimum=0.0),
+            reader.scalar('rolling resistance r1', 'linear resistance'),
+            reader.scalar('rolling resistance r2', 'quadratic resistance', minimum=0.0)),
+        efficiency_traction=reader.scalar('efficiency traction', 'fraction', required=False,
+                                          minimum=0.0, exclusive=True),
+        efficiency_brake=reader.scalar('efficiency reg brake', 'fraction', required=False,
+                                       minimum=0.0),
+        length=length, length_source=length_source,
+        max_acceleration=reader.scalar('max acceleration', 'acceleration', required=False,
+                                       minimum=0.0, exclusive=True),
+        max_deceleration=reader.scalar('max deceleration', 'acceleration', required=False,
+                                       minimum=0.0, exclusive=True))
+
+
+def _check_plausible(reader: _Reader, figures: _TrainFigures) -> None:
+    """Refuse figures no train has (the bounds above), naming the field and its unit."""
+    def declared(key: str) -> str:
+        entry = reader.data.get(key)
+        return f' (the file declares {entry.get("unit")!r})' if isinstance(entry, dict) else ''
+
+    def outside(key: str, what: str, value: float, bounds: tuple[float, float],
+                unit: str) -> None:
+        low, high = bounds
+        if not low <= value <= high:
+            raise reader.fail(f'{key}.value', f'{what} is {value:.4g} {unit}, outside the '
+                              f'{low:g}-{high:g} {unit} of real trains: a wrong figure or '
+                              f'unit{declared(key)}')
+    weight = figures.mass * units.STANDARD_GRAVITY
+    outside('mass', f'{figures.mass / 1000.0:.6g} t over a length of {figures.length:g} m '
+            f'({figures.length_source})', figures.mass / 1000.0 / figures.length,
+            MASS_PER_METRE_T, 't/m')
+    outside('max traction force', 'the traction force over the weight',
+            figures.traction_force / weight, FORCE_OVER_WEIGHT, 'x weight')
+    outside('max reg braking force', 'the regenerative plus pneumatic braking force over '
+            'the weight', figures.service_force / weight, FORCE_OVER_WEIGHT, 'x weight')
+    outside('max traction power', 'the traction power per tonne',
+            figures.power / figures.mass, POWER_PER_TONNE_KW, 'kW/t')
+    resistance = figures.davis.force(figures.max_speed) / weight
+    if resistance > RESISTANCE_OVER_WEIGHT_AT_MAX_SPEED:
+        raise reader.fail('rolling resistance r0', f'the running resistance at the maximum '
+                          f'speed is {resistance:.3g} x the weight (real trains: a few per '
+                          f'cent, at most {RESISTANCE_OVER_WEIGHT_AT_MAX_SPEED:g}): a wrong '
+                          'figure or unit of r0, r1, r2 or max speed')
+
+
+def _etcs_braking_data(reader: _Reader) -> ETCSBrakingData | None:
     etcs = reader.get('ETCS braking data', required=False)
-    if etcs is not None:
-        sub = _Reader(path, etcs, 'ETCS braking data')
-        sub.only(TRAIN_ETCS_FIELDS)
-        braking = ETCSBrakingData(
-            emergency=_deceleration_table(sub, 'A_brake_emergency'),
-            service=_deceleration_table(sub, 'A_brake_service'),
-            k_dry_rst=sub.scalar('K_dry_rst', 'fraction', minimum=0.0, exclusive=True),
-            k_wet_rst=sub.scalar('K_wet_rst', 'fraction', minimum=0.0, exclusive=True),
-            traction_cut_off_s=sub.scalar('T_traction', 'time', minimum=0.0),
-            emergency_brake_build_up_s=sub.scalar('T_be', 'time', minimum=0.0),
-            service_brake_build_up_s=sub.scalar('T_bs', 'time', minimum=0.0),
-            speed_uncertainty=sub.scalar('v_uncertainty', 'fraction', minimum=0.0))
-    # The braking capability (docs/guide/plant.md, "Braking bound"): the data's forces bounded
-    # by adhesion on the static mass and by the ETCS decelerations (their highest value, at
-    # the lowest speed) times the equivalent mass; the ETCS tables themselves by adhesion.
+    if etcs is None:
+        return None
+    sub = _Reader(reader.path, etcs, 'ETCS braking data')
+    sub.only(TRAIN_ETCS_FIELDS)
+    return ETCSBrakingData(
+        emergency=_deceleration_table(sub, 'A_brake_emergency'),
+        service=_deceleration_table(sub, 'A_brake_service'),
+        k_dry_rst=sub.scalar('K_dry_rst', 'fraction', minimum=0.0, exclusive=True),
+        k_wet_rst=sub.scalar('K_wet_rst', 'fraction', minimum=0.0, exclusive=True),
+        traction_cut_off_s=sub.scalar('T_traction', 'time', minimum=0.0),
+        emergency_brake_build_up_s=sub.scalar('T_be', 'time', minimum=0.0),
+        service_brake_build_up_s=sub.scalar('T_bs', 'time', minimum=0.0),
+        speed_uncertainty=sub.scalar('v_uncertainty', 'fraction', minimum=0.0))
+
+
+def _bounded_braking(figures: _TrainFigures, braking: ETCSBrakingData | None, rail: str):
+    """The braking capability (docs/guide/plant.md, "Braking bound"): the data's forces bounded
+    by adhesion on the static mass and by the ETCS decelerations (their highest value, at the
+    lowest speed) times the equivalent mass; the ETCS tables themselves by adhesion. Returns
+    (traction characteristic, bounded ETCS data, notes of what a bound lowered, the bound on
+    the braking deceleration)."""
+    mass, equivalent_mass = figures.mass, figures.equivalent_mass
     emergency_force = (max(d for _, d in braking.emergency) * equivalent_mass if braking
-                       else service_force)
-    unbounded = TractionCharacteristic(traction_force, power, service_force, emergency_force)
+                       else figures.service_force)
+    unbounded = TractionCharacteristic(figures.traction_force, figures.power,
+                                       figures.service_force, emergency_force)
     bounded = bound_braking(
         unbounded, mass, rail,
         service_limit_n=max(d for _, d in braking.service) * equivalent_mass if braking else None,
@@ -468,42 +579,61 @@ def load_train(path: str | Path, rail: str = 'dry') -> TTOBenchTrain:
             _bounded_table(braking.service, adhesion_mps2), braking.k_dry_rst,
             braking.k_wet_rst, braking.traction_cut_off_s, braking.emergency_brake_build_up_s,
             braking.service_brake_build_up_s, braking.speed_uncertainty)
-    for note in notes:
-        warnings.warn(f'{path}: {note}', DataWarning, stacklevel=2)
     bound_mps2 = min(adhesion_mps2, max(d for _, d in braking.emergency + braking.service)
                      if braking else math.inf)
-    if length is None:
-        # The format makes the length optional; 25 m per coach, else a 200 m unit.
-        length = 25.0 * coaches if coaches else 200.0
-        length_source = 'not in the file: 25 m per coach' if coaches else \
-            'not in the file: suite default 200 m'
-    else:
-        length_source = f'{path.name}: length'
-    davis = DavisResistance(r0, r1, r2)
+    return bounded.traction, braking, notes, bound_mps2
+
+
+def load_train(path: str | Path, rail: str = 'dry') -> TTOBenchTrain:
+    """A TTOBench train. Figures no train has (``_check_plausible``) are refused, naming the
+    field. Its braking is bounded by wheel-rail adhesion on a ``rail`` ('dry' or 'wet') rail
+    and by its ETCS decelerations where it has them (``trains.bound_braking``); each figure a
+    bound lowers is a DataWarning naming the file, the figure and the bound."""
+    path, data = _read_json(path)
+    reader = _Reader(path, data)
+    reader.only(TRAIN_FIELDS)
+    identifier = _metadata_id(reader)
+    figures = _train_figures(reader)
+    tunnel = reader.table('tunnel resistance', [('cross section', 'area'),
+                                                ('coefficient', 'quadratic resistance')],
+                          required=False) or []
+    braking = _etcs_braking_data(reader)
+    _check_plausible(reader, figures)
+    traction, braking, notes, bound_mps2 = _bounded_braking(figures, braking, rail)
+    for note in notes:
+        warnings.warn(f'{path}: {note}', DataWarning, stacklevel=2)
+    # The regenerative brake returns its efficiency's share of the braking work up to its power
+    # (none without a regenerative power).
+    regenerating = figures.regenerative_power > 0.0
     parameters = TrainParameters(
         name=identifier,
         description=f'TTOBench train {identifier} ({path.name})',
-        mass_kg=equivalent_mass, davis=davis, davis_nominal=davis,
-        traction=bounded.traction,
-        actuator_names=('traction',), length_m=length, max_speed_mps=max_speed,
-        sources={'all': f'TTOBench train file {path} (BSD-2, Kouzoupis et al. 2023)',
-                 'mass_kg': 'mass times (1 + rho)', 'length_m': length_source,
-                 'max_service_brake_force_n':
-                     'regenerative plus pneumatic braking force, bounded by adhesion '
-                     f'(mu on a {rail} rail x mass x g)'
-                     + (' and by the highest ETCS A_brake_service times the equivalent mass'
-                        if braking else ''),
-                 'max_emergency_brake_force_n':
-                     'the highest ETCS A_brake_emergency times the equivalent mass, bounded by '
-                     'adhesion' if braking else 'the service braking force (no ETCS data)'})
-    return TTOBenchTrain(identifier, parameters, max_speed,
-                         reader.scalar('max acceleration', 'acceleration', required=False,
-                                       minimum=0.0, exclusive=True),
-                         reader.scalar('max deceleration', 'acceleration', required=False,
-                                       minimum=0.0, exclusive=True),
-                         regenerative_power, efficiency_traction, efficiency_brake,
+        mass_kg=figures.equivalent_mass, davis=figures.davis, davis_nominal=figures.davis,
+        traction=traction, actuator_names=('traction',), length_m=figures.length,
+        max_speed_mps=figures.max_speed,
+        regenerative_efficiency=(figures.efficiency_brake or 0.0) if regenerating else 0.0,
+        regenerative_power_w=figures.regenerative_power,
+        sources=_train_sources(path, rail, figures, braking is not None))
+    return TTOBenchTrain(identifier, parameters, figures.max_speed, figures.max_acceleration,
+                         figures.max_deceleration, figures.regenerative_power,
+                         figures.efficiency_traction, figures.efficiency_brake,
                          tuple((r[0], r[1]) for r in tunnel), braking,
                          braking_notes=tuple(notes), braking_bound_mps2=bound_mps2)
+
+
+def _train_sources(path: Path, rail: str, figures: _TrainFigures, etcs: bool) -> dict:
+    return {'all': f'TTOBench train file {path} (BSD-2, Kouzoupis et al. 2023)',
+            'mass_kg': 'mass times (1 + rho)', 'length_m': figures.length_source,
+            'max_service_brake_force_n':
+                'regenerative plus pneumatic braking force, bounded by adhesion '
+                f'(mu on a {rail} rail x mass x g)'
+                + (' and by the highest ETCS A_brake_service times the equivalent mass'
+                   if etcs else ''),
+            'max_emergency_brake_force_n':
+                'the highest ETCS A_brake_emergency times the equivalent mass, bounded by '
+                'adhesion' if etcs else 'the service braking force (no ETCS data)',
+            'regenerative_efficiency, regenerative_power_w':
+                'efficiency reg brake (0 without a regenerative power), max reg braking power'}
 
 
 @dataclass(frozen=True)

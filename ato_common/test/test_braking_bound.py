@@ -131,13 +131,17 @@ def train_files(draw):
     data = json.loads((SAMPLES / 'trains' / 'CH_Stadler_FLIRT_TPF.json').read_text())
     data = copy.deepcopy(data)
     data['mass'] = {'unit': draw(st.sampled_from(['kg', 't'])), 'value': 0.0}
-    data['mass']['value'] = draw(st.floats(20.0, 2000.0)) * (
-        1000.0 if data['mass']['unit'] == 'kg' else 1.0)
+    # masses and forces of real trains (ttobench's plausibility bounds: 58.6 m long, its 2.6 MW)
+    mass_t = draw(st.floats(30.0, 1000.0))
+    data['mass']['value'] = mass_t * (1000.0 if data['mass']['unit'] == 'kg' else 1.0)
     data['rho'] = {'unit': '%', 'value': draw(st.floats(0.0, 30.0))}
-    data['max reg braking force'] = {'unit': 'kN', 'value': draw(force_kn)}
-    data['max pn braking force'] = {'unit': 'kN', 'value': draw(force_kn)}
-    if data['max reg braking force']['value'] + data['max pn braking force']['value'] <= 0.0:
-        data['max pn braking force']['value'] = 1.0
+    weight_kn = mass_t * G
+    regenerative, pneumatic = draw(force_kn), draw(force_kn)
+    if regenerative + pneumatic < 0.0021 * weight_kn:
+        pneumatic = 0.0021 * weight_kn
+    share = min(1.0, 1.99 * weight_kn / (regenerative + pneumatic))
+    data['max reg braking force'] = {'unit': 'kN', 'value': regenerative * share}
+    data['max pn braking force'] = {'unit': 'kN', 'value': pneumatic * share}
     if draw(st.booleans()):
         etcs = data['ETCS braking data']
         for key in ('A_brake_emergency', 'A_brake_service'):

@@ -65,7 +65,7 @@ def test_line_lookups_in_si():
     (lambda d: d.pop('planning'), r'planning: required section is missing'),
     (lambda d: d['planning'].update(max_jerk_mps3=float('nan')), r'max_jerk_mps3: must be'),
     (lambda d: d['line'].update(curves=[{'start_m': 0, 'length_m': 10, 'radius_m': 0}]),
-     r'radius_m: must be > 0'),
+     r'radius_m: a radius of 0 m is not a curve'),
     (lambda d: d.update(run={'initial_position_m': 500}),
      r'run.initial_position_m: the run starts at a station'),
     (lambda d: d['train'].update(mass_t=600), r'unknown field\(s\) mass_t'),

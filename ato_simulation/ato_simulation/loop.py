@@ -83,7 +83,9 @@ class OfflineRun:
     def metrics(self) -> RunMetrics:
         return compute_metrics(self.times_s, self.positions, self.speeds, self.forces,
                                self.ref_positions, self.ref_speeds,
-                               stop_samples(self.plan, self.replans, self.late_readings))
+                               stop_samples(self.plan, self.replans, self.late_readings),
+                               self.scenario.train.regenerative_efficiency,
+                               self.scenario.train.regenerative_power_w)
 
     @property
     def extended(self) -> bool:

@@ -98,8 +98,10 @@ def plot(scenario, plan: Plan, path: Path, others: dict[str, Plan] | None = None
     curves = others or {plan.strategy: plan}
     for strategy, drawn in curves.items():
         color, label = STRATEGY_STYLES[strategy]
-        energy = units.joules_to_kwh(drawn.forecast_energy_j)
-        label = f'{label}: {drawn.stops[-1].arrival_s:.0f} s, {energy:.0f} kWh'
+        energy = drawn.forecast.kwh()
+        label = (f'{label}: {drawn.stops[-1].arrival_s:.0f} s, '
+                 f'{energy["traction_energy_kwh"]:.0f} kWh gross, '
+                 f'{energy["net_energy_kwh"]:.0f} kWh net')
         times = np.arange(0.0, drawn.trajectory.end_time + 1.0, 1.0)
         points = [drawn.trajectory.at(t) for t in times]
         xs = np.array([p.position for p in points])

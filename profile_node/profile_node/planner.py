@@ -31,31 +31,33 @@ from dataclasses import dataclass, replace
 from types import SimpleNamespace
 
 import numpy as np
-from scipy.optimize import brentq
 
 from ato_common import units
 from ato_common.braking_curves import RunSupervision, Target
-from ato_common.line import Station
+from ato_common.line import PiecewiseConstant, Station
+from ato_common.metrics import WheelEnergy
 from ato_common.scenario import Scenario
 from ato_common.validation import ConfigError
+from profile_node.eco import TRACTION_RESERVE_SHARE, EcoLeg, LegLimits
 from profile_node.timetable import (
     LOWEST_CRUISE_MPS,
     SPEED_TOLERANCE_MPS,
     TIME_TOLERANCE_S,
     WINDOW_MARGIN_S,
+    JourneyTimes,
     LegTiming,
-    coast_end_speed,
-    forecast_energy_j,
+    forecast_energy,
+    journey_times,
+    point_times,
     train_grade_sine,
-    window_conflicts,
     window_target,
 )
 from profile_node.trajectory import (
     AccelerationSteps,
-    CoastSteps,
     StateBuilder,
     Trajectory,
     TrajectoryBuilder,
+    passing_time,
     speed_change_distance,
 )
 
@@ -81,7 +83,7 @@ class Plan:
     timing: tuple = ()            # TimingCheck of each journey timing point, if any
     strategy: str = 'fastest'     # how it is driven (Scenario.timetable.strategy)
     legs: tuple = ()              # profile_node.timetable.LegTiming of each leg (timetable)
-    forecast_energy_j: float = math.nan  # traction energy to follow it, nominal train, J
+    forecast: WheelEnergy | None = None  # energies at the wheel to follow it, nominal train
     expected_delay_s: float = 0.0  # at the last stop, against the timetable (after a replan)
 
     def next_stop(self, time_s: float) -> StopEvent:
@@ -113,9 +115,6 @@ class Plan:
         return min(index, len(self.supervision.legs) - 1)
 
 
-# Share of the traction reserve (force left after resistance and grade) that the plan may use;
-# the rest is the controller's margin to correct errors. The same share of the service brake.
-TRACTION_RESERVE_SHARE = 0.8
 # Below this planned acceleration the approach to a speed takes too long to be useful: a
 # section's level is kept where the train can still accelerate at least this much.
 MIN_PLANNED_ACCELERATION_MPS2 = 0.02
@@ -254,6 +253,41 @@ def _breakpoints(function, start: float, end: float) -> list[float]:
     return [s for s in function.starts if start < s < end]
 
 
+def _limit_pieces(scenario: Scenario, mrsp, anticipation_s: float,
+                  extra_m: dict[float, float]) -> list[tuple[float, float, float]]:
+    """(start, end, speed) of each MRSP value where it applies for the target: a lower limit
+    from its start less the distance run at it in ``anticipation_s``, and ``extra_m`` (by its
+    start) further ahead."""
+    pieces = []
+    for s, e, v in mrsp.segments(scenario.line.length_m):
+        ahead = v * anticipation_s + extra_m.get(s, 0.0)
+        pieces.append((s - ahead if s > 0.0 else s, e, v))
+    return pieces
+
+
+def leg_ceiling(scenario: Scenario, mrsp, start: float, end: float, anticipation_s: float,
+                extra_m: dict[float, float]) -> PiecewiseConstant:
+    """The highest target speed over the leg [start, end]: the MRSP less the planning margin,
+    its decreases brought forward as in ``leg_sections`` (without its cap where the train
+    cannot accelerate: the ``timetable`` strategy plans with the traction capability at each
+    position, ``profile_node.eco``)."""
+    margin = scenario.planning.speed_margin_mps
+    pieces = _limit_pieces(scenario, mrsp, anticipation_s, extra_m)
+    cuts = sorted({start, *(x for s, e, _ in pieces for x in (s, e) if start < x < end)})
+    starts, values = [], []
+    for a in cuts:
+        b = min((x for x in cuts if x > a), default=end)
+        value = min(v for s, e, v in pieces if s < b and e > a) - margin
+        if value <= 0.0:
+            raise PlanningError(f'{scenario.origin}: line at {a:.0f}-{b:.0f} m: the speed limit '
+                                'is not above the planning margin '
+                                f'({units.mps_to_kmh(margin):g} km/h)')
+        if not values or value != values[-1]:
+            starts.append(a)
+            values.append(value)
+    return PiecewiseConstant(starts, values)
+
+
 def leg_sections(scenario: Scenario, mrsp, start: float, end: float,
                  anticipation_s: float, extra_m: dict[float, float]) -> list[Section]:
     """The leg [start, end] cut where the level or the grade changes, equal levels merged.
@@ -261,11 +295,7 @@ def leg_sections(scenario: Scenario, mrsp, start: float, end: float,
     ``anticipation_s``: a lower limit applies from its start less the distance run at it in
     that time; ``extra_m`` moves a given limit's application further ahead (by its start)."""
     line, margin = scenario.line, scenario.planning.speed_margin_mps
-    # Where each MRSP value applies for the target: decreases brought forward.
-    pieces = []
-    for s, e, v in mrsp.segments(line.length_m):
-        ahead = v * anticipation_s + extra_m.get(s, 0.0)
-        pieces.append((s - ahead if s > 0.0 else s, e, v))
+    pieces = _limit_pieces(scenario, mrsp, anticipation_s, extra_m)
 
     def ceiling(a: float, b: float) -> float:
         return min(v for s, e, v in pieces if s < b and e > a) - margin
@@ -315,118 +345,13 @@ def highest_speed_braking_within(distance: float, v_to: float, deceleration: flo
     return low
 
 
-@dataclass(frozen=True)
-class LegCruise:
-    """The ``timetable`` strategy's choice on one leg: from ``starts_m[i]`` on, the target
-    cruises at no more than ``speeds_mps[i]``, and a coast before a braking there ends at
-    ``coast_end_mps[i]`` (the braking speed of the optimal control, profile_node.timetable)."""
-
-    starts_m: tuple[float, ...]
-    speeds_mps: tuple[float, ...]
-    coast_end_mps: tuple[float, ...]
-
-    def stretch(self, position_m: float) -> int:
-        return max(i for i, start in enumerate(self.starts_m)
-                   if start <= position_m or i == 0)
-
-    def capped(self, sections: list[Section]) -> list[Section]:
-        """The sections cut where the cruise speed changes, each level capped by it."""
-        out = []
-        for section in sections:
-            cuts = [section.start_m] + [x for x in self.starts_m
-                                        if section.start_m < x < section.end_m] + [section.end_m]
-            for a, b in zip(cuts, cuts[1:]):
-                level = min(section.level_mps, self.speeds_mps[self.stretch(a)])
-                out.append(Section(a, b, level, section.climb_sine, section.descent_sine))
-        return out
-
-
-def coasting_deceleration(scenario: Scenario):
-    """deceleration(v, x) of the train coasting (no traction, no brake) with its front at x:
-    nominal Davis resistance over the mass plus g sin(grade over the train's length) [m/s^2]."""
-    train, line = scenario.train, scenario.line
-    # Looked up once (the same values as per call): per coasting step.
-    resistance, mass, length = train.davis_nominal.force, train.mass_kg, train.length_m
-    gravity, grade = units.STANDARD_GRAVITY, train_grade_sine
-
-    def deceleration(v: float, x: float) -> float:
-        return resistance(v) / mass + gravity * grade(line, x, length)
-    return deceleration
-
-
-# Coasting simulations: step, s, and the accuracy of the point where a coast starts, m.
-COAST_STEP_S = 3.0
-COAST_TOLERANCE_M = 0.5
-
-
-def _coast_end(scenario: Scenario, start_m: float, v_from: float, v_to: float, jerk: float,
-               limit_m: float) -> float:
-    """Where a coast from ``v_from`` at ``start_m`` reaches ``v_to`` (inf: not before
-    ``limit_m``)."""
-    builder = StateBuilder(x0=start_m)
-    builder.v = v_from
-    if not builder.coast_to(v_to, coasting_deceleration(scenario), jerk, COAST_STEP_S, limit_m):
-        return math.inf
-    return builder.x
-
-
-def _coast_then_brake(builder: TrajectoryBuilder, scenario: Scenario, section: Section,
-                      coast_end: float, exit_speed: float, deceleration: float,
-                      jerk: float) -> None:
-    """From the cruise at ``builder.v``: cruise, coast down to ``coast_end`` (or less far where
-    the section is too short) and brake to ``exit_speed`` exactly at the section's end."""
-    peak = builder.v
-    low = max(coast_end, exit_speed)
-    end = section.end_m
-
-    def brake_start(speed: float) -> float:
-        return end - speed_change_distance(speed, exit_speed, deceleration, jerk)
-    # The coasts from here (to the speeds the bisection below tries) share their steps.
-    here = CoastSteps(builder.x, peak, coasting_deceleration(scenario), jerk, COAST_STEP_S)
-
-    def coast_end_from_here(speed: float) -> float:
-        x = here.end_of(speed, end)
-        return math.inf if x is None else x
-    if coast_end_from_here(low) <= brake_start(low):
-        # Room for the whole coast: cruise until the point from which it ends where the
-        # braking starts (a later start ends later).
-        first, last = builder.x, brake_start(low)
-        while last - first > COAST_TOLERANCE_M:
-            middle = 0.5 * (first + last)
-            if _coast_end(scenario, middle, peak, low, jerk, end) <= brake_start(low):
-                first = middle
-            else:
-                last = middle
-        if peak > 0.0 and first > builder.x:
-            builder.add((first - builder.x) / peak)
-    else:
-        # Coast from here to the lowest speed from which the braking still ends in time.
-        lo, hi = low, peak
-        for _ in range(20):
-            middle = 0.5 * (lo + hi)
-            if coast_end_from_here(middle) <= brake_start(middle):
-                hi = middle
-            else:
-                lo = middle
-        low = hi
-    builder.coast_to(low, coasting_deceleration(scenario), jerk, COAST_STEP_S)
-    # The coast ends at most the tolerance before the braking point: cruise there.
-    gap = brake_start(low) - builder.x
-    if gap > 0.0 and low > 0.0:
-        builder.add(gap / low)
-    builder.speed_change(exit_speed, deceleration, jerk)
-
-
 def plan_leg(builder: TrajectoryBuilder, scenario: Scenario, sections: list[Section],
-             leg_deceleration_factor: float, cruise: LegCruise | None = None) -> None:
-    """Append one leg, from the builder's state (standstill, or the measured speed of a
-    replan) at its first section's start to standstill at its last section's end.
-    ``cruise``: the ``timetable`` strategy's cruise speeds and coasting (None: the fastest
-    curve)."""
+             leg_deceleration_factor: float) -> None:
+    """Append one leg of the fastest curve, from the builder's state (standstill, or the
+    measured speed of a replan) at its first section's start to standstill at its last
+    section's end."""
     planning = scenario.planning
     jerk = planning.max_jerk_mps3
-    if cruise is not None:
-        sections = cruise.capped(sections)
     decelerations = [leg_deceleration_factor * braking_deceleration(scenario, s.descent_sine)
                      for s in sections]
     # Backward pass: the highest speed allowed at each section's end.
@@ -470,12 +395,6 @@ def plan_leg(builder: TrajectoryBuilder, scenario: Scenario, sections: list[Sect
                     high = middle
             peak = low
         builder.accelerate_to(peak, capability, jerk, MIN_PLANNED_ACCELERATION_MPS2)
-        if cruise is not None and exit_speed < peak - 1e-6:
-            coast_end = cruise.coast_end_mps[cruise.stretch(section.end_m - 1e-6)]
-            if coast_end < peak - 1e-6:
-                _coast_then_brake(builder, scenario, section, coast_end, exit_speed,
-                                  deceleration, jerk)
-                continue
         braking = speed_change_distance(peak, exit_speed, deceleration, jerk)
         cruise_m = section.end_m - braking - builder.x
         if peak > 0.0 and cruise_m > 0.0:
@@ -486,14 +405,22 @@ def plan_leg(builder: TrajectoryBuilder, scenario: Scenario, sections: list[Sect
 def _build(scenario: Scenario, supervision: RunSupervision, stations: list[Station],
            anticipation_s: float, extra_m: dict[float, float], deceleration_factors: list[float],
            start_s: float = 0.0, leg_planner=None, start_state: tuple[float, float] | None = None):
-    """The whole curve, leg by leg. ``leg_planner(leg, builder, sections, factor)`` appends a
-    leg (the ``timetable`` strategy); None: :func:`plan_leg`, the fastest curve.
+    """The whole curve, leg by leg. ``leg_planner(leg, builder, sections, factor, ceiling,
+    permitted)`` appends a leg (the ``timetable`` strategy; ``ceiling``: ``leg_ceiling``,
+    ``permitted``: the leg's permitted speed at a position); None: :func:`plan_leg`, the
+    fastest curve.
     ``start_state``: (speed, acceleration) the curve starts from (a replan), else rest."""
     builder = TrajectoryBuilder(x0=stations[0].position_m, t0=start_s)
+    dwell = stations[0].dwell_s
     if start_state is not None:
         builder.v, builder.a = start_state
         builder.ramp_acceleration_to_zero(scenario.planning.max_jerk_mps3)
-    builder.add(stations[0].dwell_s)
+    elif scenario.journey is not None:
+        # The origin's departure window: no departure before its earliest time.
+        earliest = scenario.journey.earliest_departure_s(stations[0].position_m)
+        if earliest is not None:
+            dwell = max(dwell, earliest - start_s)
+    builder.add(dwell)
     stops = []
     for leg, destination in enumerate(stations[1:]):
         sections = leg_sections(scenario, supervision.legs[leg].mrsp, builder.x,
@@ -501,7 +428,10 @@ def _build(scenario: Scenario, supervision: RunSupervision, stations: list[Stati
         if leg_planner is None:
             plan_leg(builder, scenario, sections, deceleration_factors[leg])
         else:
-            leg_planner(leg, builder, sections, deceleration_factors[leg])
+            ceiling = leg_ceiling(scenario, supervision.legs[leg].mrsp, builder.x,
+                                  destination.position_m, anticipation_s, extra_m)
+            leg_planner(leg, builder, sections, deceleration_factors[leg], ceiling,
+                        supervision.legs[leg].sampled('permitted'))
         builder.snap(destination.position_m)
         arrival = builder.t
         dwell = destination.dwell_s
@@ -526,40 +456,18 @@ class TimingCheck:
 
 def timing_checks(scenario: Scenario, trajectory: Trajectory,
                   stops: tuple[StopEvent, ...]) -> tuple[TimingCheck, ...]:
-    """Each timing point of the scenario's journey against the plan (its planned time and
-    whether that is within the window): the ``fastest`` curve only reports the windows it
-    misses, the ``timetable`` one plans to meet them."""
+    """Each timing point of the scenario's journey against the plan (its planned time,
+    ``timetable.point_times``, and whether that is within the window): the ``fastest`` curve
+    only reports the windows it misses, the ``timetable`` one plans to meet them."""
     if scenario.journey is None:
         return ()
-    checks = []
     points = scenario.journey.timing_points
-    origin_departure = trajectory.start_time + scenario.line.stations[0].dwell_s
-    for i, point in enumerate(points):
-        stop = next((s for s in stops if s.station.position_m == point.position_m), None)
-        is_departure = i > 0 and points[i - 1].is_stopping_point and \
-            points[i - 1].position_m == point.position_m
-        if i == 0:
-            planned = origin_departure
-        elif point.is_stopping_point and stop is not None:
-            planned = stop.departure_s if is_departure else stop.arrival_s
-        else:
-            planned = passing_time(trajectory, point.position_m)
+    checks = []
+    for point, planned in zip(points, point_times(scenario.journey, trajectory, stops)):
         within = ((point.earliest_s is None or planned >= point.earliest_s - 1e-6)
                   and (point.latest_s is None or planned <= point.latest_s + 1e-6))
         checks.append(TimingCheck(point, planned, within))
     return tuple(checks)
-
-
-def passing_time(trajectory: Trajectory, position_m: float) -> float:
-    """First time the target reaches a position (bisection: the position never decreases)."""
-    low, high = trajectory.start_time, trajectory.end_time
-    for _ in range(60):
-        middle = 0.5 * (low + high)
-        if trajectory.at(middle).position < position_m:
-            low = middle
-        else:
-            high = middle
-    return high
 
 
 def first_violation(trajectory: Trajectory, plan_stops, supervision: RunSupervision):
@@ -577,6 +485,20 @@ def first_violation(trajectory: Trajectory, plan_stops, supervision: RunSupervis
     return None
 
 
+def leg_limits(scenario: Scenario, leg: int = 0) -> LegLimits:
+    """The limits the ``timetable`` strategy plans leg ``leg`` of the scenario within, as the
+    first build has them (the supervision check can move a braking ahead or lower a leg's
+    deceleration): the problem that ``profile_node.oracle`` solves too."""
+    stations = [s for s in scenario.line.stations
+                if s.position_m >= scenario.run.initial_position_m - 1e-9]
+    supervision = RunSupervision.for_scenario(scenario)
+    settings = scenario.supervision
+    anticipation = settings.service_brake_build_up_s + settings.driver_reaction_s
+    start, end = stations[leg].position_m, stations[leg + 1].position_m
+    ceiling = leg_ceiling(scenario, supervision.legs[leg].mrsp, start, end, anticipation, {})
+    return LegLimits(scenario, start, end, ceiling, supervision.legs[leg].sampled('permitted'))
+
+
 def plan_reference(scenario: Scenario, start_s: float = 0.0) -> Plan:
     """The target curve of a scenario, from its initial position at rest at run time
     ``start_s`` (0: the start of the run), driven as its ``timetable.strategy`` says:
@@ -584,7 +506,7 @@ def plan_reference(scenario: Scenario, start_s: float = 0.0) -> Plan:
     if scenario.timetable.strategy == 'timetable':
         return plan_timetable(scenario, start_s)
     plan = plan_fastest(scenario, start_s)
-    return replace(plan, forecast_energy_j=forecast_energy_j(scenario, plan.trajectory))
+    return replace(plan, forecast=forecast_energy(scenario, plan.trajectory))
 
 
 def plan_fastest(scenario: Scenario, start_s: float = 0.0, leg_planner=None,
@@ -642,187 +564,296 @@ def resume_plan(scenario: Scenario, position_m: float, time_s: float) -> Plan | 
     return plan_reference(resumed, start_s=time_s)
 
 
-# The timetable strategy (profile_node.timetable gives its theory, the energy and the windows):
-# each leg's cruise speeds solved to its times.
+# The timetable strategy (profile_node.eco gives its optimisation, profile_node.timetable the
+# energy and the windows): each leg's hold speeds solved to its times.
+
+# Where the running time jumps with the hold speed (the structure of the curve changes), a
+# leg may arrive this much after its target time (half the margin a window's time is aimed at
+# inside it), s.
+LATE_TOLERANCE_S = 0.5 * WINDOW_MARGIN_S
+# Bisection steps of an excursion's start between two places (_LegSolver._between).
+BETWEEN_STEPS = 8
+# The hold speed of the fastest least-energy curve, over the leg's highest ceiling: the price
+# of time so high that no coast pays (the curve is then the fastest under the ceilings).
+FASTEST_HOLD_FACTOR = 10.0
+
+
+def hold_speed_for(time_with, target: float, low: float, high: float, guess: float) -> float:
+    """The hold speed in [low, high] at which ``time_with(speed)`` (a running time that falls
+    as the speed rises) is ``target``: a bracket grown from ``guess`` by 15 % steps, then
+    regula falsi (the Illinois variant) until the time is within TIME_TOLERANCE_S or the
+    bracket within SPEED_TOLERANCE_MPS. Where the time jumps (the structure of the curve
+    changes), the late side if it is late by at most LATE_TOLERANCE_S, else the early one;
+    ``high`` where even it is late, ``low`` where even it is early."""
+    def late(v: float) -> float:
+        return time_with(v) - target
+    v = min(max(guess, low), high)
+    f = late(v)
+    if abs(f) <= TIME_TOLERANCE_S:
+        return v
+    slow, fast = (v, f), None
+    if f < 0.0:
+        slow, fast = None, (v, f)
+    while slow is None:
+        v = max(fast[0] / 1.15, low)
+        f = late(v)
+        if f >= 0.0:
+            slow = (v, f)
+        elif v <= low:
+            return low
+        else:
+            fast = (v, f)
+    while fast is None:
+        v = min(slow[0] * 1.15, high)
+        f = late(v)
+        if f <= 0.0:
+            fast = (v, f)
+        elif v >= high:
+            return high
+        else:
+            slow = (v, f)
+    side = 0
+    for _ in range(60):
+        (a, fa), (b, fb) = slow, fast
+        if fa <= TIME_TOLERANCE_S or b - a <= SPEED_TOLERANCE_MPS:
+            break
+        if -fb <= TIME_TOLERANCE_S:
+            return b
+        wa, wb = (0.5 if side == -1 else 1.0), (0.5 if side == 1 else 1.0)
+        v = (a * fb * wa - b * fa * wb) / (fb * wa - fa * wb)
+        v = min(max(v, a + 0.1 * (b - a)), b - 0.1 * (b - a))
+        f = late(v)
+        if f > 0.0:
+            slow, side = (v, f), 1
+        else:
+            fast, side = (v, f), -1
+    return slow[0] if slow[1] <= LATE_TOLERANCE_S else fast[0]
+
 
 class _LegSolver:
     """Appends each leg of the timetable strategy to the curve (``planner._build``'s
-    ``leg_planner``), solving its cruise speeds to its times."""
+    ``leg_planner``): the least-energy curve (``profile_node.eco``) whose hold speeds, one per
+    stretch between passing windows, meet the leg's times."""
 
-    def __init__(self, scenario: Scenario, regenerative_efficiency: float = 0.0,
-                 targets: dict[int, float] | None = None):
+    def __init__(self, scenario: Scenario, targets: dict[int, float] | None = None,
+                 shortest_s: list[float] | None = None, windows: JourneyTimes | None = None):
         self.scenario = scenario
-        self.eta = regenerative_efficiency
         self.targets = targets or {}   # leg -> target arrival time (a replan's)
+        self.shortest_s = shortest_s or []   # leg -> the fastest curve's running time
+        self.windows = windows         # what the journey's windows allow at each point
         self.timings: list[LegTiming] = []
-        self.latest: dict[int, float] = {}   # leg -> latest arrival the later legs allow
 
-    def _trial(self, builder: TrajectoryBuilder, sections, factor,
-               cruise: LegCruise | None) -> TrajectoryBuilder:
+    @staticmethod
+    def _copy(builder: TrajectoryBuilder) -> TrajectoryBuilder:
         trial = TrajectoryBuilder(x0=builder.x, t0=builder.t)
         trial.v, trial.a = builder.v, builder.a
-        plan_leg(trial, self.scenario, sections, factor, cruise)
         return trial
 
-    def _cruise(self, starts, speeds, coast_share: float = 0.0) -> LegCruise:
-        """``coast_share`` in [0, 1] raises every coast's end speed from eq (2)'s W towards
-        the cruise speed (1: no coasting): the times between the fastest curve and the
-        coasting curve at the highest cruise speed."""
-        ends = []
-        for v in speeds:
-            w = coast_end_speed(self.scenario, v, self.eta)
-            ends.append(w + coast_share * (v - w))
-        return LegCruise(tuple(starts), tuple(speeds), tuple(ends))
+    def _trial(self, builder: TrajectoryBuilder, eco: EcoLeg, starts, speeds,
+               forced: dict[int, int] | None = None) -> TrajectoryBuilder:
+        trial = self._copy(builder)
+        trial.choices = eco.build(trial, starts, speeds, forced)
+        return trial
 
-    def _time_at(self, trial: TrajectoryBuilder, position: float | None) -> float:
-        if position is None:
-            return trial.t
-        return passing_time(trial.build(), position)
-
-    def _solve_speed(self, builder, sections, factor, starts, speeds, k, position, target,
-                     top):
+    def _solve_speed(self, builder, eco: EcoLeg, starts, speeds, k, position, target,
+                     guess: float, forced: dict[int, int]) -> tuple[float, dict[int, int]]:
         """speeds[k] such that the curve reaches ``position`` (None: the leg's end) at
-        ``target``; the fastest it can where even ``top`` is too slow. Returns (speeds[k],
-        coast share): a target between the fastest curve and the coasting one at ``top``
-        is met by coasting less (``_cruise``)."""
-        memo = {}
+        ``target`` (``hold_speed_for``, from ``guess``); the fastest it can where even the
+        fastest hold speed is too slow. Where the running time jumps with the hold speed
+        further than LATE_TOLERANCE_S (an excursion's best start moves from one place to
+        another), the starts that moved are set in between (``_between``). Returns the
+        speed and the excursion starts set so (``forced``, updated)."""
+        memo: dict[float, tuple[float, dict[int, int]]] = {}
 
-        def time_with(v, share=0.0):
-            if (v, share) not in memo:
+        def time_with(v: float) -> float:
+            if v not in memo:
                 trial_speeds = list(speeds)
                 trial_speeds[k] = v
-                cruise = self._cruise(starts, trial_speeds, share)
-                memo[v, share] = self._time_at(self._trial(builder, sections, factor, cruise),
-                                               position)
-            return memo[v, share]
-        low, high = LOWEST_CRUISE_MPS, top
-        if time_with(high) >= target:
-            if time_with(high, 1.0) >= target:
-                return high, 1.0
-            share = brentq(lambda c: time_with(high, c) - target, 0.0, 1.0, xtol=1e-3,
-                           maxiter=60)
-            return high, share
-        if time_with(low) <= target:
-            return low, 0.0
-        # The running time falls as the cruise speed rises: Brent's method on it.
-        return brentq(lambda v: time_with(v) - target, low, high,
-                      xtol=SPEED_TOLERANCE_MPS, maxiter=60), 0.0
+                trial = self._trial(builder, eco, starts, trial_speeds, forced)
+                memo[v] = (trial.t if position is None
+                           else passing_time(trial.build(), position), trial.choices)
+            return memo[v][0]
+        speed = hold_speed_for(time_with, target, LOWEST_CRUISE_MPS,
+                               FASTEST_HOLD_FACTOR * eco.highest, guess)
+        if abs(time_with(speed) - target) <= LATE_TOLERANCE_S:
+            return speed, forced
+        late = [v for v, (t, _) in memo.items() if t > target]
+        early = [v for v, (t, _) in memo.items() if t < target]
+        if not late or not early:
+            return speed, forced
+        slow, fast = memo[max(late)][1], memo[min(early)][1]
+        moved = {r: (slow[r], fast[r]) for r in slow.keys() & fast.keys() if slow[r] != fast[r]}
+        if not moved:
+            return speed, forced
+        return min(early), self._between(builder, eco, starts, speeds, k, min(early), position,
+                                         target, moved, forced)
 
-    def __call__(self, leg: int, builder: TrajectoryBuilder, sections, factor) -> None:
-        scenario = self.scenario
-        origin_m, end_m = builder.x, sections[-1].end_m
-        departure = builder.t
-        fastest = self._trial(builder, sections, factor, None)
-        shortest = fastest.t - departure
-        journey = scenario.journey
-        target = self.targets.get(leg)
-        points = []
+    def _between(self, builder, eco: EcoLeg, starts, speeds, k, speed, position, target,
+                 moved: dict[int, tuple[int, int]], forced: dict[int, int]) -> dict[int, int]:
+        """The excursion starts that ``moved`` (region start -> (start on the late side,
+        start on the early side)) set in between, a share tau of the way to the early side's,
+        tau bisected (at ``speed``) so that the curve is on time."""
+        trial_speeds = list(speeds)
+        trial_speeds[k] = speed
+
+        def starts_at(tau: float) -> dict[int, int]:
+            return {**forced, **{r: round(a + tau * (b - a)) for r, (a, b) in moved.items()}}
+
+        def late(tau: float) -> float:
+            trial = self._trial(builder, eco, starts, trial_speeds, starts_at(tau))
+            return (trial.t if position is None else passing_time(trial.build(), position)) \
+                - target
+        low, high = 0.0, 1.0
+        if late(low) <= 0.0:
+            return starts_at(low)
+        for _ in range(BETWEEN_STEPS):
+            middle = 0.5 * (low + high)
+            if late(middle) > 0.0:
+                low = middle
+            else:
+                high = middle
+        return starts_at(high)
+
+    def _target(self, leg: int, builder: TrajectoryBuilder, end_m: float, shortest: float):
+        """The leg's target arrival, and (point, lower bound, upper bound) of each passing
+        window within it: each window as the journey's later windows allow it
+        (``self.windows``: ``timetable.JourneyTimes``)."""
+        scenario, journey = self.scenario, self.scenario.journey
+        departure, target, points = builder.t, self.targets.get(leg), []
+        supplement = 1.0 + scenario.timetable.supplement_percent / 100.0
         if journey is not None:
-            arrival_point = next((p for p in journey.timing_points if p.is_stopping_point
-                                  and abs(p.position_m - end_m) < 1e-6), None)
-            if target is None and arrival_point is not None:
-                target = window_target(arrival_point.earliest_s, arrival_point.latest_s)
-                if target is None and arrival_point.earliest_s is not None:
-                    target = max(arrival_point.earliest_s,
-                                 departure + shortest
-                                 * (1.0 + scenario.timetable.supplement_percent / 100.0))
-            points = [p for p in journey.timing_points if not p.is_stopping_point
-                      and origin_m < p.position_m < end_m]
+            allowed = self.windows.latest if self.windows is not None \
+                else [p.latest_s for p in journey.timing_points]
+            for k, point in enumerate(journey.timing_points):
+                if not point.is_stopping_point and builder.x < point.position_m < end_m:
+                    points.append((point, point.earliest_s, _bound(allowed[k])))
+            arrival = next((k for k, p in enumerate(journey.timing_points)
+                            if p.is_stopping_point and abs(p.position_m - end_m) < 1e-6),
+                           None)
+            if target is None and arrival is not None:
+                point = journey.timing_points[arrival]
+                target = window_target(point.earliest_s, _bound(allowed[arrival]))
+                if target is None and point.earliest_s is not None:
+                    target = max(point.earliest_s, departure + shortest * supplement)
         if target is None:
-            target = departure + shortest * (1.0 + scenario.timetable.supplement_percent / 100.0)
-        # No later than what leaves the later legs their times (a later window's reserve).
-        target = min(target, self.latest.get(leg, math.inf))
-        top = max(s.level_mps for s in sections)
-        starts, speeds = [origin_m], [top]
+            target = departure + shortest * supplement
+        return target, points
+
+    def _least_energy(self, builder, eco: EcoLeg, target: float, points,
+                      fastest_s: float) -> TrajectoryBuilder:
+        """The curve of the hold speeds that meet the target and the passing windows: one
+        hold speed, then the leg split at each window it misses (``_first_missed``).
+        ``fastest_s``: the fastest curve's running time (the first guess: the highest level
+        scaled by the running times)."""
+        origin = builder.x
+        first = eco.highest * fastest_s / max(target - builder.t, fastest_s)
+        guesses: list[float] = []
+        starts, speeds = [origin], [FASTEST_HOLD_FACTOR * eco.highest]
         splits: list[tuple[float, float]] = []   # (position, time aimed at) of active windows
+        chosen = None
+        for _ in range(len(points) + 1):
+            goals = splits + [(None, target)]
+            forced: dict[int, int] = {}
+            for _sweep in range(2 if splits else 1):
+                for k, (position, goal) in enumerate(goals):
+                    guess = guesses[k] if k < len(guesses) else first
+                    speeds[k], forced = self._solve_speed(builder, eco, starts, speeds, k,
+                                                          position, goal, guess, forced)
+                guesses = list(speeds)
+            chosen = self._trial(builder, eco, starts, speeds, forced)
+            missed = self._first_missed(chosen.build(), points, splits)
+            if missed is None:
+                break
+            splits = sorted(splits + [missed], key=lambda s: s[0])
+            starts = [origin] + [p for p, _ in splits]
+            speeds = [FASTEST_HOLD_FACTOR * eco.highest] * len(starts)
+            guesses = [speeds_solved for speeds_solved in guesses[:1]]
+        return chosen
+
+    def __call__(self, leg: int, builder: TrajectoryBuilder, sections, factor,
+                 ceiling: PiecewiseConstant, permitted) -> None:
+        scenario = self.scenario
+        end_m, departure = sections[-1].end_m, builder.t
+        fastest = self._copy(builder)
+        plan_leg(fastest, scenario, sections, factor)
+        shortest = self.shortest_s[leg] if leg < len(self.shortest_s) else fastest.t - departure
+        target, points = self._target(leg, builder, end_m, shortest)
         chosen = fastest
         if target > fastest.t + TIME_TOLERANCE_S:
-            for _ in range(len(points) + 1):
-                goals = splits + [(None, target)]
-                share = 0.0
-                for _sweep in range(2 if splits else 1):
-                    for k, (position, goal) in enumerate(goals):
-                        speeds[k], share = self._solve_speed(builder, sections, factor, starts,
-                                                             speeds, k, position, goal, top)
-                chosen = self._trial(builder, sections, factor,
-                                     self._cruise(starts, speeds, share))
-                missed = self._first_missed(chosen.build(), points, splits)
-                if missed is None:
-                    break
-                position, goal = missed
-                splits = sorted(splits + [(position, goal)], key=lambda s: s[0])
-                starts = [origin_m] + [p for p, _ in splits]
-                speeds = [top] * len(starts)
+            limits = LegLimits(scenario, builder.x, end_m, ceiling, permitted, factor)
+            try:
+                eco = EcoLeg(limits, scenario.planning.max_jerk_mps3, builder.v)
+                candidate = self._least_energy(builder, eco, target, points,
+                                               fastest.t - departure)
+            except ValueError:
+                candidate = None   # no least-energy curve from this state: the fastest
+            # Where even the fastest least-energy curve is late, the fastest curve.
+            if candidate is not None and (candidate.t <= target + LATE_TOLERANCE_S
+                                          or candidate.t < fastest.t):
+                chosen = candidate
         builder.segments.extend(chosen.segments)
         builder.t, builder.x, builder.v, builder.a = chosen.t, chosen.x, chosen.v, chosen.a
+        # the least-energy curve at the fastest price can be a little faster than the fastest
+        # builder's curve (its switches fall elsewhere under the jerk limit): the shorter
+        shortest = min(shortest, chosen.t - departure)
         self.timings.append(LegTiming(f'{end_m:.0f} m', departure, target, chosen.t, shortest))
 
     @staticmethod
     def _first_missed(trajectory: Trajectory, points, splits):
-        """The first passing point outside its window (not yet a split), with the time to
-        aim at there."""
+        """The first passing window missed (not yet a split), with the time to aim at
+        there; ``points``: (point, lower bound, upper bound)."""
         fixed = {p for p, _ in splits}
-        for point in points:
+        for point, earliest, latest in points:
             if point.position_m in fixed:
                 continue
             t = passing_time(trajectory, point.position_m)
-            if point.earliest_s is not None and t < point.earliest_s - 1e-6:
-                late = point.latest_s
-                margin = WINDOW_MARGIN_S if late is None else min(
-                    WINDOW_MARGIN_S, 0.5 * (late - point.earliest_s))
-                return point.position_m, point.earliest_s + margin
-            if point.latest_s is not None and t > point.latest_s + 1e-6:
-                return point.position_m, window_target(point.earliest_s, point.latest_s)
+            if earliest is not None and t < earliest - 1e-6:
+                margin = WINDOW_MARGIN_S if latest is None else max(min(
+                    WINDOW_MARGIN_S, 0.5 * (latest - earliest)), 0.0)
+                return point.position_m, earliest + margin
+            if latest is not None and t > latest + 1e-6:
+                return point.position_m, window_target(earliest, latest)
         return None
 
 
-def _latest_arrivals(scenario: Scenario, fastest: Plan) -> dict[int, float]:
-    """leg -> the latest arrival at its stop from which every later stop's latest time is
-    still reachable (after the stop's dwell, at the fastest curve's running times)."""
-    journey, stops = scenario.journey, fastest.stops
-    latest: dict[int, float] = {}
-    bound = math.inf
-    for leg in range(len(stops) - 1, 0, -1):
-        stop = stops[leg]
-        arrival = next((p for p in journey.timing_points if p.is_stopping_point
-                        and abs(p.position_m - stop.station.position_m) < 1e-6), None)
-        if arrival is not None and arrival.latest_s is not None:
-            bound = min(bound, arrival.latest_s)
-        previous = stops[leg - 1]
-        running = stop.arrival_s - previous.departure_s
-        # The departure waits for its earliest time anyway: no need to arrive before that.
-        departure = bound - running
-        earliest = journey.earliest_departure_s(previous.station.position_m)
-        if earliest is not None:
-            departure = max(departure, earliest)
-        bound = departure - previous.station.dwell_s
-        latest[leg - 1] = bound
-    return latest
+def _bound(latest: float | None) -> float | None:
+    return None if latest is None or not math.isfinite(latest) else latest
+
+
+def _running_times(scenario: Scenario, fastest: Plan) -> list[float]:
+    """Each leg's shortest running time: the fastest curve's (checked against the
+    supervision), from its departure (waiting excluded) to its arrival."""
+    origin = next(s for s in scenario.line.stations
+                  if s.position_m >= scenario.run.initial_position_m - 1e-9)
+    departure = fastest.trajectory.start_time + origin.dwell_s
+    times = []
+    for stop in fastest.stops:
+        times.append(stop.arrival_s - departure)
+        departure = stop.departure_s
+    return times
 
 
 def plan_timetable(scenario: Scenario, start_s: float = 0.0, start_state=None,
-                   targets: dict[int, float] | None = None,
-                   regenerative_efficiency: float | None = None) -> Plan:
-    """The ``timetable`` strategy's curve (:mod:`profile_node.timetable`). A journey whose
-    windows cannot all be met is refused (PlanningError naming them and the shortest running
-    time between them) unless ``scenario.timetable.run_infeasible``; then each time is aimed
-    at as closely as the train allows. ``start_state`` and ``targets`` (leg -> arrival time):
+                   targets: dict[int, float] | None = None) -> Plan:
+    """The ``timetable`` strategy's curve (:mod:`profile_node.eco`). A journey whose
+    windows cannot all be met (``timetable.journey_times``) is refused (PlanningError naming
+    them and the shortest running time between them) unless
+    ``scenario.timetable.run_infeasible``; then every window that can be is met and the others
+    as closely as the train allows. ``start_state`` and ``targets`` (leg -> arrival time):
     a replan."""
+    # The fastest curve without waiting for earliest departures: the shortest running times.
+    fastest = plan_fastest(replace(scenario, journey=None, timetable=replace(
+        scenario.timetable, strategy='fastest')), start_s, start_state=start_state)
+    windows = None
     if start_state is None and targets is None and scenario.journey is not None:
-        fastest = plan_fastest(replace(scenario, timetable=replace(scenario.timetable,
-                                                                   strategy='fastest')),
-                               start_s)
-        conflicts = window_conflicts(scenario, fastest)
-        if conflicts and not scenario.timetable.run_infeasible:
+        windows = journey_times(scenario.journey, fastest.trajectory, fastest.stops)
+        if windows.conflicts and not scenario.timetable.run_infeasible:
             raise PlanningError(
                 f'{scenario.origin}: the journey\'s windows cannot all be met: '
-                + '; '.join(c.message() for c in conflicts)
-                + ' (timetable.run_infeasible: true runs it anyway, as close as possible)')
-    if regenerative_efficiency is None:
-        regenerative_efficiency = scenario.timetable.regenerative_efficiency
-    solver = _LegSolver(scenario, regenerative_efficiency, targets)
-    if start_state is None and targets is None and scenario.journey is not None:
-        solver.latest = _latest_arrivals(scenario, fastest)
+                + '; '.join(c.message() for c in windows.conflicts)
+                + ' (timetable.run_infeasible: true runs it anyway, meeting every window it '
+                'can)')
+    solver = _LegSolver(scenario, targets, _running_times(scenario, fastest), windows)
     plan = plan_fastest(scenario, start_s, solver, start_state)
     # plan_fastest may build the curve again (a supervision check); the last build's legs.
     timings = tuple(solver.timings[-len(plan.stops):])
@@ -830,5 +861,4 @@ def plan_timetable(scenario: Scenario, start_s: float = 0.0, start_state=None,
                     for t, stop in zip(timings, plan.stops))
     delay = timings[-1].expected_delay_s if timings else 0.0
     return replace(plan, strategy='timetable', legs=timings, expected_delay_s=delay,
-                   forecast_energy_j=forecast_energy_j(scenario, plan.trajectory,
-                                                       regenerative_efficiency))
+                   forecast=forecast_energy(scenario, plan.trajectory))

@@ -1,42 +1,9 @@
-"""The ``timetable`` driving strategy: on time, with the least traction energy.
-
-The method is the structure optimal control theory gives for the energy-efficient train control
-problem (Howlett & Pudney, *Energy-Efficient Train Control*, Springer 1995; Albrecht, Howlett,
-Pudney, Vu & Zhou, "The key principles of optimal train control", Transportation Research
-Part B 94, 2016, parts 1 and 2), applied as OSRD's MARECO energy-saving allowance applies it:
-maximum traction, a cruise (speed holding, partial traction), a coast, and maximum braking.
-
-In the distance domain, per unit mass, with speed v(x), time t(x), traction u_f >= 0, braking
-u_b >= 0, resistance r(v) and grade g(x): dv/dx = (u_f - u_b - r(v) - g(x)) / v. The cost is
-the traction work net of what regenerative braking recovers (efficiency eta),
-J = integral (u_f - eta u_b) dx, and the running time is priced by a multiplier lambda: minimise
-J + lambda T. Pontryagin's principle with the Hamiltonian
-H = u_f - eta u_b + lambda / v + p (u_f - u_b - r - g) / v and theta = -p / v gives: full traction
-for theta > 1, speed holding at theta = 1, coasting for eta < theta < 1, full braking for
-theta < eta. Speed holding at V on level track needs dp/dx = 0, so
-
-    lambda = psi(V),  psi(v) = v^2 r'(v)                                         (1)
-
-(Albrecht et al. 2016, part 1, the speed-holding condition), and H is constant on level track:
-H = r(V) + V r'(V) while holding; at the switch from coasting to braking (theta = eta, at speed
-W), H = psi(V) / W + eta r(W). The coast therefore ends, and the braking starts, at the W with
-
-    psi(V) / W + eta r(W) = r(V) + V r'(V)                                       (2)
-
-(for eta = 0: W = psi(V) / (r(V) + V r'(V)), the braking speed OSRD's MARECO uses). Each leg is
-then planned by the planner's jerk-limited builder (``planner.plan_leg`` with a ``LegCruise``;
-the solver is ``planner.plan_timetable``, this module gives its theory, energy and windows):
-traction at the train's capability up to min(level, V), cruise, coast down to W before every
-braking, braking at the planning deceleration. V is found by bisection so that the leg arrives
-at its target time (a running time that decreases with V). A passing window the single-V plan
-misses splits the leg there: the stretches before and after get their own V (the multiplier
-lambda jumps at an interior time constraint), each solved to meet its own time.
-
-Simplified against the theory: (2) is taken on level track for every coast (on a grade the
-coast simply follows the grade's force); steep descents (where the train would accelerate while
-coasting) are held at V with the brake rather than entered by a coast from below V; the jerk
-limit rounds every switch. The test (``profile_node/test/test_timetable_optimality.py``)
-compares the resulting energy with a dynamic programme over distance and speed.
+"""The ``timetable`` driving strategy's energy and journey windows (its optimisation is
+``profile_node.eco``; its solver ``planner.plan_timetable``): the grade under the train, the
+energies at the wheel a plan forecasts (``forecast_energy``, the definitions of
+``ato_common.metrics``), the time aimed at in a window, what a journey's windows allow at each
+timing point and which cannot be met (``journey_times``) and what the profile node reports of
+a plan (``plan_summary``).
 """
 
 from __future__ import annotations
@@ -46,19 +13,19 @@ from bisect import bisect_left, bisect_right
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
 from ato_common import units
+from ato_common.metrics import WheelEnergy, wheel_energy
 from ato_common.scenario import Scenario
-from profile_node.trajectory import Trajectory
+from profile_node.trajectory import Trajectory, passing_time
 
 # A window's time is aimed at this far inside the window (at most half its width), s: the
 # closed loop follows the reference a little late or early.
 WINDOW_MARGIN_S = 2.0
 # Accuracy of the time each leg is solved to, s.
 TIME_TOLERANCE_S = 0.05
-# Accuracy of the cruise speed solved for, m/s (a few hundredths of a second on a leg).
-SPEED_TOLERANCE_MPS = 0.005
+# Accuracy of the hold speed solved for, m/s (where the running time jumps with it).
+SPEED_TOLERANCE_MPS = 0.02
 # The lowest cruise speed the solver tries, m/s.
 LOWEST_CRUISE_MPS = 2.0
 # Sampling of the energy forecast, s.
@@ -109,39 +76,6 @@ def train_grade_sine(line, front_m: float, length_m: float) -> float:
     return total / length_m
 
 
-def resistance_per_kg(scenario: Scenario):
-    """r(v), r'(v): nominal Davis resistance over the mass and its derivative, m/s^2."""
-    davis, mass = scenario.train.davis_nominal, scenario.train.mass_kg
-
-    def r(v: float) -> float:
-        return davis.force(v) / mass
-
-    def dr(v: float) -> float:
-        return (davis.b_n_s_per_m + 2.0 * davis.c_n_s2_per_m2 * v) / mass
-    return r, dr
-
-
-def coast_end_speed(scenario: Scenario, cruise_mps: float,
-                    regenerative_efficiency: float = 0.0) -> float:
-    """W of eq (2): the speed at which the coast ends and the braking starts, for a cruise at
-    ``cruise_mps``; 0 where the resistance does not rise with speed (no coasting gain)."""
-    r, dr = resistance_per_kg(scenario)
-    v = cruise_mps
-    psi = v * v * dr(v)                                          # eq (1)
-    hold = r(v) + v * dr(v)
-    if psi <= 0.0 or hold <= 0.0:
-        return 0.0
-    if regenerative_efficiency <= 0.0:
-        return min(psi / hold, v)                               # eq (2), eta = 0
-    eta = regenerative_efficiency
-
-    def balance(w: float) -> float:
-        return psi / w + eta * r(w) - hold                      # eq (2)
-    if balance(v) >= 0.0:
-        return v
-    return brentq(balance, 1e-6, v)
-
-
 def sample(trajectory: Trajectory, times: np.ndarray):
     """x*, v*, a* at many times at once (vectorised ``Trajectory.at``)."""
     starts = np.array([s.t0 for s in trajectory.segments])
@@ -161,28 +95,26 @@ def sample(trajectory: Trajectory, times: np.ndarray):
     return x, v, a
 
 
-def forecast_energy_j(scenario: Scenario, trajectory: Trajectory,
-                      regenerative_efficiency: float | None = None,
-                      step_s: float = ENERGY_STEP_S) -> float:
-    """Traction energy the nominal train needs to follow ``trajectory``, net of what its
-    regenerative brake recovers (``regenerative_efficiency``, default the scenario's, times the
-    braking power up to ``timetable.regenerative_power_w``), J.
-    Force = m a* + Davis(v*) + m g sin(grade over the train's length) + curves and tunnels."""
+def forecast_energy(scenario: Scenario, trajectory: Trajectory,
+                    step_s: float = ENERGY_STEP_S) -> WheelEnergy:
+    """The energies at the wheel (``ato_common.metrics.wheel_energy``: gross traction, braking,
+    regenerated at the train's efficiency and power, net) of the nominal train following
+    ``trajectory``: the force m a* + Davis(v*) + m g sin(grade over the train's length) + curves
+    and tunnels, taken at the middle of each ``step_s`` and held over it."""
     train, line = scenario.train, scenario.line
     times = np.arange(trajectory.start_time, trajectory.end_time + step_s, step_s)
-    x, v, a = sample(trajectory, times)
+    times[-1] = trajectory.end_time
+    x_ends, _, _ = sample(trajectory, times)
+    middles = 0.5 * (times[1:] + times[:-1])
+    x, v, a = sample(trajectory, middles)
     grade = np.array([train_grade_sine(line, p, train.length_m) for p in x])
     other = np.array([line.line_force_per_kg(p) - units.STANDARD_GRAVITY * line.grade_sine(p)
                       for p in x])
     davis = train.davis_nominal
     force = (train.mass_kg * (a + units.STANDARD_GRAVITY * grade + other)
              + davis.a_n + davis.b_n_s_per_m * v + davis.c_n_s2_per_m2 * v * v)
-    power = force * v
-    if regenerative_efficiency is None:
-        regenerative_efficiency = scenario.timetable.regenerative_efficiency
-    recovered = np.maximum(power, -scenario.timetable.regenerative_power_w)
-    net = np.where(power > 0.0, power, regenerative_efficiency * recovered)
-    return float(np.trapezoid(net, times))
+    return wheel_energy(force, np.diff(x_ends), np.diff(times), train.regenerative_efficiency,
+                        train.regenerative_power_w)
 
 
 def window_target(earliest: float | None, latest: float | None) -> float | None:
@@ -197,7 +129,7 @@ def window_target(earliest: float | None, latest: float | None) -> float | None:
 
 @dataclass(frozen=True)
 class Conflict:
-    """Two timing points whose windows cannot both be met."""
+    """A timing point whose window cannot be met after an earlier one's (or the start's)."""
 
     first: str
     second: str
@@ -206,8 +138,8 @@ class Conflict:
 
     def message(self) -> str:
         return (f'{self.second} cannot be reached from {self.first} in time: the shortest '
-                f'running time between them is {self.shortest_s:.1f} s, the windows leave '
-                f'{self.allowed_s:.1f} s')
+                f'running time between them is {self.shortest_s:.1f} s (waiting excluded), '
+                f'the windows leave {self.allowed_s:.1f} s')
 
 
 def _point_name(index: int, point) -> str:
@@ -220,52 +152,105 @@ def _fmt(value: float | None) -> str:
     return '-' if value is None else f'{value:g}'
 
 
-def window_conflicts(scenario: Scenario, fastest) -> list[Conflict]:
-    """Pairs of timing points (i before j) where j's latest time minus i's earliest is shorter
-    than the fastest curve's running time from i to j (``fastest``: its Plan,
-    profile_node.planner); i is also the start of the run."""
-    if scenario.journey is None:
-        return []
-    points = scenario.journey.timing_points
-    times = [check.planned_s for check in fastest.timing]
-    start = fastest.trajectory.start_time + scenario.line.stations[0].dwell_s
-    conflicts = []
-    for j, later in enumerate(points):
-        if later.latest_s is None:
+def origin_departure_s(trajectory: Trajectory) -> float:
+    """When the curve leaves its origin: the end of its first segment if that is a dwell."""
+    first = trajectory.segments[0]
+    if first.v0 == 0.0 and first.a0 == 0.0 and first.jerk == 0.0:
+        return first.t0 + first.duration
+    return first.t0
+
+
+def point_times(journey, trajectory: Trajectory, stops) -> list[float]:
+    """The time of each of the journey's timing points on a curve (``stops``: its
+    ``StopEvent``s): a stopping point's arrival or, the second of two at one station, its
+    departure; at the origin the departure (an arrival there before it: the start); a passing
+    point's first passage."""
+    points = journey.timing_points
+    origin = trajectory.segments[0].x0
+    by_position = {stop.station.position_m: stop for stop in stops}
+    times = []
+    for i, point in enumerate(points):
+        if not point.is_stopping_point:
+            times.append(passing_time(trajectory, point.position_m))
             continue
-        found = len(conflicts)
-        for i in range(j):
-            earlier = points[i]
-            if earlier.earliest_s is None or earlier.position_m == later.position_m:
-                continue
-            shortest = times[j] - times[i]
-            allowed = later.latest_s - earlier.earliest_s
-            if allowed < shortest - 1e-6:
-                conflicts.append(Conflict(_point_name(i, earlier), _point_name(j, later),
-                                          shortest, allowed))
-        if len(conflicts) == found and times[j] > later.latest_s + 1e-6:
-            conflicts.append(Conflict('the start of the run', _point_name(j, later),
-                                      times[j] - start, later.latest_s - start))
-    return conflicts
+        departing = i > 0 and points[i - 1].is_stopping_point \
+            and points[i - 1].position_m == point.position_m
+        departs_later = i + 1 < len(points) and points[i + 1].is_stopping_point \
+            and points[i + 1].position_m == point.position_m
+        if abs(point.position_m - origin) < 1e-6:
+            times.append(trajectory.start_time if departs_later
+                         else origin_departure_s(trajectory))
+        elif point.position_m in by_position:
+            stop = by_position[point.position_m]
+            times.append(stop.departure_s if departing else stop.arrival_s)
+        else:
+            times.append(passing_time(trajectory, point.position_m))
+    return times
 
 
-def energy_kwh(plan) -> float:
-    return units.joules_to_kwh(plan.forecast_energy_j) if math.isfinite(
-        plan.forecast_energy_j) else math.nan
+@dataclass(frozen=True)
+class JourneyTimes:
+    """What a journey's windows allow at each timing point: the earliest time the train can
+    be there (its window's lower bound, and the shortest running times from the earlier
+    points, waiting excluded), the latest it may be there to meet every later window, and the
+    windows that cannot be met (each conflict named once, at the first point it makes late;
+    the latest time is never before the earliest: a conflict's later window is missed, the
+    earlier ones are met)."""
+
+    earliest: list[float]
+    latest: list[float]
+    conflicts: list[Conflict]
+
+
+def journey_times(journey, trajectory: Trajectory, stops) -> JourneyTimes:
+    """``JourneyTimes`` of a journey from the fastest curve without waiting (``trajectory``
+    and its ``stops``: the shortest running time between consecutive timing points, a stop's
+    dwell included). Forward, each point is reached no earlier than its window's lower bound
+    and the previous point's earliest time plus the running time; a point whose upper bound
+    is earlier is a conflict with the point that set that time (the start of the run, or the
+    last point whose lower bound did), unless an earlier conflict made it late. Backward, each
+    point's latest time is its upper bound, and no later than the next point's latest time
+    less the running time."""
+    points = journey.timing_points
+    times = point_times(journey, trajectory, stops)
+    running = [b - a for a, b in zip(times, times[1:])]
+    earliest, conflicts = [], []
+    source, source_time, inherited = None, times[0], False
+    for k, point in enumerate(points):
+        reached = times[0] if k == 0 else earliest[-1] + running[k - 1]
+        if point.earliest_s is not None and point.earliest_s >= reached:
+            reached, source, source_time, inherited = point.earliest_s, k, point.earliest_s, False
+        earliest.append(reached)
+        if point.latest_s is not None and reached > point.latest_s + 1e-6:
+            if not inherited:
+                first = 'the start of the run' if source is None else \
+                    _point_name(source, points[source])
+                conflicts.append(Conflict(first, _point_name(k, point), reached - source_time,
+                                          point.latest_s - source_time))
+            inherited = True
+    latest = [math.inf] * len(points)
+    for k in range(len(points) - 1, -1, -1):
+        bound = points[k].latest_s if points[k].latest_s is not None else math.inf
+        if k + 1 < len(points):
+            bound = min(bound, latest[k + 1] - running[k])
+        # never before the earliest time (a later conflict is missed, not every window)
+        latest[k] = max(bound, earliest[k])
+    return JourneyTimes(earliest, latest, conflicts)
 
 
 def plan_summary(plan) -> dict[str, object]:
     """What the profile node reports of a plan (a profile_node.planner.Plan) on diagnostics
-    (docs/guide/target-curve.md): the strategy, the forecast traction energy, the expected
-    delay, and per stop its target and planned arrival, the shortest running time and the
-    reserve; per journey timing point its planned time and whether it is within its window."""
-    values: dict[str, object] = {
-        'strategy': plan.strategy,
-        'forecast_energy_kwh': (units.joules_to_kwh(plan.forecast_energy_j)
-                                if math.isfinite(plan.forecast_energy_j) else math.nan),
+    (docs/guide/target-curve.md): the strategy, the forecast energies (``forecast.<field>``,
+    the fields and definitions of ``ato_common.metrics.RunMetrics``), the expected delay, and
+    per stop its target and planned arrival, the shortest running time and the reserve; per
+    journey timing point its planned time and whether it is within its window."""
+    values: dict[str, object] = {'strategy': plan.strategy}
+    if plan.forecast is not None:
+        values.update((f'forecast.{key}', value) for key, value in plan.forecast.kwh().items())
+    values.update({
         'expected_delay_s': plan.expected_delay_s,
         'plan_start_s': plan.trajectory.start_time,
-        'plan_end_s': plan.trajectory.end_time}
+        'plan_end_s': plan.trajectory.end_time})
     for stop in plan.stops:
         values[f'stop.{stop.station.name}.arrival_s'] = stop.arrival_s
         values[f'stop.{stop.station.name}.departure_s'] = stop.departure_s

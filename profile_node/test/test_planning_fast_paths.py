@@ -1,9 +1,8 @@
 """The planner's fast paths give the plans of the straightforward computations they replaced, bit
 for bit: the grade under the train summed over the grades it overlaps only
 (``timetable.train_grade_sine``), the traction phases from one speed replayed from their shared
-steps (``trajectory.AccelerationSteps``), the trial coasts from one point likewise
-(``trajectory.CoastSteps``) and the others on a builder that keeps no segments
-(``trajectory.StateBuilder``). The slow paths are written out here, from the public
+steps (``trajectory.AccelerationSteps``) and the other trial phases on a builder that keeps no
+segments (``trajectory.StateBuilder``). The slow paths are written out here, from the public
 builder's methods, and planned with in place of the fast ones."""
 
 from __future__ import annotations
@@ -18,12 +17,7 @@ from ato_common.scenario import builtin_scenarios, load_scenario
 from profile_node import planner
 from profile_node.planner import MIN_PLANNED_ACCELERATION_MPS2, plan_reference, traction_capability
 from profile_node.timetable import train_grade_sine
-from profile_node.trajectory import (
-    AccelerationSteps,
-    CoastSteps,
-    StateBuilder,
-    TrajectoryBuilder,
-)
+from profile_node.trajectory import AccelerationSteps, StateBuilder, TrajectoryBuilder
 
 
 def slow_train_grade_sine(line, front_m: float, length_m: float) -> float:
@@ -55,27 +49,11 @@ def slow_traction_distance(traction, davis, mass_kg, planning, climb_sine, v_fro
     return builder.x
 
 
-class SlowCoasts:
-    """Each coast built segment by segment with the public builder, every time."""
-
-    def __init__(self, x0, v_from, deceleration, jerk, step_s):
-        self.start = x0, v_from, deceleration, jerk, step_s
-
-    def end_of(self, target_speed, limit_x=math.inf):
-        x0, v_from, deceleration, jerk, step_s = self.start
-        builder = TrajectoryBuilder(x0=x0)
-        builder.v = v_from
-        if not builder.coast_to(target_speed, deceleration, jerk, step_s, limit_x):
-            return None
-        return builder.x
-
-
 def plan_slowly(monkeypatch, scenario):
     with monkeypatch.context() as patch:
         patch.setattr(planner, 'train_grade_sine', slow_train_grade_sine)
         patch.setattr(planner, '_traction_distance', slow_traction_distance)
         patch.setattr(planner, 'StateBuilder', TrajectoryBuilder)
-        patch.setattr(planner, 'CoastSteps', SlowCoasts)
         return plan_reference(scenario)
 
 
@@ -109,29 +87,13 @@ def test_traction_phases_replayed_from_shared_steps_are_the_builders():
                 assert steps.distance_to(v_to) == builder.x, (climb, v_from, v_to)
 
 
-def test_coasts_replayed_from_shared_steps_are_the_builders():
-    scenario = load_scenario('short_line')
-    deceleration = planner.coasting_deceleration(scenario)
-    jerk = scenario.planning.max_jerk_mps3
-    rng = random.Random(5)
-    for x0, v_from in ((1000.0, 60.0), (20000.0, 45.0), (33000.0, 30.0)):
-        steps = CoastSteps(x0, v_from, deceleration, jerk, planner.COAST_STEP_S)
-        for _ in range(60):
-            v_to = rng.uniform(0.0, 70.0)
-            limit = rng.choice([math.inf, x0 + rng.uniform(0.0, 6000.0)])
-            builder = TrajectoryBuilder(x0=x0)
-            builder.v = v_from
-            done = builder.coast_to(v_to, deceleration, jerk, planner.COAST_STEP_S, limit)
-            assert steps.end_of(v_to, limit) == (builder.x if done else None), (x0, v_to, limit)
-
-
 def test_a_state_builder_ends_where_the_trajectory_builder_does():
     full, state = TrajectoryBuilder(x0=10.0, t0=3.0), StateBuilder(x0=10.0, t0=3.0)
     for builder in (full, state):
         builder.v = 30.0
         builder.add(1.3, 0.2)
         builder.add(0.7, -0.25)
-        builder.coast_to(20.0, lambda v, x: 0.01 + 1e-4 * v * v, 0.3, 3.0)
+        builder.follow(lambda v, x: -0.01 - 1e-4 * v * v, 0.3, speed=20.0, step_s=3.0)
     assert (state.t, state.x, state.v, state.a) == (full.t, full.x, full.v, full.a)
     assert state.segments == [] and full.segments
 
@@ -149,5 +111,4 @@ def test_the_plans_are_those_of_the_slow_paths_bit_for_bit(monkeypatch, name, st
     assert fast.trajectory.segments == slow.trajectory.segments   # every float of the curve
     assert fast.stops == slow.stops
     assert fast.legs == slow.legs
-    assert (fast.expected_delay_s, fast.forecast_energy_j) == \
-        (slow.expected_delay_s, slow.forecast_energy_j)
+    assert (fast.expected_delay_s, fast.forecast) == (slow.expected_delay_s, slow.forecast)

@@ -85,12 +85,14 @@ def test_a_journey_timetable_holds_departures_and_reports_its_windows(tmp_path):
             'timing point 3 (stop at 6000 m, window [600, -] s) in time: the shortest running '
             'time between them is 23') in message
     assert 'the windows leave 100.0 s' in message and 'timetable.run_infeasible' in message
-    # The flag runs it anyway, as close as possible: the fastest where a window is missed.
+    # The flag runs it anyway, as close as possible: the fastest where a window is missed
+    # (the least-energy curve at the price of time where no coast pays: within half a second
+    # of the fastest strategy's curve, which switches at other places under the jerk limit).
     anyway = plan_reference(load_scenario_file(tmp_path, {
         **given, 'timetable': {'run_infeasible': True}}))
     fastest = plan_reference(load_scenario_file(tmp_path, {
         **given, 'timetable': {'strategy': 'fastest'}}))
-    assert anyway.stops[-1].arrival_s == pytest.approx(fastest.stops[-1].arrival_s, abs=0.1)
+    assert anyway.stops[-1].arrival_s == pytest.approx(fastest.stops[-1].arrival_s, abs=0.5)
     # The fastest curve (today's) waits at stations and reports the windows it misses.
     plan = fastest
     middle = plan.stops[0]

@@ -437,7 +437,11 @@ def test_the_energies_the_metrics_have_are_shown():
     metrics = RunMetrics(samples=2, simulated_time_s=1.0, rms_speed_error_kmh=0.0,
                          max_speed_error_kmh=0.0, rms_position_error_m=0.0,
                          max_position_error_m=0.0, stop_errors_m={}, traction_energy_kwh=3.0)
-    assert energy_rows(metrics) == [('traction energy, gross (kWh)', '3.00')]
+    # ato_common.metrics gives all four (net = gross - regenerated where not given)
+    assert energy_rows(metrics) == [('traction energy, gross (kWh)', '3.00'),
+                                    ('braking energy (kWh)', '0.00'),
+                                    ('regenerated energy (kWh)', '0.00'),
+                                    ('net energy (kWh)', '3.00')]
 
     @dataclass(frozen=True)
     class Fuller(RunMetrics):  # as ato_common.metrics gives them, once it does
