@@ -41,7 +41,8 @@ def test_the_score_weighs_the_metrics_and_counts_the_violations():
 
 
 def test_the_training_seed_must_not_be_the_campaigns(campaign):
-    with pytest.raises(ConfigError, match="the training seed 2026 is the campaign's own"):
+    with pytest.raises(ConfigError, match=f"the training seed {campaign.seed} is the "
+                                          "campaign's own"):
         tuning.training_campaign(campaign, campaign.seed, 2, ['pid'])
     training = tuning.training_campaign(campaign, 31, 2, ['pid'])
     assert (training.seed, training.draws) == (31, 2)
