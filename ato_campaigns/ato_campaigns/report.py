@@ -135,7 +135,37 @@ def statistics(campaign: Campaign, rows, law_columns=None) -> dict[str, Any]:
         'sensitivity': _stacked({m: cs.sensitivity(rows, m)
                                  for m in _metrics(rows, SENSITIVITY_METRICS)}, 'metric'),
         'margins': _margins_frame(law_columns),
+        'tuned_vs_published': tuned_vs_published(campaign, rows),
     }
+
+
+def tuned_vs_published(campaign: Campaign, rows):
+    """What the tuning changes, per scenario and law entry run in both configurations, on the
+    same draws: the paired differences tuned minus published of the main metrics (with their
+    bootstrap intervals) and of the rate of ATP interventions and of runs not ok (Newcombe
+    interval, McNemar's exact p-value)."""
+    import pandas as pd
+    parts = []
+    pairs = {}
+    for e in campaign.laws:
+        pairs.setdefault(e.entry, {})[e.configuration] = e.label
+    for entry, labels in pairs.items():
+        if not {'published', 'tuned'} <= set(labels):
+            continue
+        sub = rows[rows['law'].isin([labels['published'], labels['tuned']])]
+        for metric in _metrics(rows, (RANK_METRIC, 'stop_error_m', 'traction_energy_kwh')):
+            d = cs.paired_differences(sub, labels['published'], metric)
+            parts.append(d.assign(entry=entry, metric=metric, kind=''))
+        failures = cs.paired_failures(sub, labels['published'])
+        failures = failures[failures['kind'].isin(('ATP intervention', 'not ok'))]
+        parts.append(failures.rename(columns={'rate_diff': 'mean_diff'}).assign(
+            entry=entry, metric='rate'))
+    if not parts:
+        return pd.DataFrame()
+    table = pd.concat(parts, ignore_index=True)
+    first = ['scenario', 'entry', 'law', 'baseline', 'metric', 'kind', 'pairs', 'mean_diff',
+             'low', 'high']
+    return table[first + [c for c in table.columns if c not in first]]
 
 
 def _margins_frame(law_columns):
@@ -192,8 +222,10 @@ def _header(campaign: Campaign, rows, elapsed_s: float) -> list[str]:
     statuses = rows['status'].value_counts().to_dict() if runs else {}
     counted = ', '.join(f'{statuses[s]} {s}' for s in STATUSES if s in statuses)
     m = methods()
+    entries = len({e.entry or e.label for e in campaign.laws})
     return [f'Campaign `{campaign.name}` ({campaign.origin}): {len(campaign.scenarios)} '
-            f'scenario(s) x {len(campaign.laws)} laws x {campaign.draws} draws, seed '
+            f'scenario(s) x {entries} laws x {len(campaign.configurations)} configuration(s) '
+            f'({", ".join(campaign.configurations)}) x {campaign.draws} draws, seed '
             f'{campaign.seed}, fingerprint `{campaign.fingerprint}`: {runs} runs ({counted}); '
             f'the runs took {rows["wall_s"].sum():.0f} s in sum, this command {elapsed_s:.0f} s '
             f'of wall time on {os.cpu_count()} cores (a resumed campaign runs only the missing '
@@ -435,6 +467,37 @@ def _paired_table(campaign: Campaign, tables: dict, key: str) -> list[str]:
     return lines + ['']
 
 
+def _tuned_table(tables: dict, key: str) -> list[str]:
+    """What the tuning changes, per law (tuned_vs_published)."""
+    table = tables['tuned_vs_published']
+    table = table[table['scenario'] == key] if not table.empty else table
+    if table.empty:
+        return []
+    lines = ['### Tuned against published (each law on the same draws: tuned minus published; '
+             f'{cs.CONFIDENCE:.0%} paired bootstrap interval of the mean difference, for the '
+             "rates Newcombe's interval and McNemar's exact p-value)", '',
+             '| law | pairs | RMS speed error (km/h) | worst stop error (m) | traction energy '
+             '(kWh) | ATP intervention rate | not ok rate | McNemar p (ATP, not ok) |',
+             '|---|---|---|---|---|---|---|---|']
+    for entry, group in table.groupby('entry', sort=False):
+        cells, p_values = [str(group['pairs'].max())], []
+        for metric, kind in ((RANK_METRIC, ''), ('stop_error_m', ''),
+                             ('traction_energy_kwh', ''), ('rate', 'ATP intervention'),
+                             ('rate', 'not ok')):
+            r = group[(group['metric'] == metric) & (group['kind'] == kind)]
+            if r.empty:
+                cells.append('-')
+                continue
+            r = r.iloc[0]
+            fmt = '+.3f' if metric != 'traction_energy_kwh' else '+.1f'
+            cells.append(f'{_f(r["mean_diff"], fmt)} [{_f(r["low"], fmt)}, '
+                         f'{_f(r["high"], fmt)}]')
+            if metric == 'rate':
+                p_values.append(_f(r.get('mcnemar_p'), '.3g'))
+        lines.append(f'| {entry} | ' + ' | '.join(cells) + f' | {", ".join(p_values)} |')
+    return lines + ['']
+
+
 def _pareto_table(tables: dict, key: str) -> list[str]:
     table = tables['pareto']
     table = table[table['scenario'] == key] if not table.empty else table
@@ -496,6 +559,7 @@ def _scenario_section(campaign: Campaign, rows, tables: dict, key: str,
              *_margins_section(campaign, tables, key),
              *_metrics_table(campaign, tables, key), *_stop_table(tables, key),
              *_failure_tables(campaign, tables, key), *_paired_table(campaign, tables, key),
+             *_tuned_table(tables, key),
              *_pareto_table(tables, key), *_sensitivity_tables(campaign, tables, key),
              *_not_ok(sub)]
     if plots:

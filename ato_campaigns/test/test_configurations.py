@@ -258,6 +258,11 @@ def test_the_report_shows_the_margins_beside_the_results(reported):
     overview = pd.read_csv(out / 'stats' / 'overview.csv').set_index('law')
     assert overview.loc['pid/tuned', 'configuration'] == 'tuned'
     assert math.isfinite(overview.loc['pid/tuned', 'phase_margin_deg'])
+    tuning = pd.read_csv(out / 'stats' / 'tuned_vs_published.csv')
+    rms = tuning[(tuning['entry'] == 'pid') & (tuning['metric'] == 'rms_speed_error_kmh')]
+    assert (rms['law'].item(), rms['baseline'].item(), rms['pairs'].item()) == (
+        'pid/tuned', 'pid/published', 3)
+    assert '### Tuned against published' in text and '| pid | 3 | ' in text
     paired = pd.read_csv(out / 'stats' / 'paired_differences.csv')
     assert set(paired['baseline']) == {'pid/tuned'} and 'pid/tuned' not in set(paired['law'])
 
