@@ -77,7 +77,13 @@ from ato_common.run_events import (
 )
 from ato_common.scenario import Scenario, load_scenario
 from ato_common.validation import ConfigError, Fields
-from ato_controller_node.gains import GAINS, GainsUnavailable, TunedArtefact, tuned_artefact
+from ato_controller_node.gains import (
+    GAINS,
+    GainsUnavailable,
+    TunedArtefact,
+    available,
+    tuned_artefact,
+)
 from ato_controller_node.laws import LAWS
 from ato_controller_node.laws.base import setting_fields, validated_settings
 from ato_simulation.applies import applicable_rate, plant_model_for
@@ -334,11 +340,12 @@ def _tuned(loaded: Mapping[str, Scenario], entries: list[LawEntry], seed: int
         for i, entry in enumerate(entries):
             try:
                 artefact = tuned_artefact(entry.law, train)
-            except GainsUnavailable as error:
+            except GainsUnavailable:
+                there = ', '.join(f'{law} on {on}' for on, law in available()) or 'none'
                 raise ConfigError(f"laws[{i}]: {entry.law} has no tuned gains for the train "
-                                  f"{train} of scenario '{scenario.name}' ({error}); or run "
-                                  'the published configuration only: configurations: '
-                                  '[published]') from None
+                                  f"{train} of scenario '{scenario.name}' (tuned: {there}); run "
+                                  'make tune for it, or the published configuration only: '
+                                  'configurations: [published]') from None
             except ValueError as error:
                 raise ConfigError(f'laws[{i}]: the tuned gains of {entry.law} for the train '
                                   f'{train}: {error}') from None

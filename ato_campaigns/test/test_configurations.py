@@ -100,6 +100,7 @@ def test_a_law_without_a_tuned_artefact_is_refused_before_anything_runs(
     message = str(refused.value)
     assert str(path) in message and 'laws[1]: luo_xu has no tuned gains for the train ' \
         'crh3_luo_xu' in message and 'configurations: [published]' in message
+    assert '(tuned: pid on crh3_luo_xu)' in message
     assert main([str(path), '--serial', '--out', str(tmp_path / 'out')]) == 2
     assert 'luo_xu has no tuned gains' in capsys.readouterr().err
     assert not (tmp_path / 'out').exists()   # nothing ran, nothing fell back to published
