@@ -237,7 +237,8 @@ def _parse(data: Any, origin: str, base: Path,
     end = f.number('end_time_s', 0.0, minimum=0.0)
     loaded = _scenarios(f, base)
     entries = _entries(f)
-    chosen = _configurations(f) if configurations is None else tuple(configurations)
+    chosen = _configurations(f)   # checked even when the caller replaces it
+    chosen = chosen if configurations is None else tuple(configurations)
     envelope = _envelope(f)
     laws = tuple(LawEntry(f'{e.label}{CONFIGURATION_SEPARATOR}{c}', e.law, e.settings,
                           e.gradient, c, e.label) for e in entries for c in chosen)
