@@ -146,7 +146,7 @@ def tuned_vs_published(campaign: Campaign, rows):
     interval, McNemar's exact p-value)."""
     import pandas as pd
     parts = []
-    pairs = {}
+    pairs: dict[str, dict[str, str]] = {}
     for e in campaign.laws:
         pairs.setdefault(e.entry, {})[e.configuration] = e.label
     for entry, labels in pairs.items():
