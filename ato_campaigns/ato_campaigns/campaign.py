@@ -3,7 +3,8 @@
     python -m ato_campaigns.campaign [FILE] [--scheduler tcp://HOST:8786] [--workers N]
                                           [--serial] [--out runs/campaigns]
                                           [--results-page PAGE]
-    python -m ato_campaigns.campaign --campaign FILE --draw N --law LABEL [--scenario S]
+    python -m ato_campaigns.campaign --campaign FILE --draw N --law LABEL
+                                          [--configuration published|tuned] [--scenario S]
                                           [--save RUN.npz] [--out runs/campaigns]
 
 FILE defaults to the default campaign of ``make campaign`` (ato_campaigns/campaigns/default.yaml;
@@ -13,7 +14,9 @@ ato_campaigns.engine; the report (markdown, plots and its statistics as CSV and 
 
 With ``--draw`` and ``--law`` the command makes one row of the campaign again, offline, in this
 process, as the campaign made it (ato_campaigns.engine.rerun), prints it (and whether it equals
-the row stored in ``<out>``), and with ``--save`` writes the run's arrays (numpy .npz).
+the row stored in ``<out>``), and with ``--save`` writes the run's arrays (numpy .npz). The row
+is named by its label (``--law pid/tuned``) or by its entry and configuration (``--law pid
+--configuration tuned``).
 """
 
 from __future__ import annotations
@@ -36,9 +39,11 @@ from ato_campaigns.engine import (
     rows_folder,
     run_campaign,
 )
+from ato_campaigns.margins import campaign_margins
 from ato_campaigns.provenance import results_page_provenance
 from ato_campaigns.report import write_report
 from ato_common.validation import ConfigError
+from ato_controller_node.gains import GAINS
 
 #: the default campaign of `make campaign`, shipped beside this module
 DEFAULT_CAMPAIGN = Path(__file__).resolve().with_name('campaigns') / 'default.yaml'
@@ -66,7 +71,11 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                         'README (make campaign: README.md)')
     rerunning = parser.add_argument_group('one row again (offline, in this process)')
     rerunning.add_argument('--draw', type=int, default=None, help='the draw index of the row')
-    rerunning.add_argument('--law', default=None, help="the row's law label")
+    rerunning.add_argument('--law', default=None,
+                           help="the row's label (pid/tuned), or its entry's (pid) with "
+                           '--configuration')
+    rerunning.add_argument('--configuration', default=None, choices=GAINS,
+                           help="the row's configuration of the gains (with --law ENTRY)")
     rerunning.add_argument('--scenario', default=None,
                            help='the scenario of the row (a campaign of several scenarios)')
     rerunning.add_argument('--save', type=Path, default=None, metavar='RUN.npz',
@@ -77,8 +86,10 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     args.campaign = args.campaign or args.file or DEFAULT_CAMPAIGN
     if (args.draw is None) != (args.law is None):
         parser.error('--draw and --law go together: the row to make again')
-    if args.draw is None and (args.save is not None or args.scenario is not None):
-        parser.error('--save and --scenario are for one row again: give --draw and --law')
+    if args.draw is None and (args.save is not None or args.scenario is not None
+                              or args.configuration is not None):
+        parser.error('--save, --scenario and --configuration are for one row again: give '
+                     '--draw and --law')
     return args
 
 
@@ -104,7 +115,8 @@ def run_all(campaign, args: argparse.Namespace, argv: list[str]) -> int:
                 if args.results_page is not None else None)
     started = time.monotonic()
     print(f'{campaign.name}: {len(campaign.tasks())} runs ({len(campaign.scenarios)} '
-          f'scenarios x {len(campaign.laws)} laws x {campaign.draws} draws), rows in '
+          f'scenarios x {len(campaign.laws) // len(campaign.configurations)} laws x '
+          f'{len(campaign.configurations)} configurations x {campaign.draws} draws), rows in '
           f'{rows_folder(args.out, campaign.name)}', file=sys.stderr)
     try:
         rows = run_campaign(campaign, args.out, serial=args.serial, scheduler=args.scheduler,
@@ -118,15 +130,17 @@ def run_all(campaign, args: argparse.Namespace, argv: list[str]) -> int:
                                                 '--readme', 'README.md'])
                else ' '.join(['python -m ato_campaigns.campaign', *argv]))
     report = write_report(campaign, rows, args.out / campaign.name, command, elapsed,
-                          args.results_page, measured, args.readme)
+                          args.results_page, measured, args.readme,
+                          law_columns=campaign_margins(campaign))
     print(f'wrote {report}')
     return 0
 
 
 def rerun_row(campaign, args: argparse.Namespace) -> int:
     """One row again: print it, say whether it equals the stored one, save the arrays."""
-    row, run = rerun(campaign, args.law, args.draw, args.scenario)
-    shown = {k: row[k] for k in ('scenario', 'law', 'draw', 'status', 'reason', 'events')}
+    row, run = rerun(campaign, args.law, args.draw, args.scenario, args.configuration)
+    shown = {k: row[k] for k in ('scenario', 'law', 'configuration', 'envelope', 'draw',
+                                 'status', 'reason', 'events')}
     shown.update({k: row[k] for k in METRICS if k in row})
     shown['drawn'] = {k[2:]: v for k, v in row.items() if k.startswith('p_')}
     print(json.dumps({k: None if isinstance(v, float) and math.isnan(v) else v

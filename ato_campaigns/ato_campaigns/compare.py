@@ -1,7 +1,7 @@
 """compare: every applicable control law on every built-in scenario, offline, side by side.
 
     python -m ato_campaigns.compare [--out runs/compare] [--jobs 2] [--scenario NAME|FILE ...]
-                                  [--law NAME ...] [--timeout-s 1800]
+                                  [--law NAME ...] [--gains published|tuned] [--timeout-s 1800]
 
 The comparison is a campaign of one nominal draw (ato_campaigns.engine): the plant is
 the controller's nominal model, on a Dask LocalCluster of ``--jobs`` workers; the robustness
@@ -11,6 +11,13 @@ Every law also runs on the nominal plant with the smallest actuator a campaign d
 default uncertainty's least lag and dead time of the traction and brake force, ACTUATOR_DRAW):
 the row ``nominal with actuator`` shows what the actuator alone does to the law (a run over a
 window, at a faster rate, runs on the nominal plant only).
+
+``--gains`` is the configuration of every law's gains (ato_controller_node.gains, default
+``published``: the paper's; ``tuned``: the tuned artefact for the scenario's train, a law without
+one is listed as not run, with the reason). Beside each scenario's table the loop margins of
+every law in that configuration (ato_campaigns.margins): the phase and delay margin on the
+nominal plant (the controller's hold only), the stability with the ``nominal with actuator``
+row's actuator and at the default uncertainty's largest actuator draw.
 
 A law applies to a scenario when its ``fits`` accepts the scenario's train and plant and the
 plant's sensors do not fail a measurement the law requires (a law without speed measurement
@@ -64,11 +71,13 @@ from typing import Callable
 
 import numpy as np
 
+from ato_campaigns import margins as loop_margins
 from ato_campaigns.engine import execute, finite, judged, motion
 from ato_campaigns.provenance import results_page_provenance, write_results_page
 from ato_campaigns.run_process import RunDied, RunFailed, RunTimeout, limited
 from ato_common import uncertainty
 from ato_common.scenario import builtin_scenarios, load_scenario
+from ato_controller_node.gains import GAINS, GainsUnavailable, settings_for
 from ato_controller_node.laws import LAWS
 from ato_simulation.applies import applicable_rate, plant_model_for
 from ato_simulation.plans import run_end_time_s
@@ -111,13 +120,17 @@ class Job:
     rate_hz: float
     end_time_s: float | None = None  # None: the whole scenario
     plant: str = NOMINAL  # one of PLANTS
+    gains: str = 'published'  # the laws' configuration (ato_controller_node.gains)
 
 
 def plan_jobs(scenarios: list[str], laws: list[str] | None = None,
-              plants: tuple[str, ...] = (NOMINAL,)) -> tuple[list[Job], list[dict]]:
+              plants: tuple[str, ...] = (NOMINAL,), gains: str = 'published'
+              ) -> tuple[list[Job], list[dict]]:
     """The runs to make, and the (scenario, law) pairs that do not apply, with the reason
     (``laws``: only these; default every registered law). A law runs on each of ``plants``
-    (the comparison: PLANTS), but over a window (a faster rate) on the nominal plant only."""
+    (the comparison: PLANTS), but over a window (a faster rate) on the nominal plant only, in
+    the configuration ``gains``; a law without settings in it (no tuned artefact for the
+    scenario's train) is not run, and the reason says so."""
     jobs, skipped = [], []
     for name in scenarios:
         scenario = load_scenario(name)
@@ -125,11 +138,16 @@ def plan_jobs(scenarios: list[str], laws: list[str] | None = None,
         duration = run_end_time_s(scenario, plan_reference(scenario))
         for law in sorted(laws or LAWS):
             rate, reason = applicable_rate(law, scenario)
+            if rate is not None:
+                try:
+                    settings_for(law, gains, scenario.train.name)
+                except GainsUnavailable as error:
+                    rate, reason = None, str(error)
             if rate is None:
                 skipped.append({'scenario': name, 'law': law, 'reason': reason})
                 continue
             end = MAX_STEPS / rate if duration * rate > MAX_STEPS else None
-            jobs += [Job(name, law, model, rate, end, plant)
+            jobs += [Job(name, law, model, rate, end, plant, gains)
                      for plant in (plants if end is None else (NOMINAL,))]
     return jobs, skipped
 
@@ -164,7 +182,8 @@ def _thin(values: np.ndarray, step: int) -> list:
 def job_fields(job: Job) -> dict:
     """What every result of ``job`` holds, whatever became of the run."""
     return {'scenario': job.scenario, 'law': job.law, 'model': job.model,
-            'rate_hz': job.rate_hz, 'end_time_s': job.end_time_s, 'plant': job.plant}
+            'rate_hz': job.rate_hz, 'end_time_s': job.end_time_s, 'plant': job.plant,
+            'gains': job.gains}
 
 
 def run_job(job: Job) -> dict:
@@ -176,7 +195,8 @@ def run_job(job: Job) -> dict:
     try:
         scenario = load_scenario(job.scenario)
         run = run_offline(scenario, job.law, model=job.model, controller_rate_hz=job.rate_hz,
-                          end_time_s=job.end_time_s, uncertainty=DRAWS[job.plant])
+                          end_time_s=job.end_time_s, uncertainty=DRAWS[job.plant],
+                          gains=job.gains)
     except Exception as error:  # noqa: BLE001 -- any failure of a law is a result to show
         result.update(status='error', reason=f'{type(error).__name__}: {error}',
                       detail=traceback.format_exc(limit=3), wall_s=time.perf_counter() - started)
@@ -262,6 +282,58 @@ def run_all(jobs: list[Job], processes: int, timeout_s: float | None = None,
     return results
 
 
+def law_margins(jobs: list[Job]) -> list[dict]:
+    """The loop margins (ato_campaigns.margins) of every (scenario, law) of ``jobs`` with the
+    settings of its configuration, at its rate: on the nominal plant, with the actuator of the
+    ``nominal with actuator`` row, and at the default uncertainty's largest actuator draw."""
+    actuator = loop_margins.Actuator(*(ACTUATOR_DRAW[name] for name in ACTUATOR_PARAMETERS))
+    out, seen = [], set()
+    for job in jobs:
+        if (job.scenario, job.law) in seen:
+            continue
+        seen.add((job.scenario, job.law))
+        scenario = load_scenario(job.scenario)
+        settings = settings_for(job.law, job.gains, scenario.train.name)
+        row = {'scenario': job.scenario, 'law': job.law, 'gains': job.gains,
+               **loop_margins.entry_margins(job.law, scenario, settings, uncertainty.DEFAULTS,
+                                            job.rate_hz)}
+        if 'phase_margin_deg' in row:
+            actuated = loop_margins.loop_margins(loop_margins.law_loop(
+                job.law, scenario, settings, job.rate_hz), actuator)
+            row.update(actuator_phase_margin_deg=actuated.phase_margin_deg,
+                       stable_with_actuator=actuated.stable)
+        out.append(row)
+    return out
+
+
+def _margins_table(margins: list[dict], name: str) -> list[str]:
+    """The loop margins of a scenario's laws as markdown (empty without any)."""
+    rows = [r for r in margins if r['scenario'] == name]
+    if not rows:
+        return []
+    worst = loop_margins.largest_actuator(uncertainty.DEFAULTS).describe()
+    lines = [f'Loop margins ({rows[0]["gains"]} gains, linearised about cruise: '
+             'ato_campaigns.margins): phase and delay margin on the nominal plant (the hold '
+             f'only), phase margin with the actuator of `{WITH_ACTUATOR}`, stability at the '
+             f"default uncertainty's largest actuator draw ({worst}) and the largest dead time "
+             'the loop tolerates with that lag.', '',
+             '| law | phase margin (deg) | delay margin (s) | stable, nominal | phase margin with '
+             'the actuator (deg) | stable with it | stable at the largest draw | largest dead '
+             'time tolerated (s) |', '|---|---|---|---|---|---|---|---|']
+    yes = {True: 'yes', False: 'no'}
+    for r in rows:
+        if 'phase_margin_deg' not in r:
+            lines.append(f'| {r["law"]} | {r["note"]} | | | | | | |')
+            continue
+        lines.append(f'| {r["law"]} | {_number(r, "phase_margin_deg", ".1f")} | '
+                     f'{_number(r, "delay_margin_s", ".3g")} | {yes[r["stable_nominal"]]} | '
+                     f'{_number(r, "actuator_phase_margin_deg", ".1f")} | '
+                     f'{yes[r["stable_with_actuator"]]} | '
+                     f'{yes[r["covers_actuator_draws"]]} | '
+                     f'{_number(r, "tolerated_dead_time_s", ".3g")} |')
+    return lines + ['']
+
+
 def best_law(results: list[dict], plant: str = NOMINAL) -> str | None:
     """The ranking on ``plant``: lowest RMS speed error among the runs of the whole scenario at
     its control rate (a law sampled faster is not compared with the others) with status ok
@@ -298,14 +370,16 @@ def _row(r: dict) -> str:
 
 
 def markdown(results: list[dict], skipped: list[dict], scenarios: list[str], stamp: str,
-             command: str, plots: bool = True) -> str:
-    """The comparison as markdown: the tables, and links to the plots beside it (``plots``;
-    the results page of the docs has none, the plots stay in the output folder)."""
+             command: str, plots: bool = True, margins: list[dict] | None = None,
+             gains: str = 'published') -> str:
+    """The comparison as markdown: the tables, each scenario's loop margins (``margins``:
+    law_margins) and links to the plots beside it (``plots``; the results page of the docs
+    has none, the plots stay in the output folder). ``gains``: the laws' configuration."""
     load = ', '.join(f'{x:.1f}' for x in os.getloadavg())
     lines = ['# Comparison of the control laws', '',
              f'`{command}`, {stamp}, offline closed loop (ato_simulation.loop), '
              f'{os.cpu_count()} cores, load average {load} at the end (step times grow with '
-             'it).', '',
+             f'it). Gains: every law in its `{gains}` configuration.', '',
              f'Plants: `{NOMINAL}` (the controller\'s model: no uncertainty, no actuator '
              f'dynamics) and `{WITH_ACTUATOR}` (the same with the smallest actuator a campaign '
              f'draws: {actuator_text()}; what the actuator alone does). Status: `ok` only for a '
@@ -333,6 +407,7 @@ def markdown(results: list[dict], skipped: list[dict], scenarios: list[str], sta
                 lines.append(f'| {s["law"]} | - | - | not applicable ({s["reason"]}) '
                              '| - | - | - | - | - | - | - | - |')
         lines.append('')
+        lines += _margins_table(margins or [], name)
         if plots:
             links = ', '.join(f'[{kind}]({scenario_label(name)}_{kind}.png)'
                               for kind in ('tracking', 'errors', 'commands', 'estimates'))
@@ -426,6 +501,9 @@ def main(argv=None) -> int:
                         'default: every built-in scenario)')
     parser.add_argument('--law', action='append', choices=sorted(LAWS),
                         help='only this law (repeatable; default: all)')
+    parser.add_argument('--gains', choices=GAINS, default='published',
+                        help="every law's configuration of its gains (default published; "
+                        'tuned: the tuned artefact for the scenario\'s train)')
     parser.add_argument('--timeout-s', type=_timeout, default=DEFAULT_TIMEOUT_S,
                         help='wall-time limit of one run, s: a run that exceeds it is stopped '
                         'and listed with status timeout, the others go on (default '
@@ -439,7 +517,8 @@ def main(argv=None) -> int:
     scenarios = args.scenario or builtin_scenarios()
     measured = (results_page_provenance(args.results_page)
                 if args.results_page is not None else None)
-    jobs, skipped = plan_jobs(scenarios, args.law, PLANTS)
+    jobs, skipped = plan_jobs(scenarios, args.law, PLANTS, args.gains)
+    margins = law_margins(jobs)
     print(f'{len(jobs)} runs ({len(skipped)} law/scenario pairs not applicable) on '
           f'{args.jobs} processes', file=sys.stderr)
     results = run_all(jobs, args.jobs, args.timeout_s or None)
@@ -448,9 +527,11 @@ def main(argv=None) -> int:
     default_page = ['--results-page', str(DEFAULT_RESULTS_PAGE)]
     command = ('make compare' if argv in ([], default_page)
                else ' '.join(['python -m ato_campaigns.compare', *argv]))
-    (args.out / 'compare.md').write_text(markdown(results, skipped, scenarios, stamp, command))
+    (args.out / 'compare.md').write_text(markdown(results, skipped, scenarios, stamp, command,
+                                                  margins=margins, gains=args.gains))
     if args.results_page is not None:
-        body = markdown(results, skipped, scenarios, stamp, command, plots=False)
+        body = markdown(results, skipped, scenarios, stamp, command, plots=False,
+                        margins=margins, gains=args.gains)
         body = body.split('\n', 2)[2]  # the page has its own title and provenance line
         write_results_page(args.results_page, 'Comparison of the control laws', command,
                            f'{body}\n\nThe plots of each scenario are written beside '
@@ -462,6 +543,7 @@ def main(argv=None) -> int:
     (args.out / 'compare.json').write_text(json.dumps(
         {'generated': stamp, 'best': best, 'best_with_actuator': with_actuator,
          'actuator': {name: ACTUATOR_DRAW[name] for name in ACTUATOR_PARAMETERS},
+         'gains': args.gains, 'margins': margins,
          'results': summary, 'not_applicable': skipped}, indent=1))
     for name in scenarios:
         plot_scenario(name, results, args.out)

@@ -77,6 +77,13 @@ from ato_common.run_events import (
 )
 from ato_common.scenario import Scenario, load_scenario
 from ato_common.validation import ConfigError, Fields
+from ato_controller_node.gains import (
+    GAINS,
+    GainsUnavailable,
+    TunedArtefact,
+    available,
+    tuned_artefact,
+)
 from ato_controller_node.laws import LAWS
 from ato_controller_node.laws.base import setting_fields, validated_settings
 from ato_simulation.applies import applicable_rate, plant_model_for
@@ -103,14 +110,26 @@ METRICS = ('rms_speed_error_kmh', 'max_speed_error_kmh', 'rms_position_error_m',
 GRADIENT_KNOWLEDGE = ('drawn', 'known', 'hidden')
 
 
+#: the separator of a row's label: ``<entry>/<configuration>``, e.g. ``pid/tuned``
+CONFIGURATION_SEPARATOR = '/'
+
+
 @dataclass(frozen=True)
 class LawEntry:
-    label: str                      # the law's name in the rows (name, or name#k with settings)
+    #: the row's label: the entry's label and its configuration, ``pid/tuned`` (an entry
+    #: built in code, e.g. by the tuning, may carry any label)
+    label: str
     law: str
+    #: the entry's own settings, on top of its configuration's (explicit overrides)
     settings: Mapping[str, Any] = field(default_factory=dict)
     #: the gradient profile in the controller's knowledge: as drawn (the uncertainty's
     #: gradient_known), or known or hidden in every draw of this entry
     gradient: str = 'drawn'
+    #: the gains' configuration (``ato_controller_node.gains.GAINS``): the law's published
+    #: settings, or its tuned artefact for the scenario's train
+    configuration: str = 'published'
+    #: the entry's label in the campaign file, without the configuration (``pid``)
+    entry: str = ''
 
 
 @dataclass(frozen=True)
@@ -131,21 +150,46 @@ class Campaign:
     #: the uncertainty each scenario is drawn from: the campaign file's, else the scenario's
     #: ``uncertainty:`` section, else uncertainty.DEFAULTS
     specs: Mapping[str, Mapping[str, uncertainty.Distribution]] = field(default_factory=dict)
+    #: the gains' configurations every law runs in, each on the same draws
+    configurations: tuple[str, ...] = ('published',)
+    #: the host's ATO envelope (ato_controller_node.envelope), on or off for every law
+    envelope: bool = True
+    #: the tuned artefact of each (scenario, law) run in the tuned configuration, read once
+    #: when the file is read: every run of the campaign runs the same settings, whatever a
+    #: worker's copy of the artefacts, and the fingerprint covers them
+    tuned: Mapping[tuple[str, str], TunedArtefact] = field(default_factory=dict)
 
     def identity(self) -> dict[str, Any]:
         """What the rows depend on (JSON): the seed, the number of draws, the scenarios, the
-        laws, the uncertainty and the window."""
+        laws, their configurations and the tuned settings, the envelope, the uncertainty and
+        the window."""
         return json.loads(json.dumps({
             'seed': self.seed, 'draws': self.draws, 'scenarios': list(self.scenarios),
             'laws': [[e.label, e.law, dict(e.settings), e.gradient] for e in self.laws],
+            'configurations': list(self.configurations), 'envelope': self.envelope,
+            'tuned': {f'{a.train}/{a.law}': dict(a.settings) for a in self.artefacts()},
             'spec': {scenario: {k: repr(v) for k, v in sorted(spec.items())}
                      for scenario, spec in sorted(self.specs.items())},
             'end_time_s': self.end_time_s}, sort_keys=True, default=str))
 
+    def artefacts(self) -> list[TunedArtefact]:
+        """The tuned artefacts the campaign runs, one per (train, law), sorted."""
+        unique = {(a.train, a.law): a for a in self.tuned.values()}
+        return [unique[key] for key in sorted(unique)]
+
+    def settings_of(self, scenario: str, entry: LawEntry) -> dict[str, Any]:
+        """The settings ``entry`` runs with on ``scenario``: its configuration's (none for
+        ``published``: the law's defaults; the tuned artefact's for ``tuned``) with the entry's
+        own on top."""
+        base = self.tuned[(scenario, entry.law)].settings if entry.configuration == 'tuned' \
+            else {}
+        return {**base, **entry.settings}
+
     @property
     def fingerprint(self) -> str:
         """The hash of ``identity``: a row with another fingerprint is from another campaign
-        (another seed, number of draws, law list, uncertainty or window)."""
+        (another seed, number of draws, law list, configuration, tuned gains, envelope,
+        uncertainty or window)."""
         text = json.dumps(self.identity(), sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -161,7 +205,8 @@ def task_of(campaign: Campaign, scenario: str, entry: LawEntry, index: int) -> d
         values['gradient_known'] = 1.0 if entry.gradient == 'known' else 0.0
     return {'campaign': campaign.name, 'fingerprint': campaign.fingerprint,
             'scenario': scenario, 'law': entry.label, 'law_name': entry.law,
-            'settings': dict(entry.settings), 'draw': index, 'values': values,
+            'configuration': entry.configuration, 'envelope': campaign.envelope,
+            'settings': campaign.settings_of(scenario, entry), 'draw': index, 'values': values,
             'model': campaign.models[scenario],
             'rate_hz': campaign.rates_hz[(scenario, entry.label)],
             'end_time_s': campaign.end_time_s, 'timeout_s': campaign.timeout_s}
@@ -169,15 +214,19 @@ def task_of(campaign: Campaign, scenario: str, entry: LawEntry, index: int) -> d
 
 # --- the campaign file --------------------------------------------------------------------------
 
-def parse_campaign(data: Any, origin: str, base: Path) -> Campaign:
-    """Validate a campaign; every error names ``origin`` and the field, before anything runs."""
+def parse_campaign(data: Any, origin: str, base: Path,
+                   configurations: tuple[str, ...] | None = None) -> Campaign:
+    """Validate a campaign; every error names ``origin`` and the field, before anything runs.
+    ``configurations``: these instead of the file's (the tuning reads a campaign for its
+    scenario, laws and uncertainty only: ``('published',)``)."""
     try:
-        return _parse(data, origin, base)
+        return _parse(data, origin, base, configurations)
     except ConfigError as error:
         raise ConfigError(f'{origin}: {error}') from None
 
 
-def _parse(data: Any, origin: str, base: Path) -> Campaign:
+def _parse(data: Any, origin: str, base: Path,
+           configurations: tuple[str, ...] | None = None) -> Campaign:
     f = Fields(data, '')
     name = f.text('name')
     if not all(c.isalnum() or c in '-_.' for c in name):
@@ -186,10 +235,41 @@ def _parse(data: Any, origin: str, base: Path) -> Campaign:
     draws = _whole(f, 'draws', 1, 10**6, default=1)
     timeout = f.number('timeout_s', DEFAULT_TIMEOUT_S, minimum=0.0)
     end = f.number('end_time_s', 0.0, minimum=0.0)
+    loaded = _scenarios(f, base)
+    entries = _entries(f)
+    chosen = _configurations(f)   # checked even when the caller replaces it
+    chosen = chosen if configurations is None else tuple(configurations)
+    envelope = _envelope(f)
+    laws = tuple(LawEntry(f'{e.label}{CONFIGURATION_SEPARATOR}{c}', e.law, e.settings,
+                          e.gradient, c, e.label) for e in entries for c in chosen)
+    rates, models = {}, {}
+    for key, scenario in loaded.items():
+        models[key] = plant_model_for(scenario)
+        for i, entry in enumerate(entries):
+            rate, reason = applicable_rate(entry.law, scenario)
+            if rate is None:
+                raise ConfigError(f"laws[{i}]: {entry.law} does not fit scenario "
+                                  f"'{scenario.name}': {reason}")
+            rates.update({(key, law.label): rate for law in laws if law.entry == entry.label})
+    tuned = _tuned(loaded, entries, seed) if 'tuned' in chosen else {}
+    baseline = _baseline(f, entries, laws, chosen)
+    raw_spec = f.raw('uncertainty')
+    spec = None if raw_spec is None else uncertainty.parse_uncertainty(raw_spec)
+    specs = {key: spec if spec is not None else scenario.uncertainty
+             if scenario.uncertainty is not None else dict(uncertainty.DEFAULTS)
+             for key, scenario in loaded.items()}
+    f.reject_unknown()
+    return Campaign(name, origin, seed, draws, tuple(loaded), laws, spec, baseline,
+                    timeout or None, end or None, rates, models, specs, chosen, envelope, tuned)
+
+
+def _scenarios(f: Fields, base: Path) -> dict[str, Scenario]:
+    """The campaign's scenarios, loaded, by the key the tasks name them by (a built-in name
+    or a file's absolute path)."""
     raw_scenarios = f.raw('scenarios', required=True)
     if not isinstance(raw_scenarios, list) or not raw_scenarios:
         raise ConfigError('scenarios: must be a non-empty list of scenario names or files')
-    scenarios, loaded = [], {}
+    loaded = {}
     for i, item in enumerate(raw_scenarios):
         if not isinstance(item, str):
             raise ConfigError(f'scenarios[{i}]: must be a scenario name or file, got {item!r}')
@@ -199,40 +279,103 @@ def _parse(data: Any, origin: str, base: Path) -> Campaign:
             loaded[key] = load_scenario(key)
         except ConfigError as error:
             raise ConfigError(f'scenarios[{i}]: {error}') from None
-        scenarios.append(key)
-    laws, labels = [], set()
+    return loaded
+
+
+def _entries(f: Fields) -> list[LawEntry]:
+    """The file's law entries (before their configurations), each label once."""
     raw_laws = f.raw('laws', required=True)
     if raw_laws == 'all':
         raw_laws = sorted(LAWS)
     if not isinstance(raw_laws, list) or not raw_laws:
         raise ConfigError("laws: must be 'all' or a non-empty list of laws")
-    for i, item in enumerate(raw_laws):
-        laws.append(_law_entry(item, i))
-    for i, entry in enumerate(laws):
+    entries = [_law_entry(item, i) for i, item in enumerate(raw_laws)]
+    labels: set[str] = set()
+    for i, entry in enumerate(entries):
         if entry.label in labels:
             raise ConfigError(f"laws[{i}]: the label '{entry.label}' is used twice")
         labels.add(entry.label)
-    rates, models = {}, {}
+    return entries
+
+
+def _configurations(f: Fields) -> tuple[str, ...]:
+    """``configurations:``, a list of GAINS (default: every one)."""
+    raw = f.raw('configurations')
+    if raw is None:
+        return GAINS
+    if isinstance(raw, str):
+        raw = [raw]
+    if not isinstance(raw, list) or not raw:
+        raise ConfigError(f"configurations: must be a non-empty list of {', '.join(GAINS)}, "
+                          f'got {raw!r}')
+    for i, item in enumerate(raw):
+        if item not in GAINS:
+            raise ConfigError(f"configurations[{i}]: '{item}' is not valid; valid: "
+                              f"{', '.join(GAINS)}")
+    if len(set(raw)) != len(raw):
+        raise ConfigError(f'configurations: each configuration once, got {raw!r}')
+    return tuple(raw)
+
+
+def _envelope(f: Fields) -> bool:
+    """``envelope: on | off`` (YAML reads both as booleans; default on)."""
+    raw = f.raw('envelope')
+    if raw is None:
+        return True
+    if isinstance(raw, bool):
+        return raw
+    if raw in ('on', 'off'):
+        return raw == 'on'
+    raise ConfigError(f'envelope: must be on or off (the ATO envelope of every law), '
+                      f'got {raw!r}')
+
+
+def _tuned(loaded: Mapping[str, Scenario], entries: list[LawEntry], seed: int
+           ) -> dict[tuple[str, str], TunedArtefact]:
+    """The tuned artefact of every law on every scenario's train; a law without one, a
+    malformed one, or one tuned on the campaign's own seed is refused, naming law and train
+    (never a silent fallback to the published settings)."""
+    tuned = {}
     for key, scenario in loaded.items():
-        models[key] = plant_model_for(scenario)
-        for i, entry in enumerate(laws):
-            rate, reason = applicable_rate(entry.law, scenario)
-            if rate is None:
-                raise ConfigError(f"laws[{i}]: {entry.law} does not fit scenario "
-                                  f"'{scenario.name}': {reason}")
-            rates[(key, entry.label)] = rate
-    baseline = f.text('baseline', laws[0].label)
-    if baseline not in labels:
-        raise ConfigError(f"baseline: '{baseline}' is not one of the campaign's laws "
-                          f"({', '.join(sorted(labels))})")
-    raw_spec = f.raw('uncertainty')
-    spec = None if raw_spec is None else uncertainty.parse_uncertainty(raw_spec)
-    specs = {key: spec if spec is not None else scenario.uncertainty
-             if scenario.uncertainty is not None else dict(uncertainty.DEFAULTS)
-             for key, scenario in loaded.items()}
-    f.reject_unknown()
-    return Campaign(name, origin, seed, draws, tuple(scenarios), tuple(laws), spec, baseline,
-                    timeout or None, end or None, rates, models, specs)
+        train = scenario.train.name
+        for i, entry in enumerate(entries):
+            try:
+                artefact = tuned_artefact(entry.law, train)
+            except GainsUnavailable:
+                there = ', '.join(f'{law} on {on}' for on, law in available()) or 'none'
+                raise ConfigError(f"laws[{i}]: {entry.law} has no tuned gains for the train "
+                                  f"{train} of scenario '{scenario.name}' (tuned: {there}); run "
+                                  'make tune for it, or the published configuration only: '
+                                  'configurations: [published]') from None
+            except ValueError as error:
+                raise ConfigError(f'laws[{i}]: the tuned gains of {entry.law} for the train '
+                                  f'{train}: {error}') from None
+            training = artefact.record.get('training', {})
+            if training.get('seed') == seed:
+                raise ConfigError(f'seed: {seed} is the seed the tuned gains of {entry.law} '
+                                  f'for the train {train} were trained on; evaluate them on '
+                                  'draws the tuning never saw (another seed)')
+            tuned[(key, entry.law)] = artefact
+    return tuned
+
+
+def _baseline(f: Fields, entries: list[LawEntry], laws: tuple[LawEntry, ...],
+              configurations: tuple[str, ...]) -> str:
+    """The label paired differences are taken against: ``baseline:`` as a row label
+    (``pid/published``) or an entry's label, which takes the tuned configuration if the
+    campaign runs it, else its first; default: the entry ``pid`` if there is one, else the
+    first entry."""
+    labels = [law.label for law in laws]
+    default = 'pid' if any(e.label == 'pid' for e in entries) else entries[0].label
+    given = f.text('baseline', default)
+    if given in labels:
+        return given
+    preferred = 'tuned' if 'tuned' in configurations else configurations[0]
+    if any(e.label == given for e in entries):
+        return f'{given}{CONFIGURATION_SEPARATOR}{preferred}'
+    raise ConfigError(f"baseline: '{given}' is not one of the campaign's laws "
+                      f"({', '.join(labels)}; or an entry's label: "
+                      f"{', '.join(e.label for e in entries)})")
 
 
 def _whole(f: Fields, key: str, minimum: int, maximum: int, default: int = 0) -> int:
@@ -269,20 +412,25 @@ def _law_entry(item: Any, i: int) -> LawEntry:
                           f"{', '.join(GRADIENT_KNOWLEDGE)}")
     default_label = law if not settings and gradient == 'drawn' else f'{law}#{i}'
     label = law_fields.text('label', default_label)
+    if CONFIGURATION_SEPARATOR in label:
+        raise ConfigError(f"laws[{i}].label: '{label}' has a '{CONFIGURATION_SEPARATOR}', "
+                          'which separates a label from its configuration in the rows')
     law_fields.reject_unknown()
-    return LawEntry(label, law, dict(settings), gradient)
+    return LawEntry(label, law, dict(settings), gradient, entry=label)
 
 
-def load_campaign(path: str | Path) -> Campaign:
+def load_campaign(path: str | Path, configurations: tuple[str, ...] | None = None
+                  ) -> Campaign:
+    """The campaign file ``path``, validated (``configurations``: see parse_campaign)."""
     path = Path(path)
-    return parse_campaign(load_yaml(path), str(path), path.parent)
+    return parse_campaign(load_yaml(path), str(path), path.parent, configurations)
 
 
 # --- one run ------------------------------------------------------------------------------------
 
 def base_row(task: Mapping) -> dict:
     row = {k: task[k] for k in ('campaign', 'fingerprint', 'scenario', 'law', 'law_name',
-                                'draw', 'model', 'rate_hz')}
+                                'configuration', 'envelope', 'draw', 'model', 'rate_hz')}
     row['settings'] = json.dumps(task['settings'], sort_keys=True)
     row.update({f'p_{k}': v for k, v in task['values'].items()})
     row.update({m: math.nan for m in METRICS})
@@ -331,13 +479,16 @@ def task_scenario(name_or_path: str) -> Scenario:
 
 
 def offline_run(task: Mapping):
-    """The offline closed loop of one task (ato_simulation.loop): an OfflineRun."""
+    """The offline closed loop of one task (ato_simulation.loop): an OfflineRun. The task's
+    settings are its configuration's, resolved when the campaign was read
+    (``Campaign.settings_of``): on top of the law's defaults, i.e. ``gains='published'``."""
     from ato_simulation.loop import run_offline
     scenario = task_scenario(task['scenario'])
     settings = {task['law_name']: task['settings']} if task['settings'] else None
     return run_offline(scenario, task['law_name'], settings, model=task['model'],
                        controller_rate_hz=task['rate_hz'], end_time_s=task['end_time_s'],
-                       uncertainty=task['values'])
+                       uncertainty=task['values'], gains='published',
+                       envelope=task['envelope'])
 
 
 def offline_metrics(task: Mapping) -> dict:
@@ -545,9 +696,10 @@ def _lost_row(task: Mapping, reason: str) -> dict:
 
 def data_description(campaign: Campaign) -> dict[str, Any]:
     """What a campaign's rows stand on, for every Parquet file's metadata: the campaign, its
-    identity and fingerprint, the seed, the uncertainty of each scenario (in words too), the
-    run's end rule, the tuning artefact its laws' gains came from (empty: every law with its
-    default or given settings) and the commit of the code."""
+    identity and fingerprint, the seed, the configurations and the envelope, the uncertainty
+    of each scenario (in words too), the run's end rule, the tuning artefacts its tuned rows'
+    gains came from (``tuning_artefact``: one per law and train, empty without the tuned
+    configuration) and the commit of the code."""
     from ato_campaigns.provenance import commit_description
     from ato_simulation import plans
     window = campaign.end_time_s is not None
@@ -555,6 +707,8 @@ def data_description(campaign: Campaign) -> dict[str, Any]:
         'campaign': campaign.name, 'origin': campaign.origin,
         'fingerprint': campaign.fingerprint, 'identity': campaign.identity(),
         'seed': campaign.seed, 'draws': campaign.draws,
+        'configurations': list(campaign.configurations), 'envelope': campaign.envelope,
+        'baseline': campaign.baseline,
         'uncertainty': {scenario: {name: spec[name].describe() for name in spec}
                         for scenario, spec in campaign.specs.items()},
         'run_end': {
@@ -566,8 +720,25 @@ def data_description(campaign: Campaign) -> dict[str, Any]:
             'end_time_s': campaign.end_time_s,
             'late_limit_share': plans.LATE_LIMIT_SHARE,
             'late_limit_min_s': plans.LATE_LIMIT_MIN_S, 'late_after_s': LATE_AFTER_S},
-        'tuning_artefact': '',
+        'tuning_artefact': [artefact_description(a) for a in campaign.artefacts()],
         'commit': commit_description()}
+
+
+def artefact_description(artefact: TunedArtefact) -> dict[str, Any]:
+    """What a tuned artefact is (its law, train, settings, procedure, budget, training seed
+    and draws, and the commit that produced it), as the rows' metadata names it."""
+    record = artefact.record
+    training, produced = record.get('training', {}), record.get('produced', {})
+    from ato_campaigns.provenance import REPOSITORY
+    path = artefact.path.resolve()
+    return {'law': artefact.law, 'train': artefact.train, 'settings': dict(artefact.settings),
+            'file': str(path.relative_to(REPOSITORY)) if path.is_relative_to(REPOSITORY)
+            else str(path),
+            'procedure': record.get('procedure', {}), 'budget': record.get('budget', {}),
+            'seed': training.get('seed'), 'training': training,
+            'result': {k: v for k, v in record.get('result', {}).items()
+                       if k in ('feasible', 'violations', 'objective')},
+            'commit': produced.get('commit'), 'date': produced.get('date')}
 
 
 def run_campaign(campaign: Campaign, out: Path = DEFAULT_OUT, *, serial: bool = False,
@@ -601,16 +772,15 @@ def run_campaign(campaign: Campaign, out: Path = DEFAULT_OUT, *, serial: bool = 
     return rows
 
 
-def rerun(campaign: Campaign, law: str, draw: int, scenario: str | None = None):
+def rerun(campaign: Campaign, law: str, draw: int, scenario: str | None = None,
+          configuration: str | None = None):
     """One row of ``campaign`` made again offline, in this process, exactly as the campaign
-    made it (the same task: draw, settings, rate, window), without its time limit: (the row,
-    the OfflineRun). ``scenario``: a campaign of several scenarios needs it (a name or a file
-    as the campaign gives it)."""
+    made it (the same task: draw, settings, rate, window, envelope), without its time limit:
+    (the row, the OfflineRun). ``law``: the row's label (``pid/tuned``), or with
+    ``configuration`` its entry's label (``pid``); ``scenario``: a campaign of several
+    scenarios needs it (a name or a file as the campaign gives it)."""
     key = _scenario_of(campaign, scenario)
-    entry = next((e for e in campaign.laws if e.label == law), None)
-    if entry is None:
-        raise ConfigError(f"--law: '{law}' is not a law of the campaign; its laws: "
-                          f"{', '.join(e.label for e in campaign.laws)}")
+    entry = _entry_of(campaign, law, configuration)
     if not 0 <= draw < campaign.draws:
         raise ConfigError(f'--draw: the campaign has draws 0 to {campaign.draws - 1}, '
                           f'not {draw}')
@@ -620,6 +790,24 @@ def rerun(campaign: Campaign, law: str, draw: int, scenario: str | None = None):
     run = offline_run(task)
     row.update(run_metrics(run, 1.0 / task['rate_hz']), wall_s=time.perf_counter() - started)
     return row, run
+
+
+def _entry_of(campaign: Campaign, law: str, configuration: str | None) -> LawEntry:
+    """The law entry of a row named by its label, or by its entry's label and configuration
+    (the configuration may be left out when the campaign runs one)."""
+    if configuration is not None and configuration not in campaign.configurations:
+        raise ConfigError(f'--configuration: the campaign runs '
+                          f"{', '.join(campaign.configurations)}, not {configuration}")
+    fits = [e for e in campaign.laws if configuration in (None, e.configuration)]
+    found = [e for e in fits if e.label == law] or [e for e in fits if e.entry == law]
+    if len(found) == 1:
+        return found[0]
+    labels = ', '.join(e.label for e in campaign.laws)
+    if found:
+        raise ConfigError(f"--law: '{law}' runs in {', '.join(e.configuration for e in found)}"
+                          f': give --configuration, or a label ({labels})')
+    raise ConfigError(f"--law: '{law}'" + (f' in {configuration}' if configuration else '')
+                      + f' is not a law of the campaign; its laws: {labels}')
 
 
 def _scenario_of(campaign: Campaign, scenario: str | None) -> str:

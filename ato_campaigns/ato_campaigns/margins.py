@@ -30,23 +30,28 @@ lag.
 
 API for reports (the campaign report shows these beside the results): :func:`margins` of one
 law, configuration and actuator; :func:`coverage` against an uncertainty specification;
-:func:`margins_rows` and :func:`markdown_table` for every law and configuration of a campaign.
+:func:`entry_margins` of one law with given settings; :func:`margins_rows` and
+:func:`markdown_table` for every law and configuration on a scenario; :func:`campaign_margins`
+for every row label of a campaign (the settings it runs).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Iterable, Mapping
+from typing import TYPE_CHECKING, Any, Iterable, Mapping
 
 import numpy as np
 
 from ato_common.knowledge import knowledge_of
-from ato_common.scenario import Scenario
+from ato_common.scenario import Scenario, load_scenario
 from ato_controller_node.gains import GAINS, GainsUnavailable, settings_for
 from ato_controller_node.laws import LAWS
 from ato_controller_node.laws.base import FeedbackGains, validated_settings
 from ato_simulation.applies import applicable_rate
+
+if TYPE_CHECKING:
+    from ato_campaigns.engine import Campaign
 
 #: a frequency grid for the loop's exact response, rad/s
 FREQUENCIES = np.logspace(-4.0, 3.0, 4000)
@@ -208,6 +213,29 @@ def coverage(loop: Loop, spec: Mapping[str, Any]) -> Coverage:
     return Coverage(worst.stable, worst, tolerated, reason)
 
 
+def entry_margins(law: str, scenario: Scenario, settings: Mapping[str, Any],
+                  spec: Mapping[str, Any], rate_hz: float | None = None) -> dict[str, Any]:
+    """The margins of ``law`` with ``settings`` on ``scenario`` (at ``rate_hz``, default the
+    rate it runs at there): without an actuator (the hold only, the nominal plant), at the
+    largest actuator draw of ``spec``, and whether the law covers the draws (``note``: why,
+    in a sentence). A loop that cannot be built or judged is a row whose note says why."""
+    try:
+        loop = law_loop(law, scenario, settings, rate_hz)
+        bare = loop_margins(loop)
+        cover = coverage(loop, spec)
+    except (ValueError, KeyError) as error:
+        return {'note': f'no margins: {error}'}
+    return {'kp_per_s2': loop.gains.position_per_s2, 'kd_per_s': loop.gains.speed_per_s,
+            'ki_per_s3': loop.gains.integral_per_s3,
+            'phase_margin_deg': bare.phase_margin_deg, 'delay_margin_s': bare.delay_margin_s,
+            'stable_nominal': bare.stable,
+            'worst_phase_margin_deg': cover.worst.phase_margin_deg,
+            'worst_delay_margin_s': cover.worst.delay_margin_s,
+            'covers_actuator_draws': cover.covered,
+            'tolerated_dead_time_s': cover.tolerated_dead_time_s,
+            'coverage': cover.reason, 'note': f'{cover.reason}; {loop.gains.note}'}
+
+
 def margins_rows(laws: Iterable[str], scenario: Scenario, spec: Mapping[str, Any],
                  configurations: Iterable[str] = GAINS) -> list[dict[str, Any]]:
     """One row per law and configuration: the margins without an actuator (the hold only),
@@ -222,20 +250,25 @@ def margins_rows(laws: Iterable[str], scenario: Scenario, spec: Mapping[str, Any
             except GainsUnavailable as error:
                 rows.append({**row, 'note': str(error)})
                 continue
-            loop = law_loop(law, scenario, settings)
-            bare = loop_margins(loop)
-            cover = coverage(loop, spec)
-            rows.append({**row, 'kp_per_s2': loop.gains.position_per_s2,
-                         'kd_per_s': loop.gains.speed_per_s,
-                         'ki_per_s3': loop.gains.integral_per_s3,
-                         'phase_margin_deg': bare.phase_margin_deg,
-                         'delay_margin_s': bare.delay_margin_s,
-                         'worst_phase_margin_deg': cover.worst.phase_margin_deg,
-                         'worst_delay_margin_s': cover.worst.delay_margin_s,
-                         'covers_actuator_draws': cover.covered,
-                         'tolerated_dead_time_s': cover.tolerated_dead_time_s,
-                         'note': f'{cover.reason}; {loop.gains.note}'})
+            rows.append({**row, **entry_margins(law, scenario, settings, spec)})
     return rows
+
+
+def campaign_margins(campaign: Campaign):
+    """The margins of every row label of a campaign on each of its scenarios, with the
+    settings the label runs (its configuration's and its own), at its rate, against its
+    scenario's uncertainty: a DataFrame of columns scenario, law (the label), configuration
+    and those of :func:`entry_margins` (``report.write_report``'s ``law_columns``)."""
+    import pandas as pd
+    rows = []
+    for key in campaign.scenarios:
+        scenario = load_scenario(key)
+        for entry in campaign.laws:
+            rows.append({'scenario': key, 'law': entry.label,
+                         'configuration': entry.configuration, **entry_margins(
+                             entry.law, scenario, campaign.settings_of(key, entry),
+                             campaign.specs[key], campaign.rates_hz[(key, entry.label)])})
+    return pd.DataFrame(rows)
 
 
 def markdown_table(rows: list[dict[str, Any]], worst: Actuator) -> str:

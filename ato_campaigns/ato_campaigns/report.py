@@ -28,7 +28,8 @@ from typing import Any
 import numpy as np
 
 from ato_campaigns import stats as cs
-from ato_campaigns.engine import STOP_ERROR_LIMIT_M, Campaign
+from ato_campaigns.engine import STOP_ERROR_LIMIT_M, Campaign, artefact_description
+from ato_campaigns.margins import largest_actuator
 from ato_campaigns.provenance import write_results_page
 from ato_common import uncertainty
 from ato_common.run_events import LATE_AFTER_S, STATUSES
@@ -86,7 +87,8 @@ def _stacked(frames: dict[str, Any], column: str):
 def overview(campaign: Campaign, rows, law_columns=None):
     """Per (scenario, law): its runs, its status counts, the rate of each OVERVIEW_KINDS, the
     mean RMS speed error and traction energy, and the columns of ``law_columns`` (a DataFrame
-    indexed by law label: e.g. a law's configuration or its loop margins) joined by law."""
+    indexed by law label, or with columns ``scenario`` and ``law``: e.g. a law's
+    configuration or its loop margins) joined by law (and scenario)."""
     import pandas as pd
     rates = cs.failure_rates(rows).set_index(['scenario', 'law', 'kind'])
     out = []
@@ -103,8 +105,11 @@ def overview(campaign: Campaign, rows, law_columns=None):
             record[f'mean {metric}'] = float(measured[metric].mean())
         out.append(record)
     table = pd.DataFrame(out)
-    if law_columns is not None and not table.empty:
-        table = table.join(law_columns, on='law')
+    if law_columns is not None and not table.empty and not law_columns.empty:
+        if 'scenario' in law_columns.columns:   # per scenario and label (e.g. the margins)
+            table = table.merge(law_columns, on=['scenario', 'law'], how='left')
+        else:
+            table = table.join(law_columns, on='law')
     return table
 
 
@@ -129,7 +134,48 @@ def statistics(campaign: Campaign, rows, law_columns=None) -> dict[str, Any]:
         'convergence': cs.convergence(rows, RANK_METRIC),
         'sensitivity': _stacked({m: cs.sensitivity(rows, m)
                                  for m in _metrics(rows, SENSITIVITY_METRICS)}, 'metric'),
+        'margins': _margins_frame(law_columns),
+        'tuned_vs_published': tuned_vs_published(campaign, rows),
     }
+
+
+def tuned_vs_published(campaign: Campaign, rows):
+    """What the tuning changes, per scenario and law entry run in both configurations, on the
+    same draws: the paired differences tuned minus published of the main metrics (with their
+    bootstrap intervals) and of the rate of ATP interventions and of runs not ok (Newcombe
+    interval, McNemar's exact p-value)."""
+    import pandas as pd
+    parts = []
+    pairs: dict[str, dict[str, str]] = {}
+    for e in campaign.laws:
+        pairs.setdefault(e.entry, {})[e.configuration] = e.label
+    for entry, labels in pairs.items():
+        if not {'published', 'tuned'} <= set(labels):
+            continue
+        sub = rows[rows['law'].isin([labels['published'], labels['tuned']])]
+        for metric in _metrics(rows, (RANK_METRIC, 'stop_error_m', 'traction_energy_kwh')):
+            d = cs.paired_differences(sub, labels['published'], metric)
+            parts.append(d.assign(entry=entry, metric=metric, kind=''))
+        failures = cs.paired_failures(sub, labels['published'])
+        failures = failures[failures['kind'].isin(('ATP intervention', 'not ok'))]
+        parts.append(failures.rename(columns={'rate_diff': 'mean_diff'}).assign(
+            entry=entry, metric='rate'))
+    if not parts:
+        return pd.DataFrame()
+    table = pd.concat(parts, ignore_index=True)
+    first = ['scenario', 'entry', 'law', 'baseline', 'metric', 'kind', 'pairs', 'mean_diff',
+             'low', 'high']
+    return table[first + [c for c in table.columns if c not in first]]
+
+
+def _margins_frame(law_columns):
+    """The loop margins of every label (``law_columns`` when it holds them), else empty."""
+    import pandas as pd
+    if law_columns is None or 'note' not in law_columns.columns:
+        return pd.DataFrame()
+    frame = law_columns if 'scenario' in law_columns.columns else \
+        law_columns.rename_axis('law').reset_index()
+    return frame.reset_index(drop=True)
 
 
 def methods() -> dict[str, Any]:
@@ -161,7 +207,10 @@ def write_statistics(campaign: Campaign, tables: dict[str, Any], folder: Path,
     path.write_text(json.dumps({
         'campaign': campaign.name, 'origin': campaign.origin,
         'fingerprint': campaign.fingerprint, 'seed': campaign.seed, 'draws': campaign.draws,
-        'baseline': campaign.baseline, 'command': command, 'methods': methods(),
+        'baseline': campaign.baseline, 'configurations': list(campaign.configurations),
+        'envelope': campaign.envelope,
+        'tuning_artefacts': [artefact_description(a) for a in campaign.artefacts()],
+        'command': command, 'methods': methods(),
         'tables': {name: _records(table) for name, table in tables.items()}}, indent=1))
     return path
 
@@ -173,8 +222,10 @@ def _header(campaign: Campaign, rows, elapsed_s: float) -> list[str]:
     statuses = rows['status'].value_counts().to_dict() if runs else {}
     counted = ', '.join(f'{statuses[s]} {s}' for s in STATUSES if s in statuses)
     m = methods()
+    entries = len({e.entry or e.label for e in campaign.laws})
     return [f'Campaign `{campaign.name}` ({campaign.origin}): {len(campaign.scenarios)} '
-            f'scenario(s) x {len(campaign.laws)} laws x {campaign.draws} draws, seed '
+            f'scenario(s) x {entries} laws x {len(campaign.configurations)} configuration(s) '
+            f'({", ".join(campaign.configurations)}) x {campaign.draws} draws, seed '
             f'{campaign.seed}, fingerprint `{campaign.fingerprint}`: {runs} runs ({counted}); '
             f'the runs took {rows["wall_s"].sum():.0f} s in sum, this command {elapsed_s:.0f} s '
             f'of wall time on {os.cpu_count()} cores (a resumed campaign runs only the missing '
@@ -184,7 +235,7 @@ def _header(campaign: Campaign, rows, elapsed_s: float) -> list[str]:
             f'+/-{STOP_ERROR_LIMIT_M:g} m, no missed time window and no arrival '
             f'{LATE_AFTER_S:g} s or more after the timetable; otherwise its status names the most '
             'serious of what went wrong (the order of the statuses above) and its reason each.',
-            '', '## Methods', '',
+            '', *_gains(campaign), '## Methods', '',
             f'- Intervals at {m["confidence"]:.0%}. Proportions: Wilson score intervals. Paired '
             'failure comparison: the difference of the two laws\' rates on the same draws with '
             "Newcombe's hybrid score interval for paired proportions (Newcombe 1998, method 10) "
@@ -201,6 +252,34 @@ def _header(campaign: Campaign, rows, elapsed_s: float) -> list[str]:
             'approximation (scipy.stats.spearmanr) above.',
             '- Every table is also in `stats/<table>.csv` and `report.json` beside this '
             'report.', '']
+
+
+def _gains(campaign: Campaign) -> list[str]:
+    """The configurations, the envelope, the baseline and the tuned artefacts."""
+    envelope = 'on' if campaign.envelope else 'off'
+    lines = ['## Gains, envelope, baseline', '',
+             f'Every law runs in each configuration of its gains on the same draws, as its own '
+             f'row `<law>/<configuration>`: {", ".join(campaign.configurations)} '
+             '(`published`: the paper\'s law and gains; `tuned`: the gains of the suite\'s one '
+             'tuning procedure, `make tune`, the same for every law). The ATO envelope of the '
+             f'controller host (anti-windup of the position and speed errors) is {envelope} for '
+             f'every law. Paired comparisons are taken against **{campaign.baseline}** (the '
+             "campaign's `baseline`; by default the PID, in its tuned configuration when the "
+             'campaign runs it).', '']
+    artefacts = campaign.artefacts()
+    if artefacts:
+        lines += ['| law | train | training seed, draws | budget | feasible on its training '
+                  'draws | produced at commit | file |', '|---|---|---|---|---|---|---|']
+        for a in map(artefact_description, artefacts):
+            budget, result = a['budget'], a['result']
+            lines.append(f"| {a['law']} | {a['train']} | {a['seed']}, "
+                         f"{a['training'].get('draws', '-')} on "
+                         f"{a['training'].get('scenario', '-')} | {budget.get('trials', '-')} "
+                         f"trials x {budget.get('draws_per_trial', '-')} draws | "
+                         f"{'yes' if result.get('feasible') else 'no'} | {a['commit']} | "
+                         f"`{a['file']}` |")
+        lines.append('')
+    return lines
 
 
 def _uncertainty(campaign: Campaign) -> list[str]:
@@ -242,23 +321,78 @@ def _ranking_line(sub, key: str) -> list[str]:
             f'Best: **{best}**{verdict}.', '']
 
 
+def margins_cell(r: dict) -> str:
+    """A label's loop margins in brief: phase and delay margin on the nominal plant, and its
+    stability at the campaign's largest actuator draw (``-`` without margins)."""
+    pm = r.get('phase_margin_deg')
+    if pm is None or (isinstance(pm, float) and math.isnan(pm)):
+        return '-'
+    nominal = (f"{_f(pm, '.0f')} deg, {_f(r.get('delay_margin_s'), '.2g')} s"
+               if r.get('stable_nominal') else 'unstable')
+    worst = 'stable' if r.get('covers_actuator_draws') else 'unstable'
+    return f'{nominal}; {worst}'
+
+
 def _overview_table(table, key: str) -> list[str]:
     sub = table[table['scenario'] == key]
-    extra = [c for c in sub.columns if c not in ('scenario', 'law', 'runs', 'statuses')
-             and ': ' not in c and not c.startswith('mean ')]
+    extra = [c for c in ('configuration',) if c in sub.columns]
+    margins = 'phase_margin_deg' in sub.columns
     lines = ['### Overview', '',
              '| law | statuses | ' + ' | '.join(f'{kind} [CI]' for kind in OVERVIEW_KINDS)
              + ' | mean RMS speed error (km/h) | mean traction energy (kWh) | '
-             + ''.join(f'{c} | ' for c in extra),
-             '|---|---|' + '---|' * (len(OVERVIEW_KINDS) + 2 + len(extra))]
+             + ''.join(f'{c} | ' for c in extra)
+             + ('loop margins: phase, delay (nominal); at the largest actuator | '
+                if margins else ''),
+             '|---|---|' + '---|' * (len(OVERVIEW_KINDS) + 2 + len(extra) + margins)]
     for r in sub.to_dict('records'):
         cells = [f'{r[f"{k}: k"]}/{r["runs"]} [{_f(r[f"{k}: low"], ".2f")}, '
                  f'{_f(r[f"{k}: high"], ".2f")}]' for k in OVERVIEW_KINDS]
         lines.append(f'| {r["law"]} | {r["statuses"]} | ' + ' | '.join(cells)
                      + f' | {_f(r.get(f"mean {RANK_METRIC}"), ".3f")} | '
                      + f'{_f(r.get("mean traction_energy_kwh"), ".1f")} | '
-                     + ''.join(f'{r[c]} | ' for c in extra))
+                     + ''.join(f'{r[c]} | ' for c in extra)
+                     + (f'{margins_cell(r)} |' if margins else ''))
     return lines + ['']
+
+
+def _margins_section(campaign: Campaign, tables: dict, key: str) -> list[str]:
+    """Each label's loop margins (ato_campaigns.margins) with the settings it ran, and a
+    sentence for each that cannot cover the campaign's actuator draws."""
+    table = tables['margins']
+    table = table[table['scenario'] == key] if 'scenario' in table.columns else table
+    if table.empty:
+        return []
+    try:
+        worst = largest_actuator(campaign.specs[key]).describe()
+    except (ValueError, KeyError) as error:
+        worst = f'none ({error})'
+    lines = ['### Loop margins (the loop linearised about cruise with the settings each row '
+             'ran: ato_campaigns.margins, python-control)', '',
+             'Phase and delay margin on the nominal plant (the controller\'s hold, no '
+             'actuator) and whether the loop is stable there; the same at the campaign\'s '
+             f'largest actuator draw ({worst}), and the largest dead time the loop tolerates '
+             'with that lag. An adaptive law is linearised with its adaptation frozen at its '
+             'nominal estimates.', '',
+             '| law | configuration | phase margin (deg) | delay margin (s) | stable, nominal '
+             '| phase margin at the largest actuator (deg) | stable there | largest dead time '
+             'tolerated (s) |', '|---|---|---|---|---|---|---|---|']
+    said = []
+    for r in table.to_dict('records'):
+        if not isinstance(r.get('phase_margin_deg'), float) or \
+                math.isnan(r['phase_margin_deg']):
+            lines.append(f"| {r['law']} | {r.get('configuration', '-')} | - | - | - | - | - "
+                         '| - |')
+            said.append(f"- `{r['law']}`: {r['note']}.")
+            continue
+        covers = bool(r['covers_actuator_draws'])
+        lines.append(f"| {r['law']} | {r.get('configuration', '-')} | "
+                     f"{_f(r['phase_margin_deg'], '.1f')} | {_f(r['delay_margin_s'], '.3g')} | "
+                     f"{'yes' if r['stable_nominal'] else 'no'} | "
+                     f"{_f(r['worst_phase_margin_deg'], '.1f')} | "
+                     f"{'yes' if covers else 'no'} | {_f(r['tolerated_dead_time_s'], '.3g')} |")
+        if not covers:
+            said.append(f"- `{r['law']}`: its loop {r['coverage']}.")
+    return lines + [''] + (said + [''] if said else [])
 
 
 def _metrics_table(campaign: Campaign, tables: dict, key: str) -> list[str]:
@@ -333,6 +467,37 @@ def _paired_table(campaign: Campaign, tables: dict, key: str) -> list[str]:
     return lines + ['']
 
 
+def _tuned_table(tables: dict, key: str) -> list[str]:
+    """What the tuning changes, per law (tuned_vs_published)."""
+    table = tables['tuned_vs_published']
+    table = table[table['scenario'] == key] if not table.empty else table
+    if table.empty:
+        return []
+    lines = ['### Tuned against published (each law on the same draws: tuned minus published; '
+             f'{cs.CONFIDENCE:.0%} paired bootstrap interval of the mean difference, for the '
+             "rates Newcombe's interval and McNemar's exact p-value)", '',
+             '| law | pairs | RMS speed error (km/h) | worst stop error (m) | traction energy '
+             '(kWh) | ATP intervention rate | not ok rate | McNemar p (ATP, not ok) |',
+             '|---|---|---|---|---|---|---|---|']
+    for entry, group in table.groupby('entry', sort=False):
+        cells, p_values = [str(group['pairs'].max())], []
+        for metric, kind in ((RANK_METRIC, ''), ('stop_error_m', ''),
+                             ('traction_energy_kwh', ''), ('rate', 'ATP intervention'),
+                             ('rate', 'not ok')):
+            r = group[(group['metric'] == metric) & (group['kind'] == kind)]
+            if r.empty:
+                cells.append('-')
+                continue
+            r = r.iloc[0]
+            fmt = '+.3f' if metric != 'traction_energy_kwh' else '+.1f'
+            cells.append(f'{_f(r["mean_diff"], fmt)} [{_f(r["low"], fmt)}, '
+                         f'{_f(r["high"], fmt)}]')
+            if metric == 'rate':
+                p_values.append(_f(r.get('mcnemar_p'), '.3g'))
+        lines.append(f'| {entry} | ' + ' | '.join(cells) + f' | {", ".join(p_values)} |')
+    return lines + ['']
+
+
 def _pareto_table(tables: dict, key: str) -> list[str]:
     table = tables['pareto']
     table = table[table['scenario'] == key] if not table.empty else table
@@ -391,8 +556,10 @@ def _scenario_section(campaign: Campaign, rows, tables: dict, key: str,
         return []
     lines = [f'## {name}', '', *_pairs_warning(sub, key), *_ranking_line(sub, key),
              *_overview_table(tables['overview'], key),
+             *_margins_section(campaign, tables, key),
              *_metrics_table(campaign, tables, key), *_stop_table(tables, key),
              *_failure_tables(campaign, tables, key), *_paired_table(campaign, tables, key),
+             *_tuned_table(tables, key),
              *_pareto_table(tables, key), *_sensitivity_tables(campaign, tables, key),
              *_not_ok(sub)]
     if plots:
@@ -541,44 +708,65 @@ README_START = '<!-- campaign summary: written by make campaign, do not edit -->
 README_END = '<!-- end of the campaign summary -->'
 
 
-def summary_markdown(campaign: Campaign, rows, command: str) -> str:
-    """The short summary the README shows: per scenario, each law's mean RMS speed error, its
-    paired difference against the baseline, and its failure rates, with intervals."""
-    lines = [f'`{command}`: {len(campaign.laws)} laws x {campaign.draws} draws of the default '
-             f'uncertainty, seed {campaign.seed} (full report: '
-             '[docs/results/campaign.md](docs/results/campaign.md)).', '']
-    kinds = ('not ok', 'ATP intervention', 'did not finish')
+def summary_markdown(campaign: Campaign, rows, command: str, law_columns=None) -> str:
+    """The short summary the README shows: per scenario, each row label (every law in each
+    configuration, in the campaign's order) with its mean RMS speed error and its ratio to the
+    baseline's, its paired difference against the baseline, its ATP interventions and runs
+    not ok, and its loop margins in brief (``law_columns``: campaign_margins)."""
+    entries = len(campaign.laws) // max(len(campaign.configurations), 1)
+    lines = [f'`{command}`: {entries} laws x {len(campaign.configurations)} configurations '
+             f'({", ".join(campaign.configurations)}) x {campaign.draws} draws of the default '
+             f'uncertainty, seed {campaign.seed}, the ATO envelope '
+             f'{"on" if campaign.envelope else "off"}; paired against {campaign.baseline} '
+             '(full report: [docs/results/campaign.md](docs/results/campaign.md)).', '']
+    margins = _margins_frame(law_columns)
     for key in campaign.scenarios:
         sub = rows[rows['scenario'] == key]
         if sub.empty:
             continue
-        ranked = cs.ranking(sub, key, RANK_METRIC)
-        means = {law: mean for law, mean, _ in ranked}
-        diffs = cs.paired_differences(sub, campaign.baseline, RANK_METRIC).set_index('law')
-        rates = cs.failure_rates(sub).set_index(['law', 'kind'])
-        tied = [law for law, _, apart in ranked[1:] if not apart]
-        lines += [f'**{scenario_name(key)}**: lowest mean RMS speed error **{ranked[0][0]}**'
-                  + (f' (not told apart at {cs.CONFIDENCE:.0%} from: {", ".join(tied)})'
-                     if tied else '') + '.', '', *_pairs_warning(sub, key),
-                  f'| law | mean RMS speed error (km/h) | minus {campaign.baseline}, '
-                  f'paired [{cs.CONFIDENCE:.0%} CI] | '
-                  + ' | '.join(f'{kind} [CI]' for kind in kinds) + ' |',
-                  '|---|---|---|' + '---|' * len(kinds)]
-        for law, _, _ in ranked:
-            if law in diffs.index:
-                d = diffs.loc[law]
-                diff = f'{_f(d["mean_diff"], "+.3f")} [{_f(d["low"], "+.3f")}, ' \
-                       f'{_f(d["high"], "+.3f")}]'
-            else:
-                diff = '(baseline)'
-            cells = []
-            for kind in kinds:
-                r = rates.loc[(law, kind)]
-                cells.append(f'{r["k"]}/{r["n"]} [{r["low"]:.2f}, {r["high"]:.2f}]')
-            lines.append(f'| {law} | {_f(means[law], ".3f")} | {diff} | ' + ' | '.join(cells)
-                         + ' |')
-        lines.append('')
+        lines += [*_summary_head(sub, key), *_pairs_warning(sub, key),
+                  *_summary_table(campaign, sub, key, margins), '']
     return '\n'.join(lines).strip()
+
+
+def _summary_head(sub, key: str) -> list[str]:
+    """The best of a scenario, and how many cannot be told apart from it (the report names
+    them: the README keeps to its size)."""
+    ranked = cs.ranking(sub, key, RANK_METRIC)
+    tied = sum(not apart for _, _, apart in ranked[1:])
+    return [f'**{scenario_name(key)}**: lowest mean RMS speed error **{ranked[0][0]}**'
+            + (f'; {tied} other(s) not told apart from it at {cs.CONFIDENCE:.0%} (the report '
+               'names them)' if tied else f'; told apart from every other at '
+               f'{cs.CONFIDENCE:.0%}') + '.', '']
+
+
+def _summary_table(campaign: Campaign, sub, key: str, margins) -> list[str]:
+    """The README's table of one scenario (see summary_markdown)."""
+    baseline = campaign.baseline
+    means = cs.summary(sub, RANK_METRIC).set_index('law')['mean']
+    diffs = cs.paired_differences(sub, baseline, RANK_METRIC).set_index('law')
+    rates = cs.failure_rates(sub).set_index(['law', 'kind'])
+    if not margins.empty and 'scenario' in margins.columns:
+        margins = margins[margins['scenario'] == key]
+    cells = {r['law']: margins_cell(r) for r in margins.to_dict('records')} \
+        if not margins.empty else {}
+    lines = [f'| law | mean RMS speed error, km/h (x {baseline}) | minus {baseline} '
+             f'[{cs.CONFIDENCE:.0%} CI] | ATP | not ok | margins: phase, delay; at the largest '
+             'actuator |', '|---|---|---|---|---|---|']
+    base = means.get(baseline, math.nan)
+    for law in [e.label for e in campaign.laws if e.label in means.index]:
+        if law in diffs.index:
+            d = diffs.loc[law]
+            diff = f'{_f(d["mean_diff"], "+.3f")} [{_f(d["low"], "+.3f")}, ' \
+                   f'{_f(d["high"], "+.3f")}]'
+        else:
+            diff = '(baseline)'
+        counts = [f'{rates.loc[(law, kind), "k"]}/{rates.loc[(law, kind), "n"]}'
+                  for kind in ('ATP intervention', 'not ok')]
+        ratio = means[law] / base if base else math.nan
+        lines.append(f'| {law} | {_f(means[law], ".3f")} (x{_f(ratio, ".2f")}) | {diff} | '
+                     + ' | '.join(counts) + f' | {cells.get(law, "-")} |')
+    return lines
 
 
 def update_readme(path: Path, summary: str) -> Path:
@@ -598,7 +786,9 @@ def write_report(campaign: Campaign, rows, folder: Path, command: str, elapsed_s
                  readme: Path | None = None, law_columns=None) -> Path:
     """The report, its plots and its statistics (CSV, JSON) in ``folder``; the results page
     and the README's summary if asked. ``law_columns``: extra per-law columns of the overview
-    (a DataFrame indexed by law label)."""
+    (a DataFrame indexed by law label, or with columns scenario and law); with the loop
+    margins of ``margins.campaign_margins`` the report, its statistics and the summary show
+    them beside the results."""
     folder.mkdir(parents=True, exist_ok=True)
     tables = statistics(campaign, rows, law_columns)
     body = markdown(campaign, rows, command, elapsed_s, tables=tables)
@@ -612,5 +802,5 @@ def write_report(campaign: Campaign, rows, folder: Path, command: str, elapsed_s
                            page_body + f'\n\nThe plots, `stats/*.csv` and `report.json` are '
                            f'written beside `{path}` when the command runs.', measured)
     if readme is not None:
-        update_readme(readme, summary_markdown(campaign, rows, command))
+        update_readme(readme, summary_markdown(campaign, rows, command, law_columns))
     return path

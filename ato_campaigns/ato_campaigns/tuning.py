@@ -231,7 +231,8 @@ def training_campaign(campaign, seed: int, draws: int, laws: list[str]):
             if rate is None:
                 raise ConfigError(f'{law} does not fit {scenario}: {reason}')
             rates[(scenario, law)] = rate
-    return dataclasses.replace(campaign, seed=seed, draws=draws, rates_hz=rates)
+    return dataclasses.replace(campaign, seed=seed, draws=draws, rates_hz=rates,
+                               envelope=True)  # the procedure's, stated in each artefact
 
 
 def run_round(training, searches: list[LawSearch], execute_runs) -> None:
@@ -386,7 +387,8 @@ def parse_args(argv=None) -> argparse.Namespace:
 def main(argv=None) -> int:
     args = parse_args(argv)
     try:
-        campaign = load_campaign(args.campaign)
+        # its scenario, laws and uncertainty; the tuning starts from the published gains
+        campaign = load_campaign(args.campaign, configurations=('published',))
         if len(campaign.scenarios) != 1:
             raise ConfigError(f'{args.campaign}: tuning needs a campaign of one scenario')
         laws = args.laws or list(dict.fromkeys(e.law for e in campaign.laws))

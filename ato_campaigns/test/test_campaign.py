@@ -41,9 +41,12 @@ from ato_common.scenario import load_scenario
 from ato_common.validation import ConfigError
 from ato_simulation.loop import run_offline
 
-#: a tiny campaign: 2 laws x 1 scenario x 4 draws of the first 40 s of the short line
+#: a tiny campaign: 2 laws x 1 scenario x 4 draws of the first 40 s of the short line, in
+#: the published configuration (test_configurations.py runs both)
 TINY = {'name': 'tiny', 'seed': 11, 'draws': 4, 'scenarios': ['short_line'],
-        'laws': ['pid', {'law': 'luo_xu'}], 'end_time_s': 40, 'timeout_s': 120}
+        'laws': ['pid', {'law': 'luo_xu'}], 'configurations': ['published'], 'end_time_s': 40,
+        'timeout_s': 120}
+PID, LUO = 'pid/published', 'luo_xu/published'
 #: columns that differ between two runs of the same campaign (wall time)
 VOLATILE = ('wall_s',)
 
@@ -111,7 +114,8 @@ def serial_rows(tmp_path_factory):
 def test_a_serial_campaign_has_one_row_per_run_with_its_draw_and_metrics(serial_rows):
     campaign, rows = serial_rows
     assert len(rows) == 8 and set(rows['status']) == {'ok'}
-    assert set(rows['law']) == {'pid', 'luo_xu'} and sorted(set(rows['draw'])) == [0, 1, 2, 3]
+    assert set(rows['law']) == {PID, LUO} and sorted(set(rows['draw'])) == [0, 1, 2, 3]
+    assert set(rows['configuration']) == {'published'} and set(rows['envelope']) == {True}
     for column in ('campaign', 'scenario', 'law', 'draw', 'status', 'reason', *METRICS):
         assert column in rows.columns
     for name in campaign.specs[campaign.scenarios[0]]:
@@ -252,7 +256,8 @@ def test_every_parquet_file_says_what_its_rows_stand_on(tmp_path):
         assert spec['mass_factor'] == uncertainty.DEFAULTS['mass_factor'].describe()
         assert description['run_end']['rule'] == 'window'
         assert description['run_end']['end_time_s'] == 20.0
-        assert description['tuning_artefact'] == ''
+        assert description['tuning_artefact'] == []   # no tuned configuration
+        assert description['configurations'] == ['published'] and description['envelope']
         assert description['commit'] and 'not a git checkout' not in description['commit']
 
 
@@ -266,8 +271,9 @@ def test_one_row_is_made_again_offline_printed_and_its_arrays_saved(tmp_path, ca
                  '--save', str(saved)]) == 0
     printed, said = capsys.readouterr()
     shown = json.loads(printed)
-    stored = rows[(rows['law'] == 'luo_xu') & (rows['draw'] == 1)].iloc[0]
-    assert (shown['law'], shown['draw'], shown['status']) == ('luo_xu', 1, stored['status'])
+    stored = rows[(rows['law'] == LUO) & (rows['draw'] == 1)].iloc[0]
+    assert (shown['law'], shown['draw'], shown['status']) == (LUO, 1, stored['status'])
+    assert shown['configuration'] == 'published'
     assert shown['rms_speed_error_kmh'] == stored['rms_speed_error_kmh']
     assert shown['drawn']['mass_factor'] == stored['p_mass_factor']
     assert 'the same status and metrics as the stored row' in said
@@ -286,7 +292,7 @@ def test_one_row_is_made_again_offline_printed_and_its_arrays_saved(tmp_path, ca
 
 
 def hang_or_fail(task):
-    if task['draw'] == 1 and task['law'] == 'pid':
+    if task['draw'] == 1 and task['law'] == PID:
         while True:  # a law that never returns
             pass
     if task['draw'] == 2:
@@ -312,11 +318,11 @@ def test_a_hanging_run_times_out_a_failing_one_is_reported_and_the_campaign_comp
             client.close()
     assert len(rows) == 8
     status = {(r.law, r.draw): (r.status, r.reason) for r in rows.itertuples()}
-    assert status[('pid', 1)][0] == 'timeout' and '3 s' in status[('pid', 1)][1]
-    for law in ('pid', 'luo_xu'):
+    assert status[(PID, 1)][0] == 'timeout' and '3 s' in status[(PID, 1)][1]
+    for law in (PID, LUO):
         assert status[(law, 2)][0] == 'error'
         assert 'ZeroDivisionError: estimate reached zero' in status[(law, 2)][1]
-    assert [status[(law, d)][0] for law in ('pid', 'luo_xu') for d in (0, 3)] == ['ok'] * 4
+    assert [status[(law, d)][0] for law in (PID, LUO) for d in (0, 3)] == ['ok'] * 4
     failed = rows[rows['status'] != 'ok']
     assert failed['rms_speed_error_kmh'].isna().all()
     assert (failed['p_mass_factor'] > 0).all()  # the drawn parameters are kept
@@ -574,7 +580,7 @@ def test_the_readme_summary_is_written_between_its_markers_only(tmp_path, serial
     text = readme.read_text()
     assert text.startswith('# x\n\nbefore\n') and text.endswith('after\n')
     assert 'OLD SUMMARY' not in text
-    assert '| pid |' in text and '| luo_xu |' in text and '**short_line**' in text
+    assert f'| {PID} |' in text and f'| {LUO} |' in text and '**short_line**' in text
     readme.write_text('no markers')
     with pytest.raises(ValueError, match='no campaign summary markers'):
         campaign_report.update_readme(readme, 'x')
@@ -603,12 +609,13 @@ def test_a_hidden_gradient_changes_the_controller_only_and_the_closed_loop_shows
 def test_a_law_entry_can_hide_the_gradient_on_the_same_draws(tmp_path):
     example = resources.files('ato_campaigns') / 'campaigns' / 'hidden_gradient.yaml'
     assert [(e.label, e.gradient) for e in load_campaign(Path(str(example))).laws] == [
-        ('pid', 'drawn'), ('pid_gradient_hidden', 'hidden')]
+        (PID, 'drawn'), ('pid_gradient_hidden/published', 'hidden')]
     data = dict(TINY, draws=2, end_time_s=300,
                 laws=['pid', {'law': 'pid', 'label': 'flat', 'gradient': 'hidden'}])
     rows = run_campaign(load_campaign(write(tmp_path, data)), tmp_path / 'out', serial=True,
                         progress=False)
-    pid, flat = (rows[rows['law'] == law].reset_index(drop=True) for law in ('pid', 'flat'))
+    pid, flat = (rows[rows['law'] == law].reset_index(drop=True)
+                 for law in (PID, 'flat/published'))
     assert list(pid['p_gradient_known']) == [1.0, 1.0]
     assert list(flat['p_gradient_known']) == [0.0, 0.0]
     plant = [c for c in rows.columns if c.startswith('p_') and c != 'p_gradient_known']

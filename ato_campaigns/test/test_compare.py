@@ -261,3 +261,48 @@ def test_a_bad_time_limit_is_refused_naming_the_option(value, capsys):
         compare.main(['--timeout-s', value])
     assert f"--timeout-s: must be a finite number of seconds >= 0 (0: no limit), got '{value}'" \
         in capsys.readouterr().err
+
+
+def test_the_gains_configuration_reaches_every_run_and_a_law_without_it_is_listed():
+    jobs, skipped = compare.plan_jobs(['short_line', 'jinan_xuzhou'], ['pid'], gains='tuned')
+    assert [(j.scenario, j.gains) for j in jobs] == [('short_line', 'tuned')]
+    train = load_scenario('jinan_xuzhou').train.name
+    (reason,) = [s['reason'] for s in skipped if s['scenario'] == 'jinan_xuzhou']
+    assert f'no tuned gains of pid for the train {train}' in reason
+    assert [j.gains for j in compare.plan_jobs(['short_line'], ['pid'])[0]] == ['published']
+
+
+def test_a_run_runs_the_configuration_of_its_job(monkeypatch):
+    from ato_simulation import loop
+    seen = []
+    real = loop.run_offline
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs['gains'])
+        return real(*args, **dict(kwargs, end_time_s=5.0))
+
+    monkeypatch.setattr(loop, 'run_offline', spy)
+    (job,) = compare.plan_jobs(['short_line'], ['pid'], gains='tuned')[0]
+    assert compare.run_job(job)['gains'] == 'tuned' and seen == ['tuned']
+
+
+@pytest.mark.parametrize('gains', ['published', 'tuned'])
+def test_the_comparison_shows_each_law_s_loop_margins_in_its_configuration(gains):
+    from ato_campaigns import margins
+    jobs, _ = compare.plan_jobs(['short_line'], ['pid', 'luo_xu'], compare.PLANTS, gains)
+    table = compare.law_margins(jobs)
+    assert [(r['law'], r['gains']) for r in table] == [('luo_xu', gains), ('pid', gains)]
+    scenario = load_scenario('short_line')
+    for row in table:
+        expected = margins.margins(row['law'], gains, scenario)
+        assert row['phase_margin_deg'] == pytest.approx(expected.phase_margin_deg)
+        assert row['stable_nominal'] == expected.stable
+        actuated = margins.margins(row['law'], gains, scenario, margins.Actuator(
+            *(compare.ACTUATOR_DRAW[name] for name in compare.ACTUATOR_PARAMETERS)))
+        assert row['stable_with_actuator'] == actuated.stable
+    text = compare.markdown([], [], ['short_line'], 'now', 'make compare', margins=table,
+                            gains=gains)
+    assert f'every law in its `{gains}` configuration' in text
+    assert f'Loop margins ({gains} gains' in text
+    pid = next(r for r in table if r['law'] == 'pid')
+    assert f'| pid | {pid["phase_margin_deg"]:.1f} | ' in text

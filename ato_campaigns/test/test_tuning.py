@@ -40,8 +40,18 @@ def test_the_score_weighs_the_metrics_and_counts_the_violations():
     assert score.violations == (1, 1, 1) and not score.feasible
 
 
+def test_the_tuning_reads_the_default_campaign_for_its_published_start():
+    """The default campaign names its configurations; the tuning reads it without the tuned
+    one (it starts from the published settings, and a train without artefacts is tuned)."""
+    campaign = load_campaign(tuning.DEFAULT_CAMPAIGN, configurations=('published',))
+    assert campaign.configurations == ('published',) and campaign.tuned == {}
+    assert {e.law for e in campaign.laws} == {e.law for e in load_campaign(
+        tuning.DEFAULT_CAMPAIGN).laws}
+
+
 def test_the_training_seed_must_not_be_the_campaigns(campaign):
-    with pytest.raises(ConfigError, match="the training seed 2026 is the campaign's own"):
+    with pytest.raises(ConfigError, match=f"the training seed {campaign.seed} is the "
+                                          "campaign's own"):
         tuning.training_campaign(campaign, campaign.seed, 2, ['pid'])
     training = tuning.training_campaign(campaign, 31, 2, ['pid'])
     assert (training.seed, training.draws) == (31, 2)
