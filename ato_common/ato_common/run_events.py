@@ -209,8 +209,8 @@ class TimingPointPassed:
             or (self.latest_s is not None and self.time_s > self.latest_s))
 
 
-def timing_points_passed(scenario: Scenario, times_s: Sequence[float],
-                         positions: Sequence[float],
+def timing_points_passed(scenario: Scenario, times_s: Sequence[float] | np.ndarray,
+                         positions: Sequence[float] | np.ndarray,
                          tolerance_m: float = PLATFORM_TOLERANCE_M) -> list[TimingPointPassed]:
     """Each timing point of the scenario's journey against the run: a passing point when the
     front first reaches it, a stopping point's arrival when the front is first within the
@@ -237,7 +237,8 @@ def timing_points_passed(scenario: Scenario, times_s: Sequence[float],
     return passed
 
 
-def journey_events(scenario: Scenario, times_s: Sequence[float], positions: Sequence[float],
+def journey_events(scenario: Scenario, times_s: Sequence[float] | np.ndarray,
+                   positions: Sequence[float] | np.ndarray,
                    tolerance_m: float = PLATFORM_TOLERANCE_M) -> RunEvents:
     """The timing points of the scenario's journey (:func:`timing_points_passed`) outside
     [earliest, latest] or never reached: missed windows."""

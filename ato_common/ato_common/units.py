@@ -8,6 +8,10 @@ grades in per mille; masses in t; forces in kN; speeds in km/h.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING, TypeVar
+
+if TYPE_CHECKING:
+    import numpy as np
 
 STANDARD_GRAVITY = 9.80665  # m/s^2, used unless a paper fixes another g
 KMH_PER_MPS = 3.6
@@ -33,7 +37,11 @@ def kw_to_w(power_kw: float) -> float:
     return power_kw * 1000.0
 
 
-def joules_to_kwh(energy_j: float) -> float:
+#: an energy or an array of them (a cumulative energy, sample by sample)
+Energy = TypeVar('Energy', float, 'np.ndarray')
+
+
+def joules_to_kwh(energy_j: Energy) -> Energy:
     return energy_j / 3.6e6
 
 

@@ -74,26 +74,26 @@ class BackgroundWriter:
                 self.first_ns = newest_ns
             if self.handed_ns is None or newest_ns > self.handed_ns:
                 self.handed_ns = newest_ns
-            self._hold(newest_ns)
+            self._hold(newest_ns, self.first_ns)
 
-    def _on_disk_ns(self) -> int:
-        return self.first_ns if self.flushed_ns is None else self.flushed_ns
+    def _on_disk_ns(self, first_ns: int) -> int:
+        return first_ns if self.flushed_ns is None else self.flushed_ns
 
-    def _hold(self, newest_ns: int) -> None:
-        if newest_ns - self._on_disk_ns() <= self.lead_ns:
+    def _hold(self, newest_ns: int, first_ns: int) -> None:
+        if newest_ns - self._on_disk_ns(first_ns) <= self.lead_ns:
             return
         started = time.monotonic()
         told = started
         with self._progress:
             while self.error is None and not self.closed and \
-                    newest_ns - self._on_disk_ns() > self.lead_ns:
+                    newest_ns - self._on_disk_ns(first_ns) > self.lead_ns:
                 self._progress.wait(0.1)
                 now = time.monotonic()
                 if now - told >= SLOW_WRITER_S:
                     told = now
                     self.on_slow(f'the loop has waited {now - started:.1f} s of wall time for '
                                  f'the bag writer, whose file holds the step records up to '
-                                 f'{self._on_disk_ns() / 1e9:.3f} s (lead '
+                                 f'{self._on_disk_ns(first_ns) / 1e9:.3f} s (lead '
                                  f'{self.lead_ns / 1e9:g} s)')
         self.waited_s += time.monotonic() - started
         self._check()

@@ -35,12 +35,12 @@ from collections import Counter
 from dataclasses import dataclass, field
 from operator import itemgetter
 from pathlib import Path
-from typing import Iterable, Iterator, NamedTuple, Sequence
+from typing import Callable, Iterable, Iterator, NamedTuple, Sequence
 
 import foxglove
 import yaml
 import zstandard
-from foxglove.mcap import MCAPCompression, MCAPWriteOptions
+from foxglove.mcap import MCAPCompression, MCAPWriteOptions, MCAPWriter
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Message, Metadata, Schema
@@ -204,8 +204,8 @@ class BagWriter:
             # Created by this writer or not at all (two recorders given one folder at the same
             # moment: the second is refused instead of both writing one file). The SDK opens
             # the file itself: no Python call per write.
-            self._writer = foxglove.open_mcap(self.path, allow_overwrite=False,
-                                              context=self._context, writer_options=options)
+            self._writer: MCAPWriter | None = foxglove.open_mcap(
+                self.path, allow_overwrite=False, context=self._context, writer_options=options)
         except FileExistsError:
             raise BagError(f'{self.path} was just created by another recorder: choose another '
                            'output folder') from None
@@ -217,7 +217,8 @@ class BagWriter:
         self.flush_period_log_ns = int(flush_period_log_s * 1e9)
         self._schemas: dict[str, foxglove.Schema] = {}
         self._channels: dict[str, foxglove.Channel] = {}
-        self._log: dict[str, object] = {}  # topic -> its channel's log (the compiled call)
+        # topic -> its channel's log (the compiled call): (data, log time ns)
+        self._log: dict[str, Callable[[bytes, int], None]] = {}
         self.topics: dict[str, TopicInfo] = {}
         self.start_ns: int | None = None
         self.end_ns = 0
@@ -309,17 +310,27 @@ class BagWriter:
         if self.failed or self.closed:
             return
         try:
-            self._writer.flush()
+            self._open_writer().flush()
         except (RuntimeError, OSError) as error:
             raise self._failed(error) from None
         self._last_flush = time.monotonic() if now is None else now
         if self.start_ns is not None:
             self._last_flush_log_ns = self.flushed_ns = self.end_ns
 
+    def _open_writer(self) -> MCAPWriter:
+        """The SDK's writer. Released before the bag was closed (at the interpreter's exit,
+        ``_drop_open_writers``), the file cannot be finished: failed, BagError."""
+        if self._writer is None:
+            self.failed = True
+            raise BagError(f'cannot write {self.path}: its writer was released at the '
+                           f'interpreter\'s exit; the recording stopped: '
+                           f'{recover_command(self.folder)}')
+        return self._writer
+
     def _write_record(self, metadata: dict) -> None:
         try:
-            self._writer.write_metadata(METADATA_RECORD,
-                                        {'serialized_metadata': dump_yaml(metadata)})
+            self._open_writer().write_metadata(METADATA_RECORD,
+                                               {'serialized_metadata': dump_yaml(metadata)})
         except (RuntimeError, OSError) as error:
             raise self._failed(error) from None
 
@@ -332,14 +343,15 @@ class BagWriter:
         if not self.failed:
             try:
                 self._write_record(metadata_of(self.info()))
-                self._writer.close()
+                self._open_writer().close()
             except BagError:
                 pass  # failed: said below
             except (RuntimeError, OSError) as error:
                 self._failed(error)
         if self.failed:
             try:
-                self._writer.close()
+                if self._writer is not None:
+                    self._writer.close()
             except (RuntimeError, OSError):
                 pass  # already failed: the error below says so
             # Dropped now: the SDK's writer must not be dropped (and report its error) while

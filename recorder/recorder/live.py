@@ -39,11 +39,13 @@ import os
 import re
 import sys
 import threading
+from typing import Callable
 
 import foxglove
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import Subscription
 from rclpy.utilities import remove_ros_args
 
 from ato_common.validation import ConfigError
@@ -123,7 +125,8 @@ class LiveViewNode(RunNodeHooks, Node):
         self.types: dict[str, str] = {}
         self.offered: dict[str, list] = {}
         self.skipped: set[str] = set()
-        self.subscriptions_by_topic: dict[str, object] = {}
+        # topic -> its subscription (on this node, or on the sampler) and what forwards it
+        self.subscriptions_by_topic: dict[str, tuple[Subscription, Callable[[bytes], None]]] = {}
         self.forwarded = 0
         self.sim_time = self.get_parameter('use_sim_time').value
         self.server, self.front = self.serve(host, port)
@@ -162,24 +165,19 @@ class LiveViewNode(RunNodeHooks, Node):
         for topic, channel in self.channels.items():
             subscribed = topic in self.subscriptions_by_topic
             if channel.id() in watched and not subscribed:
-                msg_type = message_class(self.types[topic])
+                msg_type, forward = message_class(self.types[topic]), self._forward(topic)
                 if self.sampler is None:  # every message, as it arrives
-                    self.subscriptions_by_topic[topic] = self.create_subscription(
-                        msg_type, topic, self._forward(topic),
-                        subscription_qos(self.offered[topic]), raw=True)
+                    subscription = self.create_subscription(
+                        msg_type, topic, forward, subscription_qos(self.offered[topic]), raw=True)
                 else:
-                    self.subscriptions_by_topic[topic] = (
-                        self.sampler.create_subscription(
-                            msg_type, topic, lambda data: None,
-                            sampling_qos(self.offered[topic]), raw=True),
-                        self._forward(topic))
+                    subscription = self.sampler.create_subscription(
+                        msg_type, topic, lambda data: None, sampling_qos(self.offered[topic]),
+                        raw=True)
+                self.subscriptions_by_topic[topic] = subscription, forward
                 self.get_logger().info(f'watched: {topic}')
             elif channel.id() not in watched and subscribed:
-                removed = self.subscriptions_by_topic.pop(topic)
-                if self.sampler is None:
-                    self.destroy_subscription(removed)
-                else:
-                    self.sampler.destroy_subscription(removed[0])
+                removed, _ = self.subscriptions_by_topic.pop(topic)
+                (self if self.sampler is None else self.sampler).destroy_subscription(removed)
                 self.get_logger().info(f'no longer watched: {topic}')
         if self.sim_time:
             now = self.get_clock().now().nanoseconds
@@ -225,7 +223,7 @@ class LiveViewNode(RunNodeHooks, Node):
         self.skipped.add(topic)
         self.get_logger().warning(f'{topic}: {reason}; not offered')
 
-    def _forward(self, topic: str):
+    def _forward(self, topic: str) -> Callable[[bytes], None]:
         channel, clock = self.channels[topic], self.get_clock()
         stamped = logs_at_stamp(topic, self.types[topic], 'stamp')
 

@@ -55,9 +55,11 @@ import sys
 from datetime import datetime, timezone
 from operator import itemgetter
 from pathlib import Path
+from typing import Callable
 
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.subscription import Subscription
 from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock as ClockMsg
 from std_msgs.msg import Header
@@ -141,7 +143,8 @@ class RecorderNode(RunNodeHooks, Node):
         # The subscriptions' node: never spun, its messages are taken every take period.
         self.taker = Node(f'{self.get_name()}_subscriptions', context=self.context,
                           start_parameter_services=False)
-        self.takes: dict[str, tuple[object, object]] = {}  # topic -> (subscription, handler)
+        # topic -> (subscription, handler)
+        self.takes: dict[str, tuple[Subscription, Callable[[bytes], None]]] = {}
         self.writer = writer
         self.sim_time = sim_time
         self.sim_now_ns = 0  # --sim-time: the stamp of the last /clock
@@ -151,13 +154,13 @@ class RecorderNode(RunNodeHooks, Node):
                               'one of them')
         self.log_time = log_time
         self.wanted = set(topics) if topics else None
-        self.subscribed: dict[str, object] = {}
+        self.subscribed: dict[str, Subscription | None] = {}  # None: a topic left out
         # ato_ros.step_records: the per-step topics of a namespace whose loop nodes publish
         # step records are taken from those, not subscribed to one by one
         self.step_records = step_records
         self.bundled: set[str] = set()  # namespaces whose step records are subscribed to
         self.written: dict[str, Written] = {}  # namespace -> what is written of its records
-        self.step_subscriptions: list = []
+        self.step_subscriptions: list[Subscription] = []
         self.direct: set[str] = set()  # per-step topics subscribed to: left out of the records
         self.from_records: set[str] = set()  # per-step topics taken from the step records
         self.discoveries = 0
@@ -191,8 +194,9 @@ class RecorderNode(RunNodeHooks, Node):
         found = self.get_topic_names_and_types()
         # the step records first: a per-step topic they carry is then not subscribed to
         for topic, types in found:
-            if topic not in self.subscribed and self.is_step_records(topic, types):
-                self._subscribe_step_records(topic)
+            if topic not in self.subscribed and \
+                    (namespace := self.step_records_namespace(topic, types)) is not None:
+                self._subscribe_step_records(topic, namespace)
         if self.discoveries % RECHECK_DISCOVERIES == 0:
             self.recheck_from_records()
         for topic, types in found:
@@ -240,17 +244,23 @@ class RecorderNode(RunNodeHooks, Node):
         stamp and counted in what is written of the namespace (``Written``): the
         acknowledgements, and so the plant's lead, cover it as they cover the step records."""
         self.direct.add(topic)
-        written = self.written.get(namespace)
-        handler = self._handler(topic, stamped=True)
+        on_message = self._counted(topic, self._handler(topic, stamped=True),
+                                   self.written.get(namespace))
+        subscription = self.create_subscription(msg_type, topic, on_message, qos, raw=True)
+        self.subscribed[topic] = subscription
+        self.step_subscriptions.append(subscription)  # taken at the close too
 
+    @staticmethod
+    def _counted(topic: str, handler: Callable[[bytes], None],
+                 written: Written | None) -> Callable[[bytes], None]:
+        """``handler``, with each message's stamp counted in what is written of its namespace
+        (``written``), so that the acknowledgements cover it."""
         def on_message(data: bytes) -> None:
             handler(data)
             stamp = cdr_stamp_ns(data)
             if written is not None and stamp is not None:
                 written.wrote(topic, stamp)
-        self.subscribed[topic] = self.create_subscription(msg_type, topic, on_message, qos,
-                                                          raw=True)
-        self.step_subscriptions.append(self.subscribed[topic])  # taken at the close too
+        return on_message
 
     def carries_records(self, namespace: str) -> bool:
         """Whether this recorder takes the step records of ``namespace``."""
@@ -285,9 +295,11 @@ class RecorderNode(RunNodeHooks, Node):
                 self.get_logger().info(f'{topic} has a publisher that publishes no step '
                                        'records: subscribed to from now on')
 
-    def is_step_records(self, topic: str, types) -> bool:
-        return list(types) == [STEP_RECORDS.type_name] and \
-            namespace_of(topic, 'step_records') is not None
+    def step_records_namespace(self, topic: str, types) -> str | None:
+        """The namespace whose step records ``topic`` is, else None."""
+        if list(types) != [STEP_RECORDS.type_name]:
+            return None
+        return namespace_of(topic, 'step_records')
 
     def attach_in_process(self) -> str | None:
         """In the composed stack: take the step records of this node's namespace from the loop
@@ -300,14 +312,14 @@ class RecorderNode(RunNodeHooks, Node):
         records.attach(self._on_local_records)
         return namespace
 
-    def _subscribe_step_records(self, topic: str) -> None:
-        """Take the per-step topics of ``topic``'s namespace from its step records (and drop a
+    def _subscribe_step_records(self, topic: str, namespace: str) -> None:
+        """Take the per-step topics of ``namespace`` from its step records, ``topic`` (and drop a
         subscription to one of them made before the step records were seen: the loop does not
-        start before the recorder has matched the step records, so it has received nothing).
+        start before the recorder has matched the step records, so it has received nothing;
+        one whose topic has a publisher of its own is kept, and counted).
         Without step records (``--no-step-records``) the topic is left alone: nobody bundles
         for this recorder; nor for the recorder's own namespace in the composed stack (handed
         on in the process)."""
-        namespace = namespace_of(topic, 'step_records')
         if not self.step_records or namespace == self.local_namespace or (
                 self.wanted is not None and not any(
                     (step_recorded(t) or (None, None))[1] == namespace for t in self.wanted)):
@@ -322,21 +334,28 @@ class RecorderNode(RunNodeHooks, Node):
             recorded = step_recorded(other)
             if recorded is None or recorded[1] != namespace:
                 continue
+            if not self.taken_from_records(other):
+                # A publisher of its own (an ATO node outside the suite), subscribed to before
+                # the step records were seen: its subscription is kept (a new one would miss
+                # what is published before it is matched), its messages counted.
+                self.direct.add(other)
+                subscription, handler = self.takes[other]
+                self.takes[other] = (subscription, self._counted(other, handler, written))
+                continue
             subscription, _ = self.takes.pop(other)
             self.taker.destroy_subscription(subscription)
             del self.subscribed[other]
-            if not self.taken_from_records(other):  # a publisher of its own: as it comes
-                self._subscribe_per_step(other, subscription.msg_type, subscription.qos_profile,
-                                         namespace)
         # Taken as they come (an executor's subscription, not the take period's): in lockstep
         # the plant waits for their acknowledgement (ato_ros.publishing.RecorderLead).
         acknowledgements = self.create_publisher(
             Header, namespace.rstrip('/') + '/' + RECORDED.name, qos_profile(RECORDED.qos))
-        self.step_subscriptions.append(self.create_subscription(
-            STEP_RECORDS_MSG, topic,
-            lambda data: self._on_step_records(data, written, acknowledgements),
-            subscription_qos(offered), raw=True))
-        self.subscribed[topic] = self.step_subscriptions[-1]
+
+        def on_records(data: bytes) -> None:
+            self._on_step_records(data, written, acknowledgements)
+        records = self.create_subscription(STEP_RECORDS_MSG, topic, on_records,
+                                           subscription_qos(offered), raw=True)
+        self.step_subscriptions.append(records)
+        self.subscribed[topic] = records
         self.get_logger().info(f'recording the per-step topics of {namespace} from its step '
                                f'records ({topic}), each logged at its step, acknowledged on '
                                f'{acknowledgements.topic_name}')
@@ -470,7 +489,7 @@ class RecorderNode(RunNodeHooks, Node):
         (so that ``--sim-time``'s /clock is read where it came among the others)."""
         if self.finished:
             return
-        taken = []
+        taken: list[tuple[int, int, Callable[[bytes], None], bytes]] = []
         for subscription, handler in self.takes.values():
             with subscription.handle:
                 for _ in range(MAX_TAKES):
@@ -493,7 +512,7 @@ class RecorderNode(RunNodeHooks, Node):
                         break
                     subscription.callback(message[0])
 
-    def _handler(self, topic: str, stamped: bool):
+    def _handler(self, topic: str, stamped: bool) -> Callable[[bytes], None]:
         write = self.writer.write
         is_clock = topic == self.clock_topic
 

@@ -43,7 +43,7 @@ from ato_common.conventions import TOPICS, status_in_namespace
 from ato_common.identity import identity_mismatch, parse_identity, scenario_identity
 from ato_common.metrics import RunMetrics, StopSample, compute_metrics, format_summary
 from ato_common.run_events import PLATFORM_TOLERANCE_M, journey_events, timing_points_passed
-from ato_common.scenario import builtin_scenarios, load_scenario
+from ato_common.scenario import Scenario, builtin_scenarios, load_scenario
 from ato_common.validation import ConfigError
 from recorder.bag import BagError, bag_info, read_messages
 from recorder.report_plots import plot
@@ -175,7 +175,7 @@ def stops_from_curve(times: np.ndarray, positions: np.ndarray, speeds: np.ndarra
                      ) -> list[PlannedStop]:
     """Each standstill of the target curve after the train first moved: from its first to
     its last instant (the stop error is read at the last, the end of the dwell)."""
-    stops = []
+    stops: list[PlannedStop] = []
     moving = np.nonzero(speeds > 0.0)[0]
     if moving.size == 0:
         return stops
@@ -208,7 +208,8 @@ class _Reader:
         self.estimates: dict[str, list] = {}
         self.stops: list[PlannedStop] = []
         self.watch = {'watchdog': 'normal', 'atp_intervention': 'False'}
-        self.extra = RunData(np.array([]), *([np.array([])] * 7), [], [])
+        empty = np.array([])  # the arrays are load_run's
+        self.extra = RunData(empty, empty, empty, empty, empty, empty, empty, empty, [], [])
         keys = {name: key for key, name in topics.items()}
         self.handlers = {name: getattr(self, f'on_{key}') for name, key in keys.items()}
 
@@ -337,7 +338,7 @@ def run_metrics(data: RunData) -> RunMetrics:
                            data.ref_positions, data.ref_speeds, data.stops)
 
 
-def scenario_of_run(data: RunData, given: str | None, bag: Path):
+def scenario_of_run(data: RunData, given: str | None, bag: Path) -> Scenario | None:
     """The scenario the recorded plant simulated: ``given`` (a name or a file), checked against
     the identity the plant published, or else the built-in scenario the identity names. None
     when neither is known (a recording without the plant's identity, and no scenario given);
@@ -475,7 +476,8 @@ def stop_rows(data: RunData, metrics: RunMetrics) -> list[tuple[str, ...]]:
     """Each stop of the target curve: the station, its planned (the curve's standstill) and
     actual (the train's standstill) arrival, departure and dwell ('-' where the run starts or
     ends standing) and its stopping error."""
-    times, rows = data.stamps_ns / 1e9, []
+    times = data.stamps_ns / 1e9
+    rows: list[tuple[str, ...]] = []
     for stop in data.planned_stops:
         arrival, departure = standstill(times, data.positions, data.speeds, stop.position_m)
         error = metrics.stop_errors_m.get(stop.name)
@@ -542,7 +544,7 @@ class Report:
 
     bag: Path
     data: RunData
-    scenario: object | None
+    scenario: Scenario | None
     metrics: RunMetrics
 
     def sections(self) -> list[tuple[str, str]]:

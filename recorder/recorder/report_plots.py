@@ -8,11 +8,14 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
 from ato_common import units
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 #: how the report names a raw key's unit suffix (SI, ``ato_common.units``)
 UNITS = (('_n_per_mps2', 'N/(m/s²)'), ('_n_per_mps', 'N/(m/s)'), ('_kg_per_m', 'kg/m'),
@@ -226,8 +229,10 @@ def estimates_figure(data):
     return fig
 
 
-def figures(data, stop_errors: dict[str, float]) -> list[tuple[str, Callable[[], object]]]:
-    """(file stem, figure maker) of every plot, in the report's order."""
+def figures(data, stop_errors: dict[str, float]
+            ) -> list[tuple[str, Callable[[], Figure | None]]]:
+    """(file stem, figure maker) of every plot, in the report's order (a maker returns None
+    when the recording has no data for its plot)."""
     return [('tracking', lambda: tracking_figure(data)),
             ('errors', lambda: errors_figure(data)),
             ('distance_to_go', lambda: distance_to_go_figure(data)),

@@ -83,7 +83,7 @@ def normalise_qos(entry) -> dict:
     missing = [k for k in QOS_KEYS if k not in entry]
     if missing:
         raise FormatError(f'QoS profile without {", ".join(missing)}')
-    out = {}
+    out: dict[str, object] = {}
     for key in QOS_KEYS:
         value = entry[key]
         if key in POLICIES:

@@ -230,6 +230,24 @@ def test_a_full_disk_stops_the_recording_with_a_clear_error_and_no_valid_looking
     assert not (tmp_path / 'run' / 'metadata.yaml').exists()
 
 
+def test_a_writer_released_at_the_exit_fails_clearly_and_leaves_no_valid_looking_bag(
+        tmp_path, monkeypatch):
+    """At the interpreter's exit the SDK's writers not yet closed are released; a recorder
+    still writing then gets a BagError naming the cause (not an AttributeError), and its bag
+    is not finished as if it were whole."""
+    import weakref
+
+    from recorder import bag
+    writer = write_bag(tmp_path / 'run', count=10)
+    monkeypatch.setattr(bag, '_open_writers', weakref.WeakSet([writer]))
+    bag._drop_open_writers()
+    with pytest.raises(BagError, match="released at the interpreter's exit.*recover"):
+        writer.flush()
+    with pytest.raises(BagError, match='could not be finished'):
+        writer.close()
+    assert not (tmp_path / 'run' / 'metadata.yaml').exists()
+
+
 def test_recover_of_a_file_that_is_not_mcap_says_so_and_leaves_it_untouched(tmp_path, capsys):
     bogus = tmp_path / 'bogus.mcap'
     content = b'certainly not an MCAP recording\n' * 50
