@@ -191,7 +191,7 @@ def parse_line(data, where: str = 'line') -> Line:
         grades.insert(0, 0.0)
     _ascending(grade_starts, f'{where}.gradients')
 
-    curves = []
+    curves: list[Curve] = []
     for item in f.items('curves'):
         start = item.number('start_m', minimum=0.0, maximum=length)
         curve_length = item.number('length_m', minimum=0.0, exclusive_minimum=True)

@@ -176,11 +176,11 @@ def _parse_line(f: Fields, base: Path) -> tuple[Line, ttobench.TTOBenchJourney |
     raw = f.raw('line', required=True)
     if not (isinstance(raw, dict) and 'ttobench' in raw):
         line = parse_line(raw, 'line')
-        journey = f.section('journey')
-        if journey.has('ttobench'):
+        journey_section = f.section('journey')
+        if journey_section.has('ttobench'):
             raise ConfigError('journey.ttobench: a TTOBench journey needs a TTOBench track '
                               '(line.ttobench)')
-        journey.reject_unknown()
+        journey_section.reject_unknown()
         return line, None
     fields = f.section('line')
     path = _file(fields, 'ttobench', base)

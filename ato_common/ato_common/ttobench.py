@@ -39,7 +39,7 @@ import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, overload
 
 from ato_common import units
 from ato_common.files import load_json
@@ -173,8 +173,17 @@ class _Reader:
                             f'({", ".join(table)})')
         return table[declared]
 
+    @overload
+    def scalar(self, key: str, quantity: str, required: Literal[True] = True,
+               minimum: float | None = None, exclusive: bool = False) -> float: ...
+
+    @overload
+    def scalar(self, key: str, quantity: str, required: bool,
+               minimum: float | None = None, exclusive: bool = False) -> float | None: ...
+
     def scalar(self, key: str, quantity: str, required: bool = True, minimum: float | None = None,
                exclusive: bool = False) -> float | None:
+        """A {"unit": ..., "value": ...} field in SI (None: absent and not ``required``)."""
         entry = self.get(key, required)
         if entry is None:
             return None
@@ -183,6 +192,14 @@ class _Reader:
         _Reader(self.path, entry, self._place(key)).only(('unit', 'value'))
         convert = self.unit(f'{key}.unit', entry.get('unit'), quantity)
         return convert(self.number(entry['value'], f'{key}.value', minimum, exclusive))
+
+    @overload
+    def table(self, key: str, columns: list[tuple[str, str]], required: Literal[True] = True
+              ) -> list[list[Any]]: ...
+
+    @overload
+    def table(self, key: str, columns: list[tuple[str, str]], required: bool
+              ) -> list[list[Any]] | None: ...
 
     def table(self, key: str, columns: list[tuple[str, str]], required: bool = True
               ) -> list[list[Any]] | None:
@@ -202,7 +219,7 @@ class _Reader:
             if isinstance(declared, dict):
                 _Reader(self.path, declared, self._place(f'{key}.units')).only(
                     tuple(name for name, quantity in columns if quantity != 'raw'))
-        converters = []
+        converters: list[Any] = []
         for name, quantity in columns:
             if quantity == 'raw':
                 converters.append(None)
@@ -270,6 +287,7 @@ def load_track(path: str | Path, dwell_s: float = 0.0) -> TTOBenchTrack:
     stops = _stops(reader)
     length = stops[-1]
     limits = _sections(reader, 'speed limits', 'velocity', 'speed', length, True)
+    assert limits is not None  # required
     for i, (_, speed) in enumerate(limits):
         if speed <= 0.0:
             raise reader.fail(f'speed limits.values[{i}]', 'the speed limit must be > 0')
@@ -735,6 +753,7 @@ def load_journey(path: str | Path) -> TTOBenchJourney:
         if v_low is not None and v_high is not None and v_low > v_high:
             raise reader.fail(where, f'lower speed {v_low:g} m/s is above upper speed '
                               f'{v_high:g} m/s')
+        assert position is not None  # checked above
         points.append(TimingPoint(position, t_low, t_high, v_low, v_high))
     for i, (a, b) in enumerate(zip(points, points[1:])):
         if b.position_m < a.position_m:
@@ -774,7 +793,8 @@ def restrict(limits: PiecewiseConstant, start: float, end: float, speed: float,
     """``limits`` lowered to at most ``speed`` on [start, end)."""
     cuts = sorted({s for s in limits.starts} | {start, min(end, length)} - {length})
     values = [min(limits(x), speed) if start <= x < end else limits(x) for x in cuts]
-    starts, merged = [], []
+    starts: list[float] = []
+    merged: list[float] = []
     for x, v in zip(cuts, values):
         if not merged or v != merged[-1]:
             starts.append(x)
