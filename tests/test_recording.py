@@ -452,11 +452,14 @@ def test_an_ato_node_of_ones_own_is_recorded_beside_the_step_records(tmp_path, d
         stack.node.create_subscription(JointTrajectory, topic('reference').name,
                                        lambda data: None, QoSProfile(depth=1000), raw=True)
         # the recorder first (as the Stack starts it), and the run once it has subscribed to the
-        # node's commands (a recorder records a publisher from when it has discovered it)
+        # node's commands (a recorder records a publisher from when it has discovered it). The
+        # Stack's own monitor subscribes to them too: the recorder's log says when it has.
         stack.start_process('recorder', {}, ['-o', str(config.record_to), '--sim-time',
                                              '--background'])
-        assert stack.spin_until(lambda: commands.get_subscription_count() >= 1, 60.0), \
+        subscribed = 'recording /ato/command [sensor_msgs/msg/JointState]'
+        assert stack.spin_until(lambda: subscribed in stack.log_tail('recorder', 200), 60.0), \
             stack.log_tail('recorder')
+        assert stack.spin_until(lambda: commands.get_subscription_count() >= 2, 60.0)
         params = stack.node_params()
         for name in ('profile', 'plant'):
             stack.start_process(name, params[name])

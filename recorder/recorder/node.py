@@ -244,23 +244,17 @@ class RecorderNode(RunNodeHooks, Node):
         stamp and counted in what is written of the namespace (``Written``): the
         acknowledgements, and so the plant's lead, cover it as they cover the step records."""
         self.direct.add(topic)
-        on_message = self._counted(topic, self._handler(topic, stamped=True),
-                                   self.written.get(namespace))
-        subscription = self.create_subscription(msg_type, topic, on_message, qos, raw=True)
-        self.subscribed[topic] = subscription
-        self.step_subscriptions.append(subscription)  # taken at the close too
+        written = self.written.get(namespace)
+        handler = self._handler(topic, stamped=True)
 
-    @staticmethod
-    def _counted(topic: str, handler: Callable[[bytes], None],
-                 written: Written | None) -> Callable[[bytes], None]:
-        """``handler``, with each message's stamp counted in what is written of its namespace
-        (``written``), so that the acknowledgements cover it."""
         def on_message(data: bytes) -> None:
             handler(data)
             stamp = cdr_stamp_ns(data)
             if written is not None and stamp is not None:
                 written.wrote(topic, stamp)
-        return on_message
+        subscription = self.create_subscription(msg_type, topic, on_message, qos, raw=True)
+        self.subscribed[topic] = subscription
+        self.step_subscriptions.append(subscription)  # taken at the close too
 
     def carries_records(self, namespace: str) -> bool:
         """Whether this recorder takes the step records of ``namespace``."""
@@ -315,8 +309,7 @@ class RecorderNode(RunNodeHooks, Node):
     def _subscribe_step_records(self, topic: str, namespace: str) -> None:
         """Take the per-step topics of ``namespace`` from its step records, ``topic`` (and drop a
         subscription to one of them made before the step records were seen: the loop does not
-        start before the recorder has matched the step records, so it has received nothing;
-        one whose topic has a publisher of its own is kept, and counted).
+        start before the recorder has matched the step records, so it has received nothing).
         Without step records (``--no-step-records``) the topic is left alone: nobody bundles
         for this recorder; nor for the recorder's own namespace in the composed stack (handed
         on in the process)."""
@@ -334,17 +327,12 @@ class RecorderNode(RunNodeHooks, Node):
             recorded = step_recorded(other)
             if recorded is None or recorded[1] != namespace:
                 continue
-            if not self.taken_from_records(other):
-                # A publisher of its own (an ATO node outside the suite), subscribed to before
-                # the step records were seen: its subscription is kept (a new one would miss
-                # what is published before it is matched), its messages counted.
-                self.direct.add(other)
-                subscription, handler = self.takes[other]
-                self.takes[other] = (subscription, self._counted(other, handler, written))
-                continue
             subscription, _ = self.takes.pop(other)
             self.taker.destroy_subscription(subscription)
             del self.subscribed[other]
+            if not self.taken_from_records(other):  # a publisher of its own: as it comes
+                self._subscribe_per_step(other, subscription.msg_type, subscription.qos_profile,
+                                         namespace)
         # Taken as they come (an executor's subscription, not the take period's): in lockstep
         # the plant waits for their acknowledgement (ato_ros.publishing.RecorderLead).
         acknowledgements = self.create_publisher(
