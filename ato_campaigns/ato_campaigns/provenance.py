@@ -80,6 +80,7 @@ def results_page_provenance(path: Path) -> Provenance:
     """The provenance of a results page about to be measured: take it when the measurement
     starts (the commit and the state of the tree it ran from); the page itself does not count
     as an uncommitted change."""
+    relative: tuple[str, ...]
     try:
         relative = (str(Path(path).resolve().relative_to(REPOSITORY)),)
     except ValueError:

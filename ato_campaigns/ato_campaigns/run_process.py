@@ -51,7 +51,7 @@ import subprocess
 import sys
 import threading
 import traceback
-from typing import Any, Callable
+from typing import IO, Any, Callable
 
 _LENGTH = struct.Struct('<Q')
 
@@ -131,16 +131,18 @@ def with_time_limit(function: Callable[[], Any], limit_s: float | None) -> Any:
     thread.start()
     thread.join(limit_s)
     if thread.is_alive():
+        # a started thread has its ident
+        assert thread.ident is not None
         _raise_in(thread.ident)
         thread.join(STOP_GRACE_S)
         raise RunTimeout(limit_s)
     if 'error' in outcome:
-        error = outcome['error']
-        if isinstance(error, RunTimeout):  # raised just as the run finished
+        raised = outcome['error']
+        if isinstance(raised, RunTimeout):  # raised just as the run finished
             raise RunTimeout(limit_s) from None
-        if isinstance(error, Exception):
-            raise RunFailed(failure_reason(error)) from None
-        raise error
+        if isinstance(raised, Exception):
+            raise RunFailed(failure_reason(raised)) from None
+        raise raised
     return outcome['value']
 
 
@@ -158,6 +160,13 @@ class RunProcess:
             stdout=subprocess.PIPE, env=env)
         return self.process
 
+    @staticmethod
+    def _pipes(process: subprocess.Popen) -> tuple[IO[bytes], IO[bytes]]:
+        """The process's standard input and output."""
+        # _start opens both as pipes
+        assert process.stdin is not None and process.stdout is not None
+        return process.stdin, process.stdout
+
     def call(self, function: Callable[[], Any], limit_s: float | None) -> Any:
         """``function()`` in the process; RunTimeout past ``limit_s`` (the process is killed),
         RunFailed if it raised, RunDied if the process ended without an answer."""
@@ -165,9 +174,10 @@ class RunProcess:
         process = self.process if self.process is not None and self.process.poll() is None \
             else self._start()
         data = cloudpickle.dumps(function)
+        stdin, _ = self._pipes(process)
         try:
-            process.stdin.write(_LENGTH.pack(len(data)) + data)
-            process.stdin.flush()
+            stdin.write(_LENGTH.pack(len(data)) + data)
+            stdin.flush()
             answer = self._receive(process, limit_s)
         except RunTimeout:
             self.stop()
@@ -199,7 +209,7 @@ class RunProcess:
     def _message(process: subprocess.Popen, limit_s: float | None) -> bytes:
         # read from the descriptor, unbuffered: a buffered reader could hold the answer that
         # came with the start, where select() no longer sees it
-        out = process.stdout.fileno()
+        out = RunProcess._pipes(process)[1].fileno()
         if limit_s and not select.select([out], [], [], limit_s)[0]:
             raise RunTimeout(limit_s)
         (length,) = _LENGTH.unpack(_read_exactly(out, _LENGTH.size))
@@ -213,7 +223,7 @@ class RunProcess:
         if process.poll() is None:
             process.kill()
         code = process.wait()
-        for stream in (process.stdin, process.stdout):
+        for stream in self._pipes(process):
             try:
                 stream.close()
             except OSError:

@@ -139,7 +139,7 @@ def newcombe_paired(a: int, b: int, c: int, d: int, confidence: float = CONFIDEN
     # the correlation of the two estimates, its numerator ad - bc corrected for continuity
     # towards 0 (by n/2 when positive, to 0 within [0, n/2]; Newcombe's phi)
     denominator = (a + b) * (c + d) * (a + c) * (b + d)
-    numerator = a * d - b * c
+    numerator: float = a * d - b * c
     numerator = numerator - n / 2 if numerator > n / 2 else min(numerator, 0)
     phi = numerator / math.sqrt(denominator) if denominator > 0 else 0.0
     delta = math.sqrt(max((p1 - l1) ** 2 - 2 * phi * (p1 - l1) * (u2 - p2) + (u2 - p2) ** 2,

@@ -36,7 +36,8 @@ def curve_data(scenario, plan: Plan, step_s: float = 1.0) -> dict[str, np.ndarra
             'speed_mps': np.array([p.speed for p in points]),
             'permitted_at_target_mps': np.array([plan.permitted_speed(p.position, t)
                                                  for t, p in zip(times, points)])}
-    positions, columns = [], {name: [] for name, *_ in SUPERVISION_STYLES}
+    positions: list[float] = []
+    columns: dict[str, list[float]] = {name: [] for name, *_ in SUPERVISION_STYLES}
     columns['mrsp'], columns['static'] = [], []
     for leg, (origin, stop) in enumerate(zip(plan.supervision.stations_m,
                                              plan.supervision.stations_m[1:])):
@@ -80,8 +81,8 @@ STRATEGY_STYLES = {'fastest': ('tab:blue', 'ATO target, fastest'),
 
 
 def plot(scenario, plan: Plan, path: Path, others: dict[str, Plan] | None = None) -> None:
-    """``plan``: the scenario's own curve, with its supervision; ``others``: every strategy's
-    curve (``strategy_plans``), drawn beside it."""
+    """``plan``: the scenario's own curve (``plan_reference``), with its supervision;
+    ``others``: every strategy's curve (``strategy_plans``), drawn beside it."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -98,6 +99,8 @@ def plot(scenario, plan: Plan, path: Path, others: dict[str, Plan] | None = None
     curves = others or {plan.strategy: plan}
     for strategy, drawn in curves.items():
         color, label = STRATEGY_STYLES[strategy]
+        # plan_reference (the plans drawn: the docstring's) forecasts every plan it returns
+        assert drawn.forecast is not None
         energy = drawn.forecast.kwh()
         label = (f'{label}: {drawn.stops[-1].arrival_s:.0f} s, '
                  f'{energy["traction_energy_kwh"]:.0f} kWh gross, '

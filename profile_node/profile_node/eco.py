@@ -40,13 +40,14 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_right
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import brentq
 
 from ato_common import units
-from ato_common.line import PiecewiseConstant
+from ato_common.line import Curve, PiecewiseConstant, Tunnel
 from ato_common.scenario import Scenario
 from profile_node.trajectory import TrajectoryBuilder, braking_distance
 
@@ -69,7 +70,7 @@ SCAN_POINTS = 8
 HOLD, POWER, COAST, BRAKE = 'hold', 'power', 'coast', 'brake'
 
 
-def train_line_force(scenario: Scenario):
+def train_line_force(scenario: Scenario) -> Callable[[float], float]:
     """w(x): the line's specific force on the train with its front at x, m/s^2: g sin(the
     grade averaged over the train's length) + the curves and tunnels at its front."""
     # profile_node.timetable.train_grade_sine, imported late: timetable imports this module
@@ -95,13 +96,22 @@ class LegLimits:
     start_m: float
     end_m: float
     ceiling: PiecewiseConstant           # the section levels (planner.leg_ceiling), m/s
-    permitted: object = None             # the supervision's permitted speed at a position
+    # the supervision's permitted speed at a position
+    permitted: Callable[[float], float] | None = None
     deceleration_factor: float = 1.0      # lowered by the supervision check (planner)
-    line_force: object = field(default=None, compare=False, repr=False)
+    # w(x) (``train_line_force`` of the scenario unless given; read it with ``line_force_at``)
+    line_force: Callable[[float], float] | None = field(default=None, compare=False,
+                                                        repr=False)
 
     def __post_init__(self) -> None:
         if self.line_force is None:
             object.__setattr__(self, 'line_force', train_line_force(self.scenario))
+
+    def line_force_at(self, position_m: float) -> float:
+        """w at a position, m/s^2."""
+        # __post_init__ sets line_force when it is not given: never None after construction
+        assert self.line_force is not None
+        return self.line_force(position_m)
 
     def ceiling_mps(self, position_m: float) -> float:
         """The highest target speed: the level, and never above the permitted speed (less
@@ -120,12 +130,12 @@ class LegLimits:
         reserve = (train.traction.max_traction_at(speed_mps)
                    - train.davis_nominal.force(speed_mps)) / train.mass_kg
         return min(planning.max_acceleration_mps2,
-                   TRACTION_RESERVE_SHARE * (reserve - self.line_force(position_m)))
+                   TRACTION_RESERVE_SHARE * (reserve - self.line_force_at(position_m)))
 
     def deceleration_mps2(self, position_m: float) -> float:
         train, planning = self.scenario.train, self.scenario.planning
         brake = train.traction.max_service_brake_force_n / train.mass_kg
-        available = TRACTION_RESERVE_SHARE * brake + min(self.line_force(position_m), 0.0)
+        available = TRACTION_RESERVE_SHARE * brake + min(self.line_force_at(position_m), 0.0)
         return self.deceleration_factor * min(planning.service_deceleration_mps2, available)
 
 
@@ -174,7 +184,8 @@ class LegGrid:
         cuts.update(limits.ceiling_changes_m)
         for s in line.grade_sine.starts:
             cuts.update(x for x in (s, s + train.length_m) if start < x < end)
-        for feature in (*line.curves, *line.tunnels):
+        features: tuple[Curve | Tunnel, ...] = (*line.curves, *line.tunnels)
+        for feature in features:
             cuts.update(x for x in (feature.start_m, feature.start_m + feature.length_m)
                         if start < x < end)
         xs = sorted(cuts)
@@ -182,7 +193,7 @@ class LegGrid:
         self.xs[-1] = end
         self.n = len(self.xs) - 1
         self.dx = [b - a for a, b in zip(self.xs, self.xs[1:])]
-        force = limits.line_force
+        force = limits.line_force_at
         # w at both ends of each interval (linear between the cuts: the grade over the
         # train's length, a transition curve's force) and its mean over it
         self.w_ends = [(force(a + 1e-9), force(b - 1e-9)) for a, b in zip(self.xs, self.xs[1:])]

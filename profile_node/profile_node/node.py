@@ -230,6 +230,21 @@ class ProfileNode(RunNodeHooks, Node):
             self.sampler.destroy_node()
             self.sampler = None
 
+    @property
+    def lockstep_plans(self) -> LockstepPlans:
+        """The plans of a lockstep run (read only in lockstep)."""
+        # set on construction in lockstep (start_lockstep_plans), before the /clock
+        # subscription, and never unset
+        assert self.plans is not None
+        return self.plans
+
+    def run_time_s(self, stamp_ns: int) -> float:
+        """The curve's time at a stamp."""
+        # 0 from construction in lockstep; in real time, taken from the plant's first state,
+        # before which on_timer publishes nothing
+        assert self.time_origin_ns is not None
+        return seconds(stamp_ns - self.time_origin_ns)
+
     def plan_for(self, stamp_ns: int) -> Plan:
         """The plan whose reference is streamed for ``stamp_ns``."""
         return self.plan if self.plans is None else self.plans.plan_at(stamp_ns)
@@ -250,7 +265,7 @@ class ProfileNode(RunNodeHooks, Node):
         return reference_to_msg(Reference(0, points))
 
     def reference_at(self, stamp_ns: int) -> Reference:
-        t = seconds(stamp_ns - self.time_origin_ns)
+        t = self.run_time_s(stamp_ns)
         horizon, step = self.params['preview_horizon_s'], self.params['preview_step_s']
         count = int(horizon / step + 1e-9)
         at = self.plan_for(stamp_ns).trajectory.at
@@ -271,7 +286,7 @@ class ProfileNode(RunNodeHooks, Node):
         if not (dtg or permitted or recording):
             return
         plan = self.plan_for(stamp_ns)
-        now = plan.trajectory.at(seconds(stamp_ns - self.time_origin_ns))
+        now = plan.trajectory.at(self.run_time_s(stamp_ns))
         if dtg or recording:
             self.observe(self.dtg_pub, dtg, stamp_ns,
                          plan.next_target(now.position, now.time_s).location_m - now.position)
@@ -314,7 +329,7 @@ class ProfileNode(RunNodeHooks, Node):
             return
         if self.last_tick_ns is not None and tick < self.last_tick_ns:
             self.restart_lockstep()
-        if self.plans.schedule(tick):
+        if self.lockstep_plans.schedule(tick):
             self.checks.append(tick)
         if not self.plan_reported:
             self.publish_plan(tick, f'{self.plan.strategy} plan')
@@ -346,7 +361,7 @@ class ProfileNode(RunNodeHooks, Node):
     def decided_until(self, stamp_ns: int) -> bool:
         """Whether every check instant whose decision applies to the reference of
         ``stamp_ns`` has been decided (its measured state read now if it has come)."""
-        start_of = self.plans.start_of
+        start_of = self.lockstep_plans.start_of
         if not self.checks or start_of(self.checks[0]) > stamp_ns:
             return True
         self.read_checks()
@@ -388,7 +403,7 @@ class ProfileNode(RunNodeHooks, Node):
             self.get_logger().warning(f'lockstep: the measured state of '
                                       f'{seconds(stamp_ns):.3f} s is not usable ({error})')
             return
-        decision = self.plans.check(stamp_ns, state.positions[0], state.speeds[0])
+        decision = self.lockstep_plans.check(stamp_ns, state.positions[0], state.speeds[0])
         if decision is None:
             return
         self.plan = decision.plan

@@ -27,8 +27,8 @@ supervision times), the braking into that target is planned further ahead and th
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -36,7 +36,8 @@ from ato_common import units
 from ato_common.braking_curves import RunSupervision, Target
 from ato_common.line import PiecewiseConstant, Station
 from ato_common.metrics import WheelEnergy
-from ato_common.scenario import Scenario
+from ato_common.scenario import PlanningLimits, Scenario
+from ato_common.trains import DavisResistance, TractionCharacteristic
 from ato_common.validation import ConfigError
 from profile_node.eco import TRACTION_RESERVE_SHARE, EcoLeg, LegLimits
 from profile_node.timetable import (
@@ -124,16 +125,22 @@ PERMITTED_SPEED_TOLERANCE_MPS = 1e-6
 CHECK_STEP_S = 0.5
 
 
-def traction_capability(scenario: Scenario, climb_sine: float):
+def traction_capability(scenario: Scenario, climb_sine: float) -> Callable[[float], float]:
     """capability(v): planning acceleration capped by the train's traction reserve [m/s^2]."""
-    train, planning = scenario.train, scenario.planning
-    mass = train.mass_kg
+    train = scenario.train
+    return _capability(train.traction, train.davis_nominal, train.mass_kg, scenario.planning,
+                       climb_sine)
+
+
+def _capability(traction: TractionCharacteristic, davis: DavisResistance, mass_kg: float,
+                planning: PlanningLimits, climb_sine: float) -> Callable[[float], float]:
+    """``traction_capability`` from the parts of the scenario it depends on."""
     # Looked up once (the same operands, so the same values, as per call): per traction step.
-    traction_at, resistance = train.traction.max_traction_at, train.davis_nominal.force
+    traction_at, resistance = traction.max_traction_at, davis.force
     highest, climb = planning.max_acceleration_mps2, units.STANDARD_GRAVITY * max(climb_sine, 0.0)
 
     def capability(v: float) -> float:
-        reserve = (traction_at(v) - resistance(v)) / mass
+        reserve = (traction_at(v) - resistance(v)) / mass_kg
         return min(highest, TRACTION_RESERVE_SHARE * (reserve - climb))
     return capability
 
@@ -166,8 +173,9 @@ class _TractionDistances:
         self.distances.clear()
         self.steps.clear()
 
-    def __call__(self, traction, davis, mass_kg: float, planning, climb_sine: float,
-                 v_from: float, v_to: float) -> float:
+    def __call__(self, traction: TractionCharacteristic, davis: DavisResistance, mass_kg: float,
+                 planning: PlanningLimits, climb_sine: float, v_from: float,
+                 v_to: float) -> float:
         key = (traction, davis, mass_kg, planning, climb_sine, v_from, v_to)
         distance = self.distances.get(key)
         if distance is None:
@@ -176,9 +184,7 @@ class _TractionDistances:
             if steps is None:
                 if len(self.steps) >= self.size:
                     self.steps.clear()
-                train = SimpleNamespace(traction=traction, davis_nominal=davis, mass_kg=mass_kg)
-                capability = traction_capability(
-                    SimpleNamespace(train=train, planning=planning), climb_sine)
+                capability = _capability(traction, davis, mass_kg, planning, climb_sine)
                 steps = self.steps[start] = AccelerationSteps(
                     v_from, capability, planning.max_jerk_mps3, MIN_PLANNED_ACCELERATION_MPS2)
             if len(self.distances) >= self.size:
@@ -274,7 +280,8 @@ def leg_ceiling(scenario: Scenario, mrsp, start: float, end: float, anticipation
     margin = scenario.planning.speed_margin_mps
     pieces = _limit_pieces(scenario, mrsp, anticipation_s, extra_m)
     cuts = sorted({start, *(x for s, e, _ in pieces for x in (s, e) if start < x < end)})
-    starts, values = [], []
+    starts: list[float] = []
+    values: list[float] = []
     for a in cuts:
         b = min((x for x in cuts if x > a), default=end)
         value = min(v for s, e, v in pieces if s < b and e > a) - margin
@@ -300,13 +307,13 @@ def leg_sections(scenario: Scenario, mrsp, start: float, end: float,
     def ceiling(a: float, b: float) -> float:
         return min(v for s, e, v in pieces if s < b and e > a) - margin
 
-    cuts = {start, end}
-    cuts.update(x for s, e, _ in pieces for x in (s, e) if start < x < end)
-    cuts.update(_breakpoints(line.grade_sine, start, end))
+    edges = {start, end}
+    edges.update(x for s, e, _ in pieces for x in (s, e) if start < x < end)
+    edges.update(_breakpoints(line.grade_sine, start, end))
     # Where the rear of the train leaves a grade: the grade it feels changes there too.
     length = scenario.train.length_m
-    cuts.update(s + length for s in line.grade_sine.starts if start < s + length < end)
-    cuts = sorted(cuts)
+    edges.update(s + length for s in line.grade_sine.starts if start < s + length < end)
+    cuts = sorted(edges)
     sections: list[Section] = []
     for a, b in zip(cuts, cuts[1:]):
         if b - a < 1e-6:
@@ -591,10 +598,13 @@ def hold_speed_for(time_with, target: float, low: float, high: float, guess: flo
     f = late(v)
     if abs(f) <= TIME_TOLERANCE_S:
         return v
-    slow, fast = (v, f), None
+    slow: tuple[float, float] | None = (v, f)
+    fast: tuple[float, float] | None = None
     if f < 0.0:
         slow, fast = None, (v, f)
     while slow is None:
+        # slow is None only from an early guess on, and fast holds the last early point
+        assert fast is not None
         v = max(fast[0] / 1.15, low)
         f = late(v)
         if f >= 0.0:
@@ -650,10 +660,10 @@ class _LegSolver:
         return trial
 
     def _trial(self, builder: TrajectoryBuilder, eco: EcoLeg, starts, speeds,
-               forced: dict[int, int] | None = None) -> TrajectoryBuilder:
+               forced: dict[int, int] | None = None) -> tuple[TrajectoryBuilder, dict[int, int]]:
+        """The leg appended to a copy of ``builder``, and its excursions' starts."""
         trial = self._copy(builder)
-        trial.choices = eco.build(trial, starts, speeds, forced)
-        return trial
+        return trial, eco.build(trial, starts, speeds, forced)
 
     def _solve_speed(self, builder, eco: EcoLeg, starts, speeds, k, position, target,
                      guess: float, forced: dict[int, int]) -> tuple[float, dict[int, int]]:
@@ -669,9 +679,9 @@ class _LegSolver:
             if v not in memo:
                 trial_speeds = list(speeds)
                 trial_speeds[k] = v
-                trial = self._trial(builder, eco, starts, trial_speeds, forced)
+                trial, choices = self._trial(builder, eco, starts, trial_speeds, forced)
                 memo[v] = (trial.t if position is None
-                           else passing_time(trial.build(), position), trial.choices)
+                           else passing_time(trial.build(), position), choices)
             return memo[v][0]
         speed = hold_speed_for(time_with, target, LOWEST_CRUISE_MPS,
                                FASTEST_HOLD_FACTOR * eco.highest, guess)
@@ -700,7 +710,7 @@ class _LegSolver:
             return {**forced, **{r: round(a + tau * (b - a)) for r, (a, b) in moved.items()}}
 
         def late(tau: float) -> float:
-            trial = self._trial(builder, eco, starts, trial_speeds, starts_at(tau))
+            trial, _ = self._trial(builder, eco, starts, trial_speeds, starts_at(tau))
             return (trial.t if position is None else passing_time(trial.build(), position)) \
                 - target
         low, high = 0.0, 1.0
@@ -760,7 +770,7 @@ class _LegSolver:
                     speeds[k], forced = self._solve_speed(builder, eco, starts, speeds, k,
                                                           position, goal, guess, forced)
                 guesses = list(speeds)
-            chosen = self._trial(builder, eco, starts, speeds, forced)
+            chosen, _ = self._trial(builder, eco, starts, speeds, forced)
             missed = self._first_missed(chosen.build(), points, splits)
             if missed is None:
                 break
@@ -768,6 +778,8 @@ class _LegSolver:
             starts = [origin] + [p for p, _ in splits]
             speeds = [FASTEST_HOLD_FACTOR * eco.highest] * len(starts)
             guesses = [speeds_solved for speeds_solved in guesses[:1]]
+        # the loop above runs at least once (len(points) + 1 >= 1 times) and sets it
+        assert chosen is not None
         return chosen
 
     def __call__(self, leg: int, builder: TrajectoryBuilder, sections, factor,

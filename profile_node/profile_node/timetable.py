@@ -214,7 +214,8 @@ def journey_times(journey, trajectory: Trajectory, stops) -> JourneyTimes:
     points = journey.timing_points
     times = point_times(journey, trajectory, stops)
     running = [b - a for a, b in zip(times, times[1:])]
-    earliest, conflicts = [], []
+    earliest: list[float] = []
+    conflicts: list[Conflict] = []
     source, source_time, inherited = None, times[0], False
     for k, point in enumerate(points):
         reached = times[0] if k == 0 else earliest[-1] + running[k - 1]
