@@ -733,13 +733,9 @@ def main() -> int:
         return measure(args)
 
 
-def measure(args: argparse.Namespace) -> int:
-    measured = (results_page_provenance(args.results_page)
-                if args.results_page is not None else None)
-    readme_measured = (results_page_provenance(args.readme) if args.readme is not None
-                       else None)
-    page = Page()
-    campaign_section = [
+def campaign_intro() -> list[str]:
+    """The campaign throughput section's heading, method and table head."""
+    return [
         '## Campaign throughput', '',
         f'`make campaign`\'s engine on {BENCH_CAMPAIGN_DRAWS} draws x '
         f'{len(BENCH_CAMPAIGN_LAWS)} laws ({", ".join(BENCH_CAMPAIGN_LAWS)}) of the whole '
@@ -752,7 +748,11 @@ def measure(args: argparse.Namespace) -> int:
         'figure is the median over the rounds.', '',
         '| engine | runs | wall time | CPU time | runs per minute | overhead, wall | '
         'overhead, CPU |', '|---|---|---|---|---|---|---|']
-    offline_section = [
+
+
+def offline_intro() -> list[str]:
+    """The offline closed loop section's heading and method."""
+    return [
         '## Offline closed loop', '',
         f'`ato_simulation.loop.run_offline` (what `make compare` and the campaigns run) of every '
         f'law that applies to `{OFFLINE_SCENARIO}`, the whole run, at the rate `make compare` '
@@ -761,6 +761,34 @@ def measure(args: argparse.Namespace) -> int:
         'cached: the target curve planned once per scenario content and reused (a campaign\'s '
         'runs of one scenario share it); planning included: the plan cache cleared before each '
         'run. Goal for `pid`: at least 4000x with the plan cached.', '']
+
+
+def law_and_plant_sections(page: Page, scenario: str) -> None:
+    """The controller's step time and the plant's speed alone, on ``page``."""
+    page.add('', '## Controller step time', '',
+             'Offline, the law and its host (saturation, bumpless transfer); target p99 < 1 ms. '
+             f'A law sampled faster than its scenario is timed over {LAW_BENCH_STEPS} steps at '
+             'its rate.', '')
+    page.lines += law_step_times(scenario)
+    page.add('', '## Plant simulation alone', '',
+             'CPU time of one core, 10 Hz control periods, 600 s from standstill, median of 5 '
+             'runs; period by period (`apply_command`, `advance`, `truth`, as the node drives '
+             'it) and all commands at once (`run_commands`).', '',
+             '| model | period by period | all commands at once |', '|---|---|---|')
+    for model, train, what in (('point_mass', None, 'RK4, CRH3'),
+                               ('multi_car', 'crh2_4car_mao',
+                                'CRH2 4-car unit, exact coupler dynamics, ETDRK4')):
+        page.add(f'| `{model}` ({what}) | {plant_speed(scenario, model, train):.0f}x | '
+                 f'{plant_speed(scenario, model, train, batched=True):.0f}x |')
+
+
+def measure(args: argparse.Namespace) -> int:
+    measured = (results_page_provenance(args.results_page)
+                if args.results_page is not None else None)
+    readme_measured = (results_page_provenance(args.readme) if args.readme is not None
+                       else None)
+    page = Page()
+    campaign_section, offline_section = campaign_intro(), offline_intro()
     if args.only == 'offline':
         page.add(*offline_section)
         offline_loop_speed()
@@ -791,21 +819,7 @@ def measure(args: argparse.Namespace) -> int:
         return 0
     page.add(f'Scenario `{args.scenario}`.', '')
     page.lines += lockstep_section(args.scenario, args.domain_id)
-    page.add('', '## Controller step time', '',
-             'Offline, the law and its host (saturation, bumpless transfer); target p99 < 1 ms. '
-             f'A law sampled faster than its scenario is timed over {LAW_BENCH_STEPS} steps at '
-             'its rate.', '')
-    page.lines += law_step_times(args.scenario)
-    page.add('', '## Plant simulation alone', '',
-             'CPU time of one core, 10 Hz control periods, 600 s from standstill, median of 5 '
-             'runs; period by period (`apply_command`, `advance`, `truth`, as the node drives '
-             'it) and all commands at once (`run_commands`).', '',
-             '| model | period by period | all commands at once |', '|---|---|---|')
-    for model, train, what in (('point_mass', None, 'RK4, CRH3'),
-                               ('multi_car', 'crh2_4car_mao',
-                                'CRH2 4-car unit, exact coupler dynamics, ETDRK4')):
-        page.add(f'| `{model}` ({what}) | {plant_speed(args.scenario, model, train):.0f}x | '
-                 f'{plant_speed(args.scenario, model, train, batched=True):.0f}x |')
+    law_and_plant_sections(page, args.scenario)
     page.add('', *offline_section)
     page.lines += offline_loop_speed()
     page.add('', '## Plant accuracy', '',
