@@ -125,3 +125,19 @@ def test_energy_balance_of_the_four_car_unit():
     assert work > 1e6
     # 1e-9 of the work (the issue asks 1e-6): tight enough to see the damper losses
     assert work - lost == pytest.approx(energy(x) - start, rel=0.0, abs=1e-9 * work)
+
+
+def test_brakes_hold_a_standing_train_and_never_push_it_backwards():
+    """The ATP's holding brake at a dwell and its emergency brake at standstill: the 4-car
+    unit stays where it stands (it used to be pushed backwards, away from its stop zone);
+    traction above the static friction still starts it."""
+    scenario = flat_line()
+    model = MultiCarModel(scenario.train, scenario.line)
+    state = model.initial_state(1000.0, 0.0)
+    braked = state
+    for _ in range(100):  # 10 s of full emergency braking on both powered cars
+        braked = model.step(braked, 0.1, (-2e5, -2e5))
+    assert np.allclose(braked[4:], 0.0) and np.allclose(braked[:4], state[:4], atol=1e-9)
+    assert model.held(state, (-2e5, -2e5)) and not model.held(state, (1e5, 1e5))
+    started = model.step(state, 0.1, (1e5, 1e5))
+    assert np.all(started[4:] > 0.0)

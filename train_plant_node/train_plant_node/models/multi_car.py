@@ -498,7 +498,7 @@ class MultiCarModel:
         """The train stands: the mean speed of its cars, weighted by their masses, is at most
         the standstill speed (a train braked to rest within a step may end it a little
         backwards: its brakes hold it, as the next step does)."""
-        masses = 1.0 / self.mode_matrices(env or self.nominal).cars[CAR_INVERSE_MASS]
+        masses = self.mode_matrices(env or self.nominal).masses
         speeds = np.asarray(state, dtype=float)[self.n:]
         return float(np.dot(masses, speeds)) <= STANDSTILL_SPEED_MPS * float(masses.sum())
 
@@ -514,7 +514,7 @@ class MultiCarModel:
         n = self.n
         rest = np.array(state, dtype=float)
         rest[n:] = 0.0
-        masses = 1.0 / mm.cars[CAR_INVERSE_MASS]
+        masses = mm.masses
         accelerations = self.derivative(rest, forces, time_s, env)[n:]
         friction = env_factors(p, ENV, time_s)[0] * float(np.dot(masses, mm.cars[CAR_A]))
         return float(np.dot(masses, accelerations)) <= friction
@@ -529,7 +529,7 @@ class MultiCarModel:
             moved = self._integrate(start, duration_s, tuple(max(f, 0.0) for f in forces),
                                     time_s, env)
             n = self.n
-            masses = 1.0 / self.mode_matrices(env or self.nominal).cars[CAR_INVERSE_MASS]
+            masses = self.mode_matrices(env or self.nominal).masses
             weights = masses / masses.sum()
             moved[:n] -= float(np.dot(weights, moved[:n] - start[:n]))
             moved[n:] -= float(np.dot(weights, moved[n:]))
