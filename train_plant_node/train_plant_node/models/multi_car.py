@@ -172,6 +172,7 @@ class _ModeMatrices:
             return new / old if old else 0.0
         mass_ratio = mode.mass_kg / train.mass_kg
         self.masses = np.array([c.mass_kg for c in cars]) * mass_ratio
+        self.weights = self.masses / self.masses.sum()  # for the train's mean speed and position
         # Resistance forces per car scale with the whole-train coefficients, then per kg.
         ra = ratio(d.a_n, nominal.a_n)
         rb = ratio(d.b_n_s_per_m, nominal.b_n_s_per_m)
@@ -271,6 +272,16 @@ def _add_matvec(out, matrix, x, alpha, y, beta, columns):
         for j in range(columns):
             total += matrix[i, j] * (alpha * x[j] + beta * y[j])
         out[i] += total
+
+
+@kernel
+def weighted_speed(x, weights):
+    """The cars' mean speed weighted by ``weights`` (the velocity half of the state ``x``)."""
+    n = weights.shape[0]
+    total = 0.0
+    for q in range(n):
+        total += weights[q] * x[n + q]
+    return total
 
 
 @kernel
@@ -447,6 +458,7 @@ class MultiCarModel:
                        mm.cars, p)
         etdrk4_kernel(x, 0.0, self.max_substep_s, props, forces, indices, table, mm.cars, p)
         derivative_kernel(x, 0.0, 0.0, mm.A, forces, table, mm.cars, p)
+        weighted_speed(x, mm.weights)
         outputs_kernel(x, self._outputs, 0.0, mm.A, forces, table, mm.cars, p)
         boundary_between(table, 0, 0)
         crossing_time(0.0, 1.0, 1.0, 1.0, 1.0, 0.5)
@@ -498,9 +510,8 @@ class MultiCarModel:
         """The train stands: the mean speed of its cars, weighted by their masses, is at most
         the standstill speed (a train braked to rest within a step may end it a little
         backwards: its brakes hold it, as the next step does)."""
-        masses = self.mode_matrices(env or self.nominal).masses
-        speeds = np.asarray(state, dtype=float)[self.n:]
-        return float(np.dot(masses, speeds)) <= STANDSTILL_SPEED_MPS * float(masses.sum())
+        weights = self.mode_matrices(env or self.nominal).weights
+        return weighted_speed(np.asarray(state, dtype=float), weights) <= STANDSTILL_SPEED_MPS
 
     def held(self, state: np.ndarray, forces: Sequence[float], time_s: float = 0.0,
              env: Surroundings | None = None) -> bool:
@@ -529,8 +540,7 @@ class MultiCarModel:
             moved = self._integrate(start, duration_s, tuple(max(f, 0.0) for f in forces),
                                     time_s, env)
             n = self.n
-            masses = self.mode_matrices(env or self.nominal).masses
-            weights = masses / masses.sum()
+            weights = self.mode_matrices(env or self.nominal).weights
             moved[:n] -= float(np.dot(weights, moved[:n] - start[:n]))
             moved[n:] -= float(np.dot(weights, moved[n:]))
             return moved
