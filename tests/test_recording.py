@@ -347,6 +347,9 @@ def test_a_recorder_that_falls_behind_holds_the_lockstep_and_loses_nothing(tmp_p
     as a SIGKILL would leave it) is within the lead of the last step published."""
     import shutil
 
+    from std_msgs.msg import Header
+
+    from ato_ros.messages import qos_profile, topic
     from ato_ros.step_records import LEAD_S
 
     # long enough that the loop (a few seconds of wall time) is under way at the SIGSTOP
@@ -354,9 +357,15 @@ def test_a_recorder_that_falls_behind_holds_the_lockstep_and_loses_nothing(tmp_p
                          log_dir=tmp_path / 'logs', record_to=tmp_path / 'bag',
                          plant_params={'command_wait_limit_s': 1.0})
     with Stack(config) as stack:
+        acknowledged: list = []
+        stack.node.create_subscription(Header, topic('recorded').name, acknowledged.append,
+                                       qos_profile(topic('recorded').qos))
         stack.start()
         monitor = stack.monitor
-        assert stack.spin_until(lambda: monitor.last_stamp_ns > 2_000_000_000, 120.0)
+        # stopped once it has vouched for a file (a loaded machine can take seconds over its
+        # first bundle: until then the plant counts it from the step at which it appeared)
+        assert stack.spin_until(lambda: monitor.last_stamp_ns > 2_000_000_000 and acknowledged,
+                                120.0), stack.log_tail('recorder')
         recorder = stack.processes['recorder']
         recorder.send_signal(signal.SIGSTOP)
         try:

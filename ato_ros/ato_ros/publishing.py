@@ -364,10 +364,13 @@ class RecorderLead:
         if held is None or behind is None:
             return ''
         recorder, stamp_ns = behind
+        acknowledgements = self.acknowledgements
+        what = (f'whose file holds the step records up to {seconds(stamp_ns):.3f} s'
+                if recorder in acknowledgements.heard else
+                f'which has acknowledged nothing since it appeared at {seconds(stamp_ns):.3f} s')
         return (f'the step at {seconds(held):.3f} s has waited '
                 f'{time.monotonic() - self.held_since:.1f} s of wall time for recorder '
-                f'{recorder}, whose file holds the step records up to {seconds(stamp_ns):.3f} s '
-                f'(lead {seconds(self.acknowledgements.lead_ns):g} s)')
+                f'{recorder}, {what} (lead {seconds(acknowledgements.lead_ns):g} s)')
 
 
 def watch_plant_identity(node, own_identity: str, refusal: str):

@@ -235,14 +235,18 @@ class Acknowledgements:
     is ``ato_ros.publishing.RecorderLead``): the latest stamp each recorder has acknowledged, and
     whether a step is more than ``lead_ns`` past the oldest of them. A recorder seen in the graph
     before it has acknowledged anything counts as having acknowledged the step at which it was
-    seen (``appeared``): one that stops before its first acknowledgement holds the loop too."""
+    seen (``appeared``): one that stops before its first acknowledgement holds the loop too.
+    ``heard`` holds the recorders that have acknowledged something (the others' stamps say
+    when they were seen, not what their files hold)."""
 
     def __init__(self, lead_ns: int):
         self.lead_ns = lead_ns
         self.stamps: dict[str, int] = {}  # recorder's node name -> stamp acknowledged
+        self.heard: set[str] = set()
 
     def acknowledged(self, recorder: str, stamp_ns: int) -> None:
         self.stamps[recorder] = stamp_ns
+        self.heard.add(recorder)
 
     def appeared(self, recorder: str, stamp_ns: int) -> None:
         """``recorder`` is in the graph at the step ``stamp_ns`` (nothing changes for one
@@ -262,3 +266,4 @@ class Acknowledgements:
         """Forget the recorders not in ``live`` (gone from the graph)."""
         for recorder in [r for r in self.stamps if r not in live]:
             del self.stamps[recorder]
+            self.heard.discard(recorder)

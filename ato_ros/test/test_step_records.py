@@ -170,7 +170,7 @@ def test_the_plant_is_held_past_the_lead_of_the_oldest_recorder_only():
     assert acks.behind(9 * S + 900_000_001) is None
     assert acks.behind(10 * S + 900_000_001) == ('/recorder', 10 * S)
     acks.keep(set())
-    assert acks.behind(10**6 * S) is None
+    assert acks.behind(10**6 * S) is None and acks.heard == set()
 
 
 def test_a_recorder_seen_before_its_first_acknowledgement_holds_from_that_step():
@@ -180,7 +180,9 @@ def test_a_recorder_seen_before_its_first_acknowledgement_holds_from_that_step()
     assert acks.behind(4 * S) == ('/recorder', 3 * S)  # stopped before it said anything
     acks.appeared('/recorder', 8 * S)  # seen again: still what it was
     assert acks.behind(4 * S) == ('/recorder', 3 * S)
+    assert acks.heard == set()  # its stamp says when it was seen, not what its file holds
     acks.acknowledged('/recorder', 5 * S)
+    assert acks.heard == {'/recorder'}
     assert acks.behind(5 * S + 900_000_000) is None
 
 
