@@ -98,9 +98,12 @@ STANDSTILL_MPS = 0.01
 #: the per-run metrics every row has (NaN when the run did not produce them); the stop errors
 #: signed as position minus stop: ``overshoot_m`` the largest beyond a stop, ``undershoot_m``
 #: the largest short of one (0 when none), ``arrival_delay_s`` the latest arrival against the
-#: timetable (negative: every stop early)
+#: timetable (negative: every stop early); ``odometer_stop_error_m`` the worst stop error as the
+#: train's own odometer measured it (the part the law can act on: ``stop_error_m`` less the
+#: odometer's error at the stop, ``OfflineRun.odometer_stop_errors_m``)
 METRICS = ('rms_speed_error_kmh', 'max_speed_error_kmh', 'rms_position_error_m',
            'max_position_error_m', 'stop_error_m', 'overshoot_m', 'undershoot_m',
+           'odometer_stop_error_m',
            'arrival_error_s', 'arrival_delay_s', 'traction_energy_kwh', 'max_jerk_mps3',
            'max_acceleration_mps2', 'saturated_fraction', 'atp_interventions',
            'watchdog_events')
@@ -527,6 +530,7 @@ def run_metrics(run, dt: float) -> dict:
             arrival.append(run.times_s[truth[0]] - run.times_s[ref[0]] if truth.size
                            else math.nan)  # not reached within the run: the stop error says it
     stop_errors = m.stop_errors_m
+    odometer = run.odometer_stop_errors_m()
     return {
         **judged(run, m),
         'rms_speed_error_kmh': m.rms_speed_error_kmh,
@@ -537,6 +541,7 @@ def run_metrics(run, dt: float) -> dict:
         'overshoot_m': max((max(e, 0.0) for e in stop_errors.values()), default=math.nan),
         'undershoot_m': max((max(-e, 0.0) for e in stop_errors.values()), default=math.nan),
         'stop_errors_m': json.dumps(stop_errors),
+        'odometer_stop_error_m': max((abs(e) for e in odometer.values()), default=math.nan),
         'arrival_error_s': (math.nan if not arrival or any(map(math.isnan, arrival))
                             else max(arrival, key=abs)),
         'traction_energy_kwh': m.traction_energy_kwh,

@@ -390,6 +390,14 @@ def test_a_train_stopped_short_by_its_odometer_bias_finishes_its_journey():
     assert unfinished(run) == ''
     assert run.metrics().stop_errors_m['Midway'] == pytest.approx(-0.75, abs=0.05)
     assert run.positions[-1] == pytest.approx(36000.0 - 0.75, abs=0.05)
+    # the law stopped where its odometer put the stop: the part of the stop error it can act
+    # on is small, the row says both
+    odometer = run.odometer_stop_errors_m()
+    assert odometer.keys() == run.metrics().stop_errors_m.keys()
+    assert odometer['Midway'] == pytest.approx(0.0, abs=0.05)
+    row = engine.run_metrics(run, 0.1)
+    assert row['stop_error_m'] == pytest.approx(0.75, abs=0.05)
+    assert row['odometer_stop_error_m'] == pytest.approx(0.0, abs=0.05)
     # a train held short of its stop (the old behaviour) is named as unfinished
     stranded = dataclasses.replace(run, positions=np.minimum(run.positions, 14000.0 - 300.0))
     assert 'never stood within its length (200 m) of Midway' in unfinished(stranded)

@@ -17,8 +17,11 @@ def campaign():
     return load_campaign(tuning.DEFAULT_CAMPAIGN)
 
 
-def row(rms=1.0, stop=0.1, energy=1000.0, atp=0.0, status='ok', law='pid'):
-    return {'law': law, 'status': status, 'rms_speed_error_kmh': rms, 'stop_error_m': stop,
+def row(rms=1.0, stop=0.1, energy=1000.0, atp=0.0, status='ok', law='pid', odometer=0.0):
+    """A run's row; ``odometer``: the odometer's error at the stop (true stop error = the
+    odometer stop error + it)."""
+    return {'law': law, 'status': status, 'rms_speed_error_kmh': rms,
+            'odometer_stop_error_m': stop, 'stop_error_m': stop + odometer,
             'traction_energy_kwh': energy, 'atp_interventions': atp}
 
 
@@ -38,6 +41,15 @@ def test_the_score_weighs_the_metrics_and_counts_the_violations():
     # failed runs count 100 km/h; stops and energy over the runs with metrics
     assert score.objective == pytest.approx((1.0 + 3.0 + 100.0) / 3 + 0.5 / 0.5 + 1.0)
     assert score.violations == (1, 1, 1) and not score.feasible
+
+
+def test_the_stop_is_judged_as_the_odometer_measured_it():
+    """A draw whose odometer errs by 1.5 m at the stop puts every law's true stop 1.5 m off:
+    the constraint and the objective read the part a law can act on; the truth is shown."""
+    score = tuning.score([row(stop=0.1, odometer=1.5), row(stop=0.3)])
+    assert score.feasible and score.objective == pytest.approx(1.0 + 0.2 / 0.5 + 1.0)
+    assert score.metrics['stop_error_m'] == pytest.approx((1.6 + 0.3) / 2)
+    assert tuning.score([row(stop=0.6)]).violations == (0, 1, 0)
 
 
 def test_the_tuning_reads_the_default_campaign_for_its_published_start():

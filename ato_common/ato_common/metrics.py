@@ -106,12 +106,7 @@ def compute_metrics(times_s, positions, speeds, forces, ref_positions, ref_speed
         raise ValueError('no samples to compute metrics from')
     energy = wheel_energy(f[:-1], np.diff(x), np.diff(t), regenerative_efficiency,
                           regenerative_power_w).kwh()
-    stop_errors = {}
-    for stop in stops:
-        if stop.time_s > t[-1] + 1e-9:
-            continue  # the run ended before this stop: no stopping error to read
-        i = min(int(np.searchsorted(t, stop.time_s, side='right')) - 1, t.size - 1)
-        stop_errors[stop.station] = float(x[max(i, 0)] - stop.station_position_m)
+    stop_errors = read_stop_errors(t, x, stops)
     return RunMetrics(
         samples=int(t.size), simulated_time_s=float(t[-1] - t[0]),
         rms_speed_error_kmh=units.mps_to_kmh(float(np.sqrt(np.mean(ev ** 2)))),
@@ -119,6 +114,20 @@ def compute_metrics(times_s, positions, speeds, forces, ref_positions, ref_speed
         rms_position_error_m=float(np.sqrt(np.mean(ex ** 2))),
         max_position_error_m=float(np.max(np.abs(ex))),
         stop_errors_m=stop_errors, **energy)
+
+
+def read_stop_errors(times_s, positions, stops: list[StopSample]) -> dict[str, float]:
+    """The stopping error at each stop (module docstring) of ``positions`` sampled at
+    ``times_s``: the truth's, or the position the train's own odometer measured (what the
+    controller stops on)."""
+    t = np.asarray(times_s, dtype=float)
+    stop_errors = {}
+    for stop in stops:
+        if stop.time_s > t[-1] + 1e-9:
+            continue  # the run ended before this stop: no stopping error to read
+        i = min(int(np.searchsorted(t, stop.time_s, side='right')) - 1, t.size - 1)
+        stop_errors[stop.station] = float(positions[max(i, 0)] - stop.station_position_m)
+    return stop_errors
 
 
 def format_summary(metrics: RunMetrics, scenario: str, controller: str,

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ato_common.knowledge import knowledge_of
-from ato_common.metrics import RunMetrics, compute_metrics
+from ato_common.metrics import RunMetrics, compute_metrics, read_stop_errors
 from ato_common.scenario import Scenario
 from ato_common.types import nanoseconds, seconds
 from ato_common.uncertainty import knowledge_options, perturbed
@@ -75,6 +75,9 @@ class OfflineRun:
     #: (stop, time) of each stop whose error is read where the train stood, not at its planned
     #: time (a late train's run: ``ato_simulation.plans.late_readings``)
     late_readings: tuple[tuple[str, float], ...] = ()
+    #: the lead car's position as the train's own odometer measured it at each control instant
+    #: (what the controller knows; ``positions`` is the truth)
+    measured_positions: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def final_plan(self) -> Plan:
@@ -86,6 +89,13 @@ class OfflineRun:
                                stop_samples(self.plan, self.replans, self.late_readings),
                                self.scenario.train.regenerative_efficiency,
                                self.scenario.train.regenerative_power_w)
+
+    def odometer_stop_errors_m(self) -> dict[str, float]:
+        """The stopping error at each stop as the train's own odometer measured it, read as
+        ``metrics().stop_errors_m`` is: the part of the stop error the controller can act on
+        (the rest is the odometer's error there, which no law can see)."""
+        return read_stop_errors(self.times_s, self.measured_positions,
+                                stop_samples(self.plan, self.replans, self.late_readings))
 
     @property
     def extended(self) -> bool:
@@ -184,7 +194,8 @@ class _ClosedLoop:
         self.references: list = sampled if sampled is not None else []
         self.at = plan.trajectory.at
         self.count = count = steps + 1
-        self.times, self.forces, self.step_times = (np.empty(count) for _ in range(3))
+        self.times, self.forces, self.step_times, self.measured_positions = (
+            np.empty(count) for _ in range(4))
         self.saturated = np.empty(count, dtype=bool)
         self.car_positions: list[tuple[float, ...]] = []
         self.car_speeds: list[tuple[float, ...]] = []
@@ -197,9 +208,10 @@ class _ClosedLoop:
 
     def _grow(self, count: int) -> None:
         if count > self.count:
-            self.times, self.forces, self.step_times, self.saturated = (
-                np.resize(a, count) for a in (self.times, self.forces, self.step_times,
-                                              self.saturated))
+            self.times, self.forces, self.step_times, self.saturated, \
+                self.measured_positions = (
+                    np.resize(a, count) for a in (self.times, self.forces, self.step_times,
+                                                  self.saturated, self.measured_positions))
             self.count = count
 
     def _plan_changed(self, k: int) -> None:
@@ -249,6 +261,7 @@ class _ClosedLoop:
         add_reference = references.append
         times, forces, step_times, saturated = (self.times, self.forces, self.step_times,
                                                 self.saturated)
+        measured_positions = self.measured_positions
         count, period_ns, watchdog_events = self.count, self.period_ns, 0
         in_force = self.in_force
         k = 0
@@ -258,6 +271,7 @@ class _ClosedLoop:
                 add_reference = references.append
                 times, forces, step_times, saturated = (self.times, self.forces,
                                                         self.step_times, self.saturated)
+                measured_positions = self.measured_positions
             t = sim.time_s
             while pending and pending[0][0] <= t:
                 host.select(pending.pop(0)[1])
@@ -277,6 +291,7 @@ class _ClosedLoop:
                 count = self.count
                 times, forces, step_times, saturated = (self.times, self.forces,
                                                         self.step_times, self.saturated)
+                measured_positions = self.measured_positions
             if sampled:
                 reference = references[k]
             else:
@@ -290,6 +305,7 @@ class _ClosedLoop:
             applied = sim.applied
             times[k] = t
             forces[k] = fsum(applied)
+            measured_positions[k] = measured.positions[0]
             add_positions(truth.positions)
             add_speeds(truth.speeds)
             add_forces(applied)
@@ -314,7 +330,7 @@ class _ClosedLoop:
                          self.step_times, self.laws, self.estimates, self.faults,
                          self.sim.atp_interventions, self.watchdog_events, self.saturated,
                          tuple(self.atp_times), tuple(p for _, p in self.replanner.history),
-                         self.journey)
+                         self.journey, measured_positions=self.measured_positions)
         if run.extended:
             run.late_readings = late_readings(stop_samples(run.plan, run.replans), run.times_s,
                                               run.positions, run.speeds,
