@@ -22,6 +22,10 @@
 6. Planning: CPU time to plan each built-in scenario's target curve, ``fastest`` and
    ``timetable`` (profile_node.timetable), and the two strategies in closed loop offline (PID,
    nominal plant): arrival against the target time and traction energy.
+7. Tuning: the budget and wall time of ``make tune``, which measures them itself (not rerun
+   here: it holds both cores for the whole budget) and writes them in each tuned artefact with
+   its date, machine and commit; this section shows them from the committed artefacts
+   (``--only tuning --results-page PAGE`` rewrites only this section of a page).
 """
 
 from __future__ import annotations
@@ -51,6 +55,7 @@ from ato_common.domains import free_domain
 from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
 from ato_common.trains import train_preset
 from ato_common.types import NS_PER_S, nanoseconds
+from ato_controller_node import gains as gains_module
 from ato_controller_node.laws import LAWS
 from ato_ros.middleware import with_middleware_defaults
 from ato_simulation.loop import run_offline
@@ -723,14 +728,64 @@ def main() -> int:
     parser.add_argument('--readme', type=Path, default=None,
                         help='also write the closed-loop table of the two strategies between '
                         'its markers in this file (make bench: README.md)')
-    parser.add_argument('--only', choices=('campaign', 'offline', 'planning', 'lockstep'),
+    parser.add_argument('--only', choices=('campaign', 'offline', 'planning', 'lockstep',
+                                            'tuning'),
                         default=None,
-                        help='measure only this section (printed, no results page)')
+                        help='measure only this section (printed, no results page; tuning: '
+                        'with --results-page, that section of the page rewritten)')
     args = parser.parse_args()
     with contextlib.ExitStack() as held:
         if args.domain_id is None:
             args.domain_id = held.enter_context(free_domain())
         return measure(args)
+
+
+TUNING_HEADING = '## Tuning'
+
+
+def tuning_section() -> list[str]:
+    """The tuning section: ``make tune``'s budget and wall time, from the committed tuned
+    artefacts (``ato_controller_node.gains``), one row per run of the command."""
+    runs: dict[tuple, list[str]] = {}
+    for train, law in gains_module.available():
+        record = gains_module.tuned_artefact(law, train).record
+        produced, budget = record['produced'], record['budget']
+        key = (produced['date'], produced['commit'], produced['machine'], produced['wall_s'],
+               budget['trials'], budget['draws_per_trial'], budget['runs'])
+        runs.setdefault(key, []).append(f'`{law}` ({train})')
+    lines = [TUNING_HEADING, '',
+             '`make tune` (ato_campaigns/tuning.py, docs/guide/laws.md#tuning): one procedure '
+             'and one budget for every law, the trials of all laws interleaved on a Dask '
+             'LocalCluster of one worker per core. The command measures its own wall time and '
+             'writes it, with its date, machine and commit, into every tuned artefact '
+             '(ato_controller_node/tuned/); this table reads them (it is not rerun by `make '
+             'bench`). Results: [Tuning](tuning.md).', '',
+             '| laws | budget per law | runs in all | wall time | runs per minute | measured |',
+             '|---|---|---|---|---|---|']
+    for (date, commit, machine, wall_s, trials, draws, per_law), laws in sorted(runs.items()):
+        total = per_law * len(laws)
+        lines.append(f'| {", ".join(laws)} | {trials} trials x {draws} draws ({per_law} runs) | '
+                     f'{total} | {wall_s:.0f} s | {60.0 * total / wall_s:.1f} | {date}, '
+                     f'commit {commit}; {machine} |')
+    if not runs:
+        lines.append('| (no tuned artefact: run `make tune`) | | | | | |')
+    return lines
+
+
+def replace_section(page: Path, heading: str, lines: list[str]) -> Path:
+    """Put ``lines`` (a section starting with ``heading``) in place of that section of
+    ``page`` (up to the next heading of its level), or at its end."""
+    text = page.read_text().rstrip('\n').split('\n')
+    level = heading.split(' ', 1)[0] + ' '
+    if heading in text:
+        start = text.index(heading)
+        end = next((i for i in range(start + 1, len(text)) if text[i].startswith(level)),
+                   len(text))
+        text[start:end] = lines + ([''] if end < len(text) else [])
+    else:
+        text += [''] + lines
+    page.write_text('\n'.join(text) + '\n')
+    return page
 
 
 def campaign_intro() -> list[str]:
@@ -817,6 +872,11 @@ def measure(args: argparse.Namespace) -> int:
     if args.only == 'lockstep':
         lockstep_section(args.scenario, args.domain_id)
         return 0
+    if args.only == 'tuning':
+        page.add(*tuning_section())
+        if args.results_page is not None:
+            print(f'\nwrote {replace_section(args.results_page, TUNING_HEADING, page.lines)}')
+        return 0
     page.add(f'Scenario `{args.scenario}`.', '')
     page.lines += lockstep_section(args.scenario, args.domain_id)
     law_and_plant_sections(page, args.scenario)
@@ -835,6 +895,7 @@ def measure(args: argparse.Namespace) -> int:
     page.add('', *comparison_section)
     table = timetable_against_fastest()
     page.add(*table)
+    page.add('', *tuning_section())
     if args.readme is not None:
         print(f'\nwrote {update_readme(args.readme, table, readme_measured, "make bench")}')
     if args.results_page is not None:

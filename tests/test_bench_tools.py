@@ -31,3 +31,16 @@ def test_cpu_share_is_the_core_a_process_used_in_the_steady_window():
     # 200x with 0.1 s steps: 2000 steps per second of wall time, 0.15 ms each
     assert abs(bench.cpu_share(run, 'recorder') - 0.3) < 1e-12
     assert abs(bench.cpu_share(run, 'plant') - 0.6) < 1e-12
+
+
+def test_the_tuning_section_replaces_its_own_section_only(tmp_path):
+    page = tmp_path / 'page.md'
+    page.write_text('# Benchmarks\n\nintro\n\n## Planning\n\nplans\n')
+    section = bench.tuning_section()
+    assert section[0] == bench.TUNING_HEADING and section[-1].startswith('| ')
+    bench.replace_section(page, bench.TUNING_HEADING, section)  # appended
+    bench.replace_section(page, bench.TUNING_HEADING, [bench.TUNING_HEADING, '', 'new'])
+    assert page.read_text() == '# Benchmarks\n\nintro\n\n## Planning\n\nplans\n\n## Tuning\n\nnew\n'
+    page.write_text('# B\n\n## Tuning\n\nold\n\n## Planning\n\nplans\n')
+    bench.replace_section(page, bench.TUNING_HEADING, [bench.TUNING_HEADING, '', 'new'])
+    assert page.read_text() == '# B\n\n## Tuning\n\nnew\n\n## Planning\n\nplans\n'
