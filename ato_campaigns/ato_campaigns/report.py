@@ -60,7 +60,8 @@ PAIRED_METRICS = ('rms_speed_error_kmh', 'max_speed_error_kmh', 'rms_position_er
 SENSITIVITY_METRICS = ('rms_speed_error_kmh', 'stop_error_m')
 BOX_METRICS = ('rms_speed_error_kmh', 'stop_error_m', 'traction_energy_kwh', 'max_jerk_mps3')
 #: the failure kinds of the overview and the README's summary
-OVERVIEW_KINDS = ('not ok', 'did not finish', 'late', 'ATP intervention', cs.STOP_KIND)
+OVERVIEW_KINDS = ('not ok', 'did not finish', 'late', 'ATP intervention', cs.STOP_KIND,
+                  cs.ODOMETER_STOP_KIND)
 
 
 def _f(value: Any, fmt: str) -> str:
@@ -752,8 +753,8 @@ def _summary_table(campaign: Campaign, sub, key: str, margins) -> list[str]:
     cells = {r['law']: margins_cell(r) for r in margins.to_dict('records')} \
         if not margins.empty else {}
     lines = [f'| law | mean RMS speed error, km/h (x {baseline}) | minus {baseline} '
-             f'[{cs.CONFIDENCE:.0%} CI] | ATP | not ok | margins: phase, delay; at the largest '
-             'actuator |', '|---|---|---|---|---|---|']
+             f'[{cs.CONFIDENCE:.0%} CI] | ATP | stop off: true / by the odometer | not ok | '
+             'margins: phase, delay; at the largest actuator |', '|---|---|---|---|---|---|---|']
     base = means.get(baseline, math.nan)
     for law in [e.label for e in campaign.laws if e.label in means.index]:
         if law in diffs.index:
@@ -763,10 +764,12 @@ def _summary_table(campaign: Campaign, sub, key: str, margins) -> list[str]:
         else:
             diff = '(baseline)'
         counts = [f'{rates.loc[(law, kind), "k"]}/{rates.loc[(law, kind), "n"]}'
-                  for kind in ('ATP intervention', 'not ok')]
+                  for kind in ('ATP intervention', cs.STOP_KIND, cs.ODOMETER_STOP_KIND,
+                               'not ok')]
         ratio = means[law] / base if base else math.nan
         lines.append(f'| {law} | {_f(means[law], ".3f")} (x{_f(ratio, ".2f")}) | {diff} | '
-                     + ' | '.join(counts) + f' | {cells.get(law, "-")} |')
+                     f'{counts[0]} | {counts[1]} / {counts[2]} | {counts[3]} | '
+                     f'{cells.get(law, "-")} |')
     return lines
 
 
