@@ -40,14 +40,15 @@ NODES = ('train_plant_node', 'profile_node', 'ato_controller_node')
 
 
 def usage() -> str:
+    from ato_common.commands import ros_command
     from ato_controller_node import node as controller
     from ato_ros.lifecycle import node_usage
     from profile_node import node as profile
     from train_plant_node import node as plant
     parts = [__doc__.strip().split('\n\n')[0], '',
              'usage: ato_stack [--record RECORDER_OPTIONS...] [--ros-args ...]', '',
-             '--record: record in the process (ros2 run recorder recorder --help lists the '
-             'options)', '']
+             f'--record: record in the process ({ros_command("run recorder recorder --help")} '
+             'lists the options)', '']
     for name, module, params in (
             ('train_plant_node', plant, plant.PARAMS), ('profile_node', profile, profile.PARAMS),
             ('ato_controller_node', controller,
