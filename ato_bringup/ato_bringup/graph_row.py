@@ -29,9 +29,10 @@ saturation, law and faults (the controller's). Then each metric is printed besid
 row (and the stored one, if ``<out>`` has it) with whether the two agree within
 ``TOLERANCE``.
 
-What cannot be compared: the step times (wall time, of two different processes); the force
-through the graph is the lead car's truth as published, the offline force the sum of the
-forces applied once the command was given (``forces_applied``). The run's end: without a stated
+What is not compared: the step times (wall time, of two different processes); the
+saturation of a law that runs faster than the nodes publish diagnostics (100 Hz). The force of
+a step is the force that acts once the step's command is given, as offline (``graph_run``
+says where the wire has it). The run's end: without a stated
 ``end_time_s`` the offline run's end follows the journey (``ato_simulation.plans.JourneyEnd``:
 a late train runs on); through the graph the plant ends at a time given at its start, so the
 graph run is given the offline run's end and judged with the same journey rule. A scenario
@@ -152,12 +153,14 @@ def graph_run(outcome: RunOutcome, measured: np.ndarray, journey, every_step: bo
                   for k, c, before in zip(stamps, faults, [0] + faults[:-1])]
     saturated = (np.array([v.get('saturated') == 'True' for v in law]) if every_step
                  else np.zeros(0, dtype=bool))
+    # not read by the metrics, and not taken from the wire here: the reference's acceleration,
+    # the forces per actuator, the step times, the law's estimates
     nan = np.full(len(samples), math.nan)
     run = OfflineRun(
         scenario, cached_plan(scenario), np.array(stamps) / 1e9, cars_x[:, 0].copy(),
         cars_v[:, 0].copy(), forces, np.array([s.ref_position for s in samples]),
         np.array([s.ref_speed for s in samples]), nan, cars_x, cars_v,
-        np.array(applied), nan.copy(), [v.get('law', '') for v in law],
+        np.empty((len(samples), 0)), nan.copy(), [v.get('law', '') for v in law],
         [], fault_text, counts[-1] if counts else 0,
         sum(v.get('watchdog', WATCHDOG_NORMAL) != WATCHDOG_NORMAL for v in plant),
         saturated, atp_times, (), journey, measured_positions=measured)
@@ -210,9 +213,10 @@ def rerun_through_graph(campaign, law: str, draw: int, scenario: str | None = No
     notes = []
     if not every_step:
         row['saturated_fraction'] = math.nan
-        notes.append(f"saturated_fraction: the law runs at {task['rate_hz']:g} Hz, faster than "
-                     'the nodes publish diagnostics (100 Hz at most): its saturation per step is '
-                     'not on the wire')
+        notes.append(f"the law runs at {task['rate_hz']:g} Hz, faster than the nodes publish "
+                     'diagnostics (100 Hz at most): its saturation per step is not on the wire '
+                     '(saturated_fraction not compared), and the steps its faults held are '
+                     'counted at the diagnostics\' instants')
     if run.replans:
         notes.append('the offline run was replanned (timetable strategy): the campaign decides '
                      'from every step\'s state, the profile node at its check instants, so the '
@@ -220,7 +224,7 @@ def rerun_through_graph(campaign, law: str, draw: int, scenario: str | None = No
     return offline, row, notes, log_dir
 
 
-#: what is compared: the status, then every metric
+#: what is compared besides the metrics (engine.METRICS)
 COMPARED = ('status', 'reason')
 
 
@@ -276,6 +280,7 @@ def main(argv=None) -> int:
     from ato_campaigns.campaign import parse_args, stored_row
     from ato_campaigns.engine import load_campaign
     from ato_common.validation import ConfigError
+    from recorder.bag import BagError
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(argv)
     if args.draw is None:
@@ -289,7 +294,7 @@ def main(argv=None) -> int:
     except ConfigError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
-    except RunFailed as error:
+    except (RunFailed, BagError) as error:
         print(f'error: the run through the graph failed: {error}', file=sys.stderr)
         return 1
     rows = comparison(offline, graph, stored_row(campaign, args.out, offline))

@@ -5,15 +5,25 @@ judged, and how ``run_scenario`` and the campaign command take the new options."
 
 import json
 import math
+from types import SimpleNamespace
 
+import numpy as np
 import pytest
 import yaml
 
-from ato_bringup import run_scenario
-from ato_bringup.graph_row import agree, comparison, graph_config
-from ato_bringup.stack import ros_args, yaml_text
+from ato_bringup import graph_row, run_scenario
+from ato_bringup.graph_row import (
+    LAW_STATUS,
+    PLANT_STATUS,
+    agree,
+    comparison,
+    graph_config,
+    graph_run,
+)
+from ato_bringup.stack import Sample, ros_args, yaml_text
 from ato_campaigns import campaign as campaign_command
 from ato_campaigns.engine import METRICS, parse_campaign, task_of
+from ato_common.scenario import load_scenario
 from ato_common.uncertainty import KNOWLEDGE_PARAMETERS, PLANT_PARAMETERS
 
 CAMPAIGN = {'name': 'parts', 'seed': 3, 'draws': 2, 'scenarios': ['short_line'],
@@ -90,3 +100,39 @@ def test_the_campaign_command_hands_a_row_through_ros_to_the_graph_rerun(monkeyp
     for wrong in (['--through', 'ros'], [*argv, '--save', 'run.npz']):
         with pytest.raises(SystemExit):
             campaign_command.parse_args(wrong)
+
+
+def _sample(k: int) -> Sample:
+    return Sample(positions=(10.0 * k,), speeds=(1.0 * k,), forces=(100.0 * k,),
+                  ref_position=10.0 * k, ref_speed=1.0 * k)
+
+
+def test_the_graph_run_reads_safety_saturation_and_faults_from_the_per_step_diagnostics():
+    stamps = [k * 100_000_000 for k in range(5)]
+    plant = {0: ('0', 'normal'), 2: ('1', 'service brake'), 3: ('1', 'normal')}
+    law = [('False', '0'), ('True', '0'), ('True', '1'), ('False', '1'), ('False', '2')]
+    diagnostics = [(stamps[k], PLANT_STATUS, {'atp_interventions': n, 'watchdog': w}, '')
+                   for k, (n, w) in plant.items()]
+    diagnostics += [(stamps[k], LAW_STATUS, {'law': 'pid', 'saturated': s, 'faults': f},
+                     f'fault {k}' if f != '0' else 'pid running')
+                    for k, (s, f) in enumerate(law)]
+    outcome = SimpleNamespace(scenario=load_scenario('short_line'), diagnostics=diagnostics,
+                              samples=[(k, _sample(i)) for i, k in enumerate(stamps)])
+    measured = np.arange(5.0)
+    lagging = graph_run(outcome, measured, None, every_step=True, instant=False)
+    assert list(lagging.forces) == [0.0, 100.0, 200.0, 300.0, 400.0]  # the step's own truth
+    instant = graph_run(outcome, measured, None, every_step=True, instant=True)
+    assert list(instant.forces) == [100.0, 200.0, 300.0, 400.0, 400.0]  # the next step's
+    assert lagging.atp_interventions == 1 and lagging.atp_times_s == (0.2,)
+    assert lagging.watchdog_events == 1  # the steps published under the watchdog's brake
+    assert list(lagging.saturated) == [False, True, True, False, False]
+    assert lagging.faults == ['', '', 'fault 2', '', 'fault 4']
+    assert lagging.laws == ['pid'] * 5 and list(lagging.measured_positions) == list(measured)
+    assert graph_run(outcome, measured, None, every_step=False, instant=False
+                     ).saturated.size == 0
+
+
+def test_a_row_that_is_not_in_the_campaign_is_refused_before_anything_runs(capsys):
+    assert graph_row.main(['--draw', '0', '--law', 'no_such_law']) == 2
+    assert "'no_such_law' is not a law of the campaign" in capsys.readouterr().err
+    assert graph_row.main([]) == 2
