@@ -25,7 +25,7 @@ setup(
         'harness for an ATO node of your own.'
     ),
     license='Apache-2.0',
-    tests_require=['pytest'],
+    tests_require=['pytest', 'PyYAML', 'numpy'],
     entry_points={
         'console_scripts': [
             'run_scenario = ato_bringup.run_scenario:main',

@@ -8,9 +8,12 @@ into a :class:`StackLaunch`: the scenario loaded, the plant model it needs
 (``ato_simulation.applies.plant_model_for``: a train of cars gets the multi-car plant, unless
 ``model`` names one), the control rate at which the law applies, the simulated time at which the
 run ends (by default the scenario's: the end of its target curve plus its settle time), and each
-node's parameters. Arguments that cannot make a run (an unknown value, a malformed scenario, a
-law that cannot drive the plant it would be given) raise :class:`LaunchRefused` with the reason,
-before any node starts.
+node's parameters. A campaign's row is made again through the graph with the same arguments
+(``draw_values``: the plant's truth of one draw; ``gradient_known``, ``gains``, ``envelope``:
+the controller's knowledge and configuration). Arguments that cannot make a run (an unknown
+value, a malformed scenario, a law that cannot drive the plant it would be given, malformed
+draw values, a configuration without gains for the law) raise :class:`LaunchRefused` with the
+reason, before any node starts.
 """
 
 from __future__ import annotations
@@ -22,9 +25,11 @@ from typing import Mapping
 from ato_common.conventions import normalised_namespace, stack_remaps
 from ato_common.scenario import DEFAULT_SCENARIO, Scenario, load_scenario
 from ato_common.validation import ConfigError
+from ato_controller_node.gains import GAINS, GainsUnavailable, settings_for
 from ato_controller_node.laws import LAWS
 from ato_simulation.applies import applicable_rate, plant_model_for
 from ato_simulation.plans import cached_plan, run_end_time_s
+from train_plant_node.draw_values import parse_draw_values
 from train_plant_node.models import MODELS
 
 #: the nodes of the stack, each started as ``<name>/<name>`` with that node name
@@ -84,6 +89,16 @@ def arguments() -> tuple[Argument, ...]:
         Argument('composed', 'false',
                  'true: the three nodes in one process on one executor (ato_stack) instead of '
                  'three processes', ('true', 'false')),
+        Argument('draw_values', '',
+                 "the plant's truth of one draw of a campaign's uncertainty: a JSON object of "
+                 'uncertain parameters, e.g. {"mass_factor": 1.08} (\'\': the nominal plant; '
+                 'the plant alone reads it)'),
+        Argument('gradient_known', 'true',
+                 "the controller knows the line's gradient profile (false: a flat line)",
+                 ('true', 'false')),
+        Argument('gains', GAINS[0], "the laws' configuration (the controller's gains)", GAINS),
+        Argument('envelope', 'true', 'the ATO envelope of the controller host, for every law',
+                 ('true', 'false')),
     )
 
 
@@ -104,17 +119,24 @@ class StackLaunch:
     namespace: str  # normalised: '/' is the root
     composed: bool
     notes: tuple[str, ...] = field(default=())  # what was decided that the arguments left open
+    draw_values: str = ''  # the plant's truth of a draw (checked: train_plant_node.draw_values)
+    gradient_known: bool = True
+    gains: str = GAINS[0]
+    envelope: bool = True
 
     def parameters(self) -> dict[str, dict[str, object]]:
         """Each node's parameters."""
         common = {'scenario': self.scenario, 'lockstep': self.lockstep}
         return {
             'ato_controller_node': {**common, 'controller': self.controller,
-                                    'rate_hz': self.rate_hz},
+                                    'rate_hz': self.rate_hz, 'gains': self.gains,
+                                    'envelope': self.envelope,
+                                    'gradient_known': self.gradient_known},
             'profile_node': dict(common),
             'train_plant_node': {**common, 'model': self.model, 'control_rate_hz': self.rate_hz,
                                  'end_time_s': self.end_time_s,
-                                 'final_delivery_timeout_s': LAUNCH_FINAL_DELIVERY_S},
+                                 'final_delivery_timeout_s': LAUNCH_FINAL_DELIVERY_S,
+                                 'draw_values': self.draw_values},
         }
 
     def parameter_sections(self) -> dict[str, dict]:
@@ -211,5 +233,13 @@ def resolve(values: Mapping[str, str], external: bool = False) -> StackLaunch:
     except ConfigError as error:  # the target curve cannot be planned
         raise LaunchRefused(str(error)) from None
     notes += [n for n in (note, end_note) if n]
+    try:
+        parse_draw_values(given['draw_values'])
+        if not external:  # a law without gains in the configuration: refused by its node
+            settings_for(given['controller'], given['gains'], scenario.train.name)
+    except (ValueError, GainsUnavailable) as error:  # each names what is wrong (ConfigError too)
+        raise LaunchRefused(str(error)) from None
     return StackLaunch(given['scenario'], given['controller'], model, rate, end_time_s,
-                       lockstep, namespace, composed, tuple(notes))
+                       lockstep, namespace, composed, tuple(notes), given['draw_values'],
+                       given['gradient_known'] == 'true', given['gains'],
+                       given['envelope'] == 'true')

@@ -20,6 +20,15 @@ for bit in lockstep), faster. The run's monitor takes the true state and the ref
 profile streamed in batches, not per message, and the diagnostics (ato_bringup.stack.LEAN), so
 the summary measures the tracking against the curve the train was given, replanned or not.
 
+A campaign's draw through the graph: ``--draw-values JSON`` gives the plant the truth of one draw
+(a JSON object of uncertain parameters, ``train_plant_node.draw_values``; only the plant reads
+it), ``--gradient hidden`` tells the controller a flat line (the knowledge part of a draw),
+``--gains`` and ``--no-envelope`` set the controller's configuration and envelope (what
+``python -m ato_campaigns.campaign --campaign FILE --draw N --law L --through ros`` gives them
+for one row)::
+
+    ros2 run ato_bringup run_scenario --draw-values '{"mass_factor": 1.1, "wind_mps": 4}'
+
 ``--controller-command CMD`` runs an ATO node of your own instead of the suite's controller (the
 contract it must honour: docs/guide/external-ato.md), started as ``CMD --ros-args -p
 scenario:=<scenario>``. ``--real-time`` runs the stack on the wall clock (the run lasts as long
@@ -78,6 +87,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     from ato_bringup.stack import RUN_DIAGNOSTICS_PERIOD_S
     from ato_common.run_events import PLATFORM_TOLERANCE_M
     from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios
+    from ato_controller_node.gains import GAINS
     from ato_controller_node.laws import LAWS
     from train_plant_node.models import MODELS
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
@@ -92,6 +102,18 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument('--model', default=AUTO_MODEL, choices=(AUTO_MODEL, *sorted(MODELS)),
                         help="the plant model (default %(default)s: the scenario's, multi_car "
                              'for a train described car by car)')
+    parser.add_argument('--draw-values', default='', metavar='JSON',
+                        help="the plant's truth of one draw of a campaign's uncertainty: a JSON "
+                             'object of uncertain parameters, e.g. \'{"mass_factor": 1.1}\' '
+                             '(ato_common.uncertainty; one left out is nominal; default: the '
+                             'nominal plant)')
+    parser.add_argument('--gradient', default='known', choices=('known', 'hidden'),
+                        help="what the controller is told of the line's grades (hidden: a flat "
+                             'line; the plant keeps the grades); default %(default)s')
+    parser.add_argument('--gains', default=GAINS[0], choices=GAINS,
+                        help="the laws' configuration (default %(default)s)")
+    parser.add_argument('--no-envelope', action='store_true',
+                        help="the controller host's ATO envelope off (for every law)")
     parser.add_argument('--real-time', action='store_true',
                         help='run on the wall clock instead of in lockstep simulated time')
     parser.add_argument('--end-time', default=SCENARIO_END, metavar='S',
@@ -193,7 +215,10 @@ def configure(args: argparse.Namespace):
     from ato_bringup.stack import StackConfig
     launch = resolve({'scenario': args.scenario, 'controller': args.controller,
                       'model': args.model, 'end_time_s': str(args.end_time),
-                      'lockstep': 'false' if args.real_time else 'true'},
+                      'lockstep': 'false' if args.real_time else 'true',
+                      'draw_values': args.draw_values, 'gains': args.gains,
+                      'gradient_known': 'true' if args.gradient == 'known' else 'false',
+                      'envelope': 'false' if args.no_envelope else 'true'},
                      external=bool(args.controller_command))
     stamp = datetime.now().strftime('%Y%m%d-%H%M%S')
     law = 'external' if args.controller_command else args.controller
@@ -205,8 +230,11 @@ def configure(args: argparse.Namespace):
                          record_to=None if args.no_record else log_dir / 'bag',
                          composed=args.composed, monitor='lean',
                          diagnostics_period_s=args.diagnostics_period,
-                         plant_params={'control_rate_hz': launch.rate_hz},
-                         controller_params={'rate_hz': launch.rate_hz},
+                         plant_params={'control_rate_hz': launch.rate_hz,
+                                       'draw_values': launch.draw_values},
+                         controller_params={'rate_hz': launch.rate_hz, 'gains': launch.gains,
+                                            'envelope': launch.envelope,
+                                            'gradient_known': launch.gradient_known},
                          controller_command=args.controller_command)
     return config, launch
 

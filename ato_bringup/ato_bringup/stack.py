@@ -86,10 +86,23 @@ def ros_args(params: dict[str, object], namespace: str = '') -> list[str]:
     for name, value in params.items():
         if isinstance(value, bool):
             value = 'true' if value else 'false'
+        elif isinstance(value, str):
+            value = yaml_text(value)
         args += ['-p', f'{name}:={value}']
     for source, target in stack_remaps(namespace):
         args += ['-r', f'{source}:={target}']
     return args
+
+
+def yaml_text(text: str) -> str:
+    """``text`` as ``-p name:=VALUE`` takes it: rcl reads VALUE as YAML, so text that YAML
+    reads as something else (a JSON object such as a plant's ``draw_values``, a list, '') is
+    given single-quoted; anything else as it is."""
+    try:
+        same = yaml.safe_load(text) == text
+    except yaml.YAMLError:
+        same = False
+    return text if same else "'" + text.replace("'", "''") + "'"
 
 
 @dataclass

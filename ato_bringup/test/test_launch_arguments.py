@@ -41,7 +41,14 @@ def test_the_defaults_start_the_suite_s_stack_to_the_scenario_s_end():
     assert set(parameters) == set(NODES)
     assert parameters['train_plant_node']['final_delivery_timeout_s'] == LAUNCH_FINAL_DELIVERY_S
     assert {a.name for a in arguments()} == {'controller', 'scenario', 'model', 'lockstep',
-                                             'rate_hz', 'end_time_s', 'namespace', 'composed'}
+                                             'rate_hz', 'end_time_s', 'namespace', 'composed',
+                                             'draw_values', 'gradient_known', 'gains',
+                                             'envelope'}
+    # the nominal plant, the controller's defaults
+    assert parameters['train_plant_node']['draw_values'] == ''
+    assert {k: parameters['ato_controller_node'][k] for k in (
+        'gains', 'envelope', 'gradient_known')} == {'gains': 'published', 'envelope': True,
+                                                    'gradient_known': True}
 
 
 @pytest.mark.parametrize('values, reason', [
@@ -56,6 +63,10 @@ def test_the_defaults_start_the_suite_s_stack_to_the_scenario_s_end():
      'applies to scenario mao_4car only at 10000 Hz, above the nodes\' 1000 Hz'),
     ({'controller': 'mao_multibody_rigid', 'rate_hz': '20'},
      'mao_multibody_rigid cannot drive scenario short_line on the point_mass plant'),
+    ({'draw_values': '{"mass_factor": 9}'}, r'draw_values.mass_factor: must be a finite number'),
+    ({'draw_values': '{"gradient_known": 0}'}, 'acts on what the controller knows'),
+    ({'gains': 'tuned', 'scenario': 'liu_li_2020', 'controller': 'liu_li'}, 'tuned'),
+    ({'envelope': 'off'}, 'envelope:=off: not one of true, false'),
 ])
 def test_arguments_that_cannot_make_a_run_are_refused_with_the_reason(values, reason):
     with pytest.raises(LaunchRefused, match=reason):

@@ -5,7 +5,8 @@
                                           [--results-page PAGE]
     python -m ato_campaigns.campaign --campaign FILE --draw N --law LABEL
                                           [--configuration published|tuned] [--scenario S]
-                                          [--save RUN.npz] [--out runs/campaigns]
+                                          [--through offline|ros] [--save RUN.npz]
+                                          [--out runs/campaigns]
 
 FILE defaults to the default campaign of ``make campaign`` (ato_campaigns/campaigns/default.yaml;
 ``--campaign FILE`` is the same as FILE). The campaign file, the engine and the rows:
@@ -16,7 +17,11 @@ With ``--draw`` and ``--law`` the command makes one row of the campaign again, o
 process, as the campaign made it (ato_campaigns.engine.rerun), prints it (and whether it equals
 the row stored in ``<out>``), and with ``--save`` writes the run's arrays (numpy .npz). The row
 is named by its label (``--law pid/tuned``) or by its entry and configuration (``--law pid
---configuration tuned``).
+--configuration tuned``). ``--through ros`` makes it again through the ROS graph too (the
+plant, profile and controller nodes in lockstep, the plant given the draw's truth and the
+controller its knowledge part) and prints each metric of the two beside the stored one, with
+whether they agree: ``ato_bringup.graph_row``, which this command runs in a process of its own
+with the same arguments (this module is pure: it imports no rclpy).
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -69,7 +75,7 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('--readme', type=Path, default=None,
                         help='also write the summary between the campaign markers of this '
                         'README (make campaign: README.md)')
-    rerunning = parser.add_argument_group('one row again (offline, in this process)')
+    rerunning = parser.add_argument_group('one row again')
     rerunning.add_argument('--draw', type=int, default=None, help='the draw index of the row')
     rerunning.add_argument('--law', default=None,
                            help="the row's label (pid/tuned), or its entry's (pid) with "
@@ -78,6 +84,10 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                            help="the row's configuration of the gains (with --law ENTRY)")
     rerunning.add_argument('--scenario', default=None,
                            help='the scenario of the row (a campaign of several scenarios)')
+    rerunning.add_argument('--through', default='offline', choices=('offline', 'ros'),
+                           help='offline (default): the offline loop, in this process; ros: '
+                           'also through the ROS graph in lockstep (ato_bringup.graph_row), '
+                           'each metric beside the offline one')
     rerunning.add_argument('--save', type=Path, default=None, metavar='RUN.npz',
                            help="also write the run's arrays to this file (numpy .npz)")
     args = parser.parse_args(argv)
@@ -87,9 +97,12 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     if (args.draw is None) != (args.law is None):
         parser.error('--draw and --law go together: the row to make again')
     if args.draw is None and (args.save is not None or args.scenario is not None
-                              or args.configuration is not None):
-        parser.error('--save, --scenario and --configuration are for one row again: give '
-                     '--draw and --law')
+                              or args.configuration is not None or args.through != 'offline'):
+        parser.error('--save, --scenario, --configuration and --through are for one row '
+                     'again: give --draw and --law')
+    if args.through == 'ros' and args.save is not None:
+        parser.error('--save writes the offline run\'s arrays; --through ros records the '
+                     'graph run (its folder is printed): give one of them')
     return args
 
 
@@ -101,6 +114,8 @@ def main(argv=None) -> int:
         path = path.resolve().relative_to(Path.cwd())  # as the report names it
     try:
         campaign = load_campaign(path)
+        if args.draw is not None and args.through == 'ros':
+            return through_graph(argv)
         if args.draw is not None:
             return rerun_row(campaign, args)
         return run_all(campaign, args, argv)
@@ -145,16 +160,30 @@ def rerun_row(campaign, args: argparse.Namespace) -> int:
     shown['drawn'] = {k[2:]: v for k, v in row.items() if k.startswith('p_')}
     print(json.dumps({k: None if isinstance(v, float) and math.isnan(v) else v
                       for k, v in shown.items()}, indent=1, default=str))
-    stored = read_rows(rows_folder(args.out, campaign.name), campaign.fingerprint)
-    if not stored.empty:
-        mine = stored[(stored['scenario'] == row['scenario']) & (stored['law'] == row['law'])
-                      & (stored['draw'] == row['draw'])]
-        if not mine.empty:
-            print(same_as_stored(row, mine.iloc[0].to_dict()), file=sys.stderr)
+    stored = stored_row(campaign, args.out, row)
+    if stored is not None:
+        print(same_as_stored(row, stored), file=sys.stderr)
     if args.save is not None:
         save_run(run, args.save)
         print(f"wrote the run's arrays to {args.save}", file=sys.stderr)
     return 0
+
+
+def through_graph(argv: list[str]) -> int:
+    """``--through ros``: the row through the ROS graph, in a process of its own
+    (``python -m ato_bringup.graph_row`` with the same arguments): its exit code."""
+    return subprocess.call([sys.executable, '-m', 'ato_bringup.graph_row', *argv])
+
+
+def stored_row(campaign, out: Path, row: dict) -> dict | None:
+    """The row of ``<out>`` with the scenario, law and draw of ``row`` (the same campaign's
+    fingerprint), or None."""
+    stored = read_rows(rows_folder(out, campaign.name), campaign.fingerprint)
+    if stored.empty:
+        return None
+    mine = stored[(stored['scenario'] == row['scenario']) & (stored['law'] == row['law'])
+                  & (stored['draw'] == row['draw'])]
+    return None if mine.empty else mine.iloc[0].to_dict()
 
 
 def same_as_stored(row: dict, stored: dict) -> str:

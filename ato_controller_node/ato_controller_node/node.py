@@ -14,7 +14,10 @@ parameters ``<law>.<gain>`` with ranges; their defaults are the configuration ``
 (``ato_controller_node.gains``): ``published`` (the papers' values) or ``tuned`` (the suite's
 tuning artefacts for the scenario's train; a law without one cannot be selected then, and
 says so). ``envelope`` turns the host's ATO envelope (anti-windup of the position error, the
-same for every law) on or off, ``envelope.*`` are its settings.
+same for every law) on or off, ``envelope.*`` are its settings. ``gradient_known`` false gives
+the controller a flat line for knowledge (``knowledge_of(scenario, hide_gradient=True)``: a
+campaign draw's ``gradient_known`` 0) while the plant keeps the grades: the only part of a
+draw the controller is told; the plant's drawn truth (its ``draw_values``) never reaches it.
 
 Graph: ``wait_for_subscribers`` holds back only the first command; an observer that goes away
 later does not stop the loop. A state stamped before the last step (lockstep) is a restarted
@@ -39,6 +42,7 @@ from ato_common.identity import scenario_identity
 from ato_common.knowledge import knowledge_of
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import Command, Reference, ReferencePoint, seconds
+from ato_common.uncertainty import knowledge_options
 from ato_common.validation import ConfigError
 from ato_controller_node.envelope import EnvelopeSettings
 from ato_controller_node.gains import GAINS, GainsUnavailable, settings_for
@@ -85,6 +89,9 @@ NODE_PARAMS = (
     Param('gains', GAINS[0], "the laws' configuration: the defaults of every <law>.<gain> "
           '(published: the papers\' values; tuned: the suite\'s tuning artefacts for the '
           "scenario's train)", choices=GAINS),
+    Param('gradient_known', True, "the controller knows the line's gradient profile (false: "
+          'its knowledge is a flat line while the plant keeps the grades; a campaign draw\'s '
+          'gradient_known 0)'),
     Param('envelope', True, 'the ATO envelope of the host: anti-windup of the position error '
           'under saturation, the same for every law (false: off for every law)'),
     Param('diagnostics_period_s', 1.0, 'period of the diagnostics, s of (simulated) time',
@@ -153,7 +160,9 @@ class AtoControllerNode(RunNodeHooks, Node):
         self.rate_hz = p['rate_hz'] or scenario.run.controller_rate_hz
         self.dt = 1.0 / self.rate_hz
         self.lockstep = p['lockstep']
-        self.knowledge = knowledge_of(scenario)  # all the controller knows of the train
+        # all the controller knows of the train: the knowledge part of a draw, nothing of its truth
+        self.knowledge = knowledge_of(scenario, **knowledge_options(
+            {'gradient_known': float(p['gradient_known'])}))
         # the laws' gains: parameters whose defaults are the configuration's
         configured, self.untuned = configuration(p['gains'], scenario.train.name)
         self.gain_table = ParameterTable(self, gain_params(configured))
@@ -398,7 +407,9 @@ class AtoControllerNode(RunNodeHooks, Node):
         r = self.last_result
         fault = r.fault or self.input_fault
         values = {'law': r.law, 'rate_hz': self.rate_hz, 'gains': self.params['gains'],
-                  'envelope': self.params['envelope'], 'speed_error_mps': r.speed_error_mps,
+                  'envelope': self.params['envelope'],
+                  'gradient_known': self.params['gradient_known'],
+                  'speed_error_mps': r.speed_error_mps,
                   'position_error_m': r.position_error_m, 'command_n': r.total_force_n,
                   'wanted_n': r.wanted_force_n, 'saturated': r.saturated,
                   'faults': self.host.faults, 'restarts': self.restarts,

@@ -16,9 +16,13 @@ A run whose emergency brake has held for longer than ``emergency_brake_limit_s``
 time ends with exit code ``EMERGENCY_BRAKE_HELD`` (3) and the reason, in the log and the
 diagnostics.
 
-The plant publishes the identity of what it simulates, latched (``train/identity``: the
-scenario's name and a hash of the resolved scenario); the controller and the profile refuse to
-run on another scenario. A failed publish (the middleware refusing a sample) is counted and
+``draw_values`` (a JSON object of uncertain parameters, ``train_plant_node.draw_values``): the
+plant runs the truth of one draw of a campaign, ``perturbed(scenario, values)`` as the offline
+loop does; only the plant reads it (the controller is told only the knowledge part, its own
+``gradient_known``). The plant publishes the identity of the nominal scenario, latched
+(``train/identity``: the scenario's name and a hash of the resolved scenario; a draw is the
+truth of that scenario, not another one); the controller and the profile refuse to run on
+another scenario. A failed publish (the middleware refusing a sample) is counted and
 reported, never fatal. Before it exits at ``end_time_s`` the plant waits until every matched
 subscriber has acknowledged the last step.
 """
@@ -39,6 +43,7 @@ from ato_common.identity import scenario_identity
 from ato_common.plant_setup import parse_failure_injection
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
 from ato_common.types import TrainState, nanoseconds, seconds
+from ato_common.uncertainty import perturbed
 from ato_common.validation import ConfigError
 from ato_ros import wire
 from ato_ros.lifecycle import RunNodeHooks, freeze_startup_objects, node_usage, run_node
@@ -62,6 +67,7 @@ from ato_ros.publishing import (
     wait_until_delivered,
 )
 from ato_ros.step_records import LEAD_S, least_lead_s
+from train_plant_node.draw_values import parse_draw_values
 from train_plant_node.models import MODELS
 from train_plant_node.simulation import (
     NORMAL,
@@ -80,6 +86,11 @@ EMERGENCY_BRAKE_HELD = 3
 PARAMS = (
     Param('scenario', DEFAULT_SCENARIO, 'built-in scenario name or path to a scenario YAML file'),
     Param('model', 'point_mass', 'plant model', choices=tuple(sorted(MODELS))),
+    Param('draw_values', '', 'the truth of one draw of a campaign\'s uncertainty: a JSON object '
+          'of uncertain parameters (ato_common.uncertainty), e.g. {"mass_factor": 1.08, '
+          '"wind_mps": -2.5}, each a finite number in its range; one left out is nominal '
+          "('': the nominal plant). The plant runs perturbed(scenario, values); gradient_known "
+          "is the controller's"),
     Param('lockstep', True, 'advance simulated time one control period per command and '
           'publish /clock (false: real time on a wall-clock timer)'),
     Param('control_rate_hz', 0.0, 'control rate the plant steps at in lockstep, Hz; must equal '
@@ -146,7 +157,10 @@ class TrainPlantNode(RunNodeHooks, Node):
         super().__init__('train_plant_node')
         self.params = ParameterTable(self, PARAMS)
         p = self.params
-        self.scenario = load_scenario(p['scenario'])
+        self.scenario = load_scenario(p['scenario'])  # nominal: its identity is published
+        drawn = parse_draw_values(p['draw_values'])
+        # the truth: only the simulation (and the failures checked against it) reads it
+        self.truth = self.scenario if drawn is None else perturbed(self.scenario, drawn)
         rate = p['control_rate_hz'] or self.scenario.run.controller_rate_hz
         self.lockstep = p['lockstep']
         self.period_ns = (control_period_ns(rate) if self.lockstep
@@ -181,7 +195,8 @@ class TrainPlantNode(RunNodeHooks, Node):
         self.get_logger().info(
             f"scenario {self.scenario.name} ({self.scenario.origin}), model {p['model']}, "
             f"{'lockstep at ' + format(rate, 'g') + ' Hz' if self.lockstep else 'real time'}, "
-            f'actuators {list(self.sim.actuator_names)}')
+            f'actuators {list(self.sim.actuator_names)}'
+            + (f", the truth of the draw {p['draw_values']}" if drawn is not None else ''))
         freeze_startup_objects()
 
     def _simulation(self) -> TrainSimulation:
@@ -198,7 +213,7 @@ class TrainPlantNode(RunNodeHooks, Node):
                               'other nodes of a lockstep run use simulated time)')
         try:
             return TrainSimulation(
-                self.scenario, p['model'],
+                self.truth, p['model'],
                 SensorSettings(p['sensor_position_noise_m'], p['sensor_speed_noise_mps'],
                                p['seed']),
                 SafetySettings(p['watchdog_periods'], p['emergency_periods']),
@@ -484,7 +499,7 @@ class TrainPlantNode(RunNodeHooks, Node):
             failures, _ = parse_failure_injection(changes['inject_failure'],
                                                   self.sim.actuator_names, self.sim.time_s)
             for failure in failures:
-                check_failure(failure, self.scenario.train)
+                check_failure(failure, self.truth.train)
         except (ConfigError, FailureRejected) as error:
             return f'inject_failure: {error}' if isinstance(error, FailureRejected) \
                 else str(error)
