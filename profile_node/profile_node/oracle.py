@@ -7,30 +7,44 @@ under the limits the planner plans within (``Limits``: the highest speed at each
 highest acceleration at each speed and position, the highest deceleration at each position),
 with the train's physics (``Physics``, read here from the scenario: the nominal Davis
 resistance, the mass, the grade averaged over the train's length and the curves and tunnels at
-its front, the regenerative brake's efficiency and power). The energy is the work of the force
-at the wheel F = m a + R(v) + m w(x): gross = the integral of max(F, 0) dx, braking = of
-max(-F, 0) dx, regenerated = the efficiency times the braking work within the regenerative
-power limit, net = gross - regenerated (``ato_common.metrics``' definitions). ``objective``
-'gross' minimises the gross energy (no regeneration valued), 'net' the net one.
+its front, the regenerative brake's efficiency and power: the train and the line the planner is
+given, as the plan's forecast takes them; not a scenario's ``plant:`` section, whose operating
+modes, failures and variations only the plant simulates). The energy is the work of the force at
+the wheel F = m a + R(v) + m w(x): gross = the integral of max(F, 0) dx, braking = of max(-F, 0)
+dx, regenerated = the efficiency times the braking work within the regenerative power limit, net
+= gross - regenerated (``ato_common.metrics``' definitions). ``objective`` 'gross' minimises the
+gross energy (no regeneration valued), 'net' the net one.
 
 The method (Bellman's principle; the time priced by a multiplier lambda, bisected): the leg is
 cut into stages of about ``dx_m``; the state at each stage boundary is the kinetic energy per
 unit mass e = v^2 / 2 on a grid of step ``de``. Over a stage the force is held, so e is linear
-in the position: the stage's time is exactly 2 dx / (v0 + v1), the mean of v^2 over it is
-e0 + e1 and the mean of v is (2/3) (v0^2 + v0 v1 + v1^2) / (v0 + v1). The controls from a grid
-state are every change of e to a grid state within the limits, and three more whose end state
-falls between grid points (coasting, the highest acceleration, the highest deceleration), the
-cost to go interpolated linearly there. ``solve(lam)`` minimises energy + lam x time backwards
-over the stages; lambda is bisected (geometrically) to the running time, and the energy at that
-time interpolated between the two solutions that bracket it (a convex combination of two
-feasible solutions: an upper bound of the grid's optimum at that time). The grid error is
-measured by refining the grid (``profile_node/test/test_oracle.py``); without a jerk limit the
-oracle's optimum can only be below a jerk-limited curve's. Given the planning jerk J, the
-oracle gives a jerk-limited curve the time its unavoidable ramps cost: a curve that starts from
-rest with |jerk| <= J reaches the acceleration a0 only after a0 / J and is a0 / (2 J) behind one
-that takes it at once; a braking to rest at d ends d / (2 J) later; ``at_time`` solves for the
-running time less a0 / (2 J) + d / (2 J) (the highest acceleration at rest and the highest
-deceleration at the stop). It has no other jerk limit.
+in the position: the stage's time is exactly 2 dx / (v0 + v1), the mean of v^2 over it is e0 +
+e1 and the mean of v is (2/3) (v0^2 + v0 v1 + v1^2) / (v0 + v1). The controls from a grid state
+are every change of e to a grid state within the limits, and three more whose end state falls
+between grid points (coasting, the highest acceleration, the highest deceleration), the cost to
+go interpolated linearly there. A stage's highest end state is the highest acceleration a(v)
+followed over it (``_reach``): capping the held acceleration at the end speed's a, where the
+traction's power limit lowers a as the speed rises, fell short by a share growing with the stage
+(``mao_4car`` in ``profile_node/test/test_plan_against_oracle_physics.py``). Beside the grid,
+each stage boundary has one more state: the braking envelope B (the highest e from which braking
+at the highest deceleration keeps under every later ceiling and stops at the end; B = 0 at the
+end). Without it, a braking into the stop or a lower ceiling could only take the grid's
+decelerations, multiples of de / dx (the cost to go is infinite above B, so an end state between
+the last grid state under B and the one above it has no finite interpolation): on
+``mao_2017_modes`` a planning deceleration of 0.093 m/s^2 became 0.08 on the bench's grid, and
+the oracle's optimum rose above the plan, which brakes at 0.093. With B, braking along the
+envelope is exact, and an end state between the last grid state under B and B is interpolated
+between the two. ``solve(lam)`` minimises energy + lam x time backwards over the stages; lambda
+is bisected (geometrically) to the running time, and the energy at that time interpolated
+between the two solutions that bracket it (a convex combination of two feasible solutions: an
+upper bound of the grid's optimum at that time). The grid error is measured by refining the grid
+(``profile_node/test/test_oracle.py``); without a jerk limit the oracle's optimum can only be
+below a jerk-limited curve's. Given the planning jerk J, the oracle gives a jerk-limited curve
+the time its unavoidable ramps cost: a curve that starts from rest with |jerk| <= J reaches the
+acceleration a0 only after a0 / J and is a0 / (2 J) behind one that takes it at once; a braking
+to rest at d ends d / (2 J) later; ``at_time`` solves for the running time less a0 / (2 J) + d /
+(2 J) (the highest acceleration at rest and the highest deceleration at the stop). It has no
+other jerk limit.
 """
 
 from __future__ import annotations
@@ -43,6 +57,9 @@ import numpy as np
 
 from ato_common import units
 from ato_common.scenario import Scenario
+
+# The steps in which the highest acceleration is followed over a stage (``_reach``), at most, m.
+REACH_STEP_M = 10.0
 
 
 @dataclass(frozen=True)
@@ -140,7 +157,12 @@ class LegOracle:
         self.e = np.arange(0.0, top * top / 2.0 + de, de)
         self.v = np.sqrt(2.0 * self.e)
         self.stages = [self._stage(limits, a, b) for a, b in zip(self.xs, self.xs[1:])]
+        self.envelope = self._braking_envelope()
+        # at each boundary: the grid state under B, and whether B falls inside its step
+        under, shares = self._between(self.envelope)
+        self._envelope_steps = [(int(b), bool(0.0 < f < 1.0)) for b, f in zip(under, shares)]
         self._tables: dict[tuple, tuple] = {}
+        self._envelope_moves: dict[int, tuple] = {}
 
     @staticmethod
     def _stage_bounds(limits: Limits, start_m: float, end_m: float, dx_m: float) -> np.ndarray:
@@ -166,6 +188,21 @@ class LegOracle:
         acceleration = np.array([limits.acceleration_mps2(v, middle) for v in self.v])
         return _Stage(b - a, start_ceiling, end_ceiling, middle_ceiling, deceleration,
                       line_force, acceleration)
+
+    def _braking_envelope(self) -> np.ndarray:
+        """B at each stage boundary (module docstring): 0 at the end; before, the least of the
+        ceilings at the boundary, B after the stage + its highest deceleration x its length and
+        what the ceiling at the stage's middle leaves (the mean of the ends' e under it)."""
+        stages = self.stages
+        envelope = np.zeros(len(stages) + 1)
+        for k in range(len(stages) - 1, -1, -1):
+            stage, after = stages[k], envelope[k + 1]
+            top = 0.5 * stage.start_ceiling ** 2
+            if k > 0:
+                top = min(top, 0.5 * stages[k - 1].end_ceiling ** 2)
+            envelope[k] = max(min(top, after + stage.deceleration * stage.dx,
+                                  stage.middle_ceiling ** 2 - after), 0.0)
+        return envelope
 
     def _costs(self, stage: _Stage, e0: np.ndarray, e1: np.ndarray):
         """Per unit mass: (objective energy, gross, braking, regenerated, time) of stages from
@@ -206,9 +243,9 @@ class LegOracle:
         j = np.clip(j, 0, n - 1)
         e0, e1 = self.e[i] + 0.0 * j, self.e[j]
         accel = (e1 - e0) / stage.dx
-        cap = np.minimum(stage.acceleration[i], stage.acceleration[j])
+        reach = self._reach(stage, self.e)
         v = self.v
-        ok = inside & (accel <= cap + 1e-12) & (accel >= -stage.deceleration - 1e-12) \
+        ok = inside & (e1 <= reach[i] + 1e-9) & (accel >= -stage.deceleration - 1e-12) \
             & (v[j] <= stage.end_ceiling + 1e-9) & (v[i] <= stage.start_ceiling + 1e-9) \
             & (e0 + e1 <= stage.middle_ceiling ** 2 + 1e-9) \
             & ((v[i] + v[j]) > 0.0)
@@ -219,11 +256,26 @@ class LegOracle:
 
     def _extra(self, stage: _Stage):
         """Coasting, the highest acceleration and the highest deceleration from each grid
-        state: end states between grid points, (end e, feasible, costs) each."""
-        p, e = self.physics, self.e
+        state: end states between grid points, one after the other in one array of three
+        times the grid's (state i's by control c at c n + i): end e, feasible, costs and the
+        grid states either side (``_between``)."""
+        end = np.concatenate(self._ends(stage, self.e))
+        return (end, *self._moves(stage, np.tile(self.e, 3), end), self._between(end))
+
+    def _between(self, end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The grid state under each end state (an array) and the share of the step to the
+        one above (0 on a grid state's own e)."""
+        position = end / self.de
+        nearest = np.rint(position)
+        position = np.where(np.abs(position - nearest) < 1e-9, nearest, position)
+        low = np.clip(np.floor(position).astype(int), 0, len(self.e) - 2)
+        return low, np.clip(position - low, 0.0, 1.0)
+
+    def _ends(self, stage: _Stage, e: np.ndarray) -> list[np.ndarray]:
+        """The end states of coasting, the highest acceleration and the highest deceleration
+        over the stage from the states ``e`` (an array)."""
+        p, v = self.physics, np.sqrt(2.0 * e)
         a, b, c = p.davis_n
-        v = self.v
-        controls = []
         coast = e - ((a + b * v + 2.0 * c * e) / p.mass_kg + stage.line_force) * stage.dx
         for _ in range(2):  # the resistance at the stage's mean speed
             v1 = np.sqrt(2.0 * np.maximum(coast, 0.0))
@@ -232,32 +284,119 @@ class LegOracle:
                 mean_v = np.where(total > 0, (2 / 3) * (v * v + v * v1 + v1 * v1) / total, 0.0)
             coast = e - ((a + b * mean_v + c * (e + np.maximum(coast, 0.0))) / p.mass_kg
                          + stage.line_force) * stage.dx
-        controls.append(coast)
-        up = e + stage.acceleration * stage.dx
-        v_up = np.sqrt(2.0 * np.maximum(up, 0.0))
-        reach = np.interp(v_up, v, stage.acceleration)
-        controls.append(e + np.minimum(stage.acceleration, reach) * stage.dx)
-        controls.append(e - stage.deceleration * stage.dx)
-        extra = []
-        for end in controls:
-            accel = (end - e) / stage.dx
-            v_end = np.sqrt(2.0 * np.maximum(end, 0.0))
-            cap = np.minimum(stage.acceleration, np.interp(v_end, v, stage.acceleration))
-            ok = (end >= 0.0) & (v_end <= stage.end_ceiling + 1e-9) \
-                & (v <= stage.start_ceiling + 1e-9) \
-                & (e + end <= stage.middle_ceiling ** 2 + 1e-9) \
-                & (accel <= cap + 1e-9) & (accel >= -stage.deceleration - 1e-9) \
-                & ((v + v_end) > 0.0)
-            extra.append((end, ok, self._costs(stage, e, end)))
-        return extra
+        return [coast, self._reach(stage, e), e - stage.deceleration * stage.dx]
+
+    def _reach(self, stage: _Stage, e: np.ndarray) -> np.ndarray:
+        """The highest e at the stage's end from the states ``e`` (an array): the highest
+        acceleration a(v) followed over the stage (de/dx = a; midpoint steps of at most
+        ``REACH_STEP_M``), never below 0. Under an acceleration that falls with the speed
+        (the traction's power limit) the chord at the end speed's a would fall short of it
+        by a share that grows with the stage's length."""
+        count = max(int(math.ceil(stage.dx / REACH_STEP_M)), 1)
+        h = stage.dx / count
+
+        def highest(e: np.ndarray) -> np.ndarray:
+            return np.interp(np.sqrt(2.0 * e), self.v, stage.acceleration)
+        reached = np.array(e, dtype=float)
+        for _ in range(count):
+            half = np.maximum(reached + 0.5 * h * highest(reached), 0.0)
+            reached = np.maximum(reached + h * highest(half), 0.0)
+        return reached
+
+    def _moves(self, stage: _Stage, e: np.ndarray, end: np.ndarray):
+        """Whether each move from ``e`` to ``end`` over the stage (arrays, broadcast) is
+        within the limits, and its costs (``_costs``)."""
+        accel = (end - e) / stage.dx
+        v, v_end = np.sqrt(2.0 * e), np.sqrt(2.0 * np.maximum(end, 0.0))
+        ok = (end >= 0.0) & (v_end <= stage.end_ceiling + 1e-9) \
+            & (v <= stage.start_ceiling + 1e-9) \
+            & (e + end <= stage.middle_ceiling ** 2 + 1e-9) \
+            & (end <= self._reach(stage, e) + 1e-9) & (accel >= -stage.deceleration - 1e-9) \
+            & ((v + v_end) > 0.0)
+        return ok, self._costs(stage, e, end)
+
+    def _envelope_table(self, k: int):
+        """The moves of stage k that start or end on the braking envelope: from the grid
+        states within reach to B after the stage (their indices, feasible, costs), and from B
+        before it to the grid states within reach, to B after it and by the three controls
+        of ``_ends`` (end states, feasible, costs). Cached per stage."""
+        if k in self._envelope_moves:
+            return self._envelope_moves[k]
+        stage, de, n = self.stages[k], self.de, len(self.e)
+        before, after = self.envelope[k], self.envelope[k + 1]
+        up = max(float(np.max(stage.acceleration)), 0.0) * stage.dx
+        down = stage.deceleration * stage.dx
+
+        def within(low: float, high: float) -> np.ndarray:
+            return np.arange(max(int(math.floor(low / de)) - 1, 0),
+                             min(int(math.ceil(high / de)) + 2, n))
+        sources = within(after - up, after + down)
+        to_envelope = (sources, *self._moves(stage, self.e[sources], np.full(len(sources), after)))
+        targets = self.e[within(before - down, before + up)]
+        ends = np.concatenate([targets, [after], *self._ends(stage, np.array([before]))])
+        from_envelope = (ends, *self._moves(stage, np.full(len(ends), before), ends),
+                         self._between(ends))
+        self._envelope_moves[k] = (to_envelope, from_envelope)
+        return self._envelope_moves[k]
+
+    def _to_go(self, end: np.ndarray, between: tuple[np.ndarray, np.ndarray], after):
+        """The cost to go from end states (an array) at a stage boundary, and a function
+        giving its parts at some of them: linear between the grid states either side
+        (``between``), or, in the step where B falls, between the last grid state under B and
+        the envelope state; inf above B (every grid state above it is). ``after``: the grid
+        states' values and parts there, the boundary, the envelope state's value and parts."""
+        value, parts, boundary, envelope_value, envelope_parts = after
+        low, share = between
+        upper = low + 1
+        with np.errstate(invalid='ignore'):   # 0 x inf where share is 0 or 1
+            to_go = (1.0 - share) * value[low] + share * value[upper]
+        to_go = np.where(share <= 0.0, value[low], np.where(share >= 1.0, value[upper], to_go))
+        envelope = self.envelope[boundary]
+        below, inside = self._envelope_steps[boundary]
+        in_cell = (low == below) & (share > 0.0) & (end <= envelope + 1e-9) if inside \
+            else np.zeros(len(end), dtype=bool)
+        cell = np.flatnonzero(in_cell)
+        lower_e = self.e[below]
+        envelope_share = np.clip((end[cell] - lower_e) / (envelope - lower_e), 0.0, 1.0)
+        with np.errstate(invalid='ignore'):
+            to_go[cell] = np.where(envelope_share >= 1.0, envelope_value,
+                                   (1.0 - envelope_share) * value[below]
+                                   + envelope_share * envelope_value)
+
+        def parts_at(rows: np.ndarray) -> np.ndarray:
+            mixed = (1.0 - share[rows]) * parts[:, low[rows]] + share[rows] * parts[:, upper[rows]]
+            on_envelope = in_cell[rows]
+            if on_envelope.any():
+                shares = np.clip((end[rows] - lower_e) / (envelope - lower_e), 0.0, 1.0)
+                mixed = np.where(on_envelope, (1.0 - shares) * parts[:, [below]]
+                                 + shares * envelope_parts[:, None], mixed)
+            return mixed
+        return to_go, parts_at
+
+    def evaluate(self, speeds_mps: np.ndarray) -> Optimum:
+        """The energies and the running time of a given curve in the oracle's physics: its
+        speeds at the stage boundaries (``xs``), the force held over each stage as in the
+        programme; lambda nan. A check that a curve's forecast uses the oracle's physics."""
+        e = 0.5 * np.asarray(speeds_mps, dtype=float) ** 2
+        if e.shape != self.xs.shape:
+            raise ValueError(f'evaluate: one speed per stage boundary ({len(self.xs)}), got '
+                             f'{e.shape}')
+        sums = np.zeros(4)
+        for k, stage in enumerate(self.stages):
+            _, *parts = self._costs(stage, e[k:k + 1], e[k + 1:k + 2])
+            sums += [float(part[0]) for part in parts]
+        mass = self.physics.mass_kg
+        return Optimum(float(sums[3]), mass * sums[0], mass * sums[1], mass * sums[2], math.nan)
 
     def solve(self, lam: float) -> Optimum:
         """The least energy + lam x time from standstill to standstill on the grid."""
         n = len(self.e)
         rows = np.arange(n)
-        # the value and, along the chosen controls, gross, braking, regenerated and time to go
+        # the value and, along the chosen controls, gross, braking, regenerated and time to go,
+        # of the grid states and of the envelope state (B = 0 at the end: the standstill)
         value = np.where(self.e == 0.0, 0.0, np.inf)
         parts = np.zeros((4, n))
+        envelope_value, envelope_parts = 0.0, np.zeros(4)
         for k in range(len(self.stages) - 1, -1, -1):
             j, ok, costs, extra = self._table(k)
             energy, *accumulated = costs
@@ -266,23 +405,30 @@ class LegOracle:
             best_value = total[rows, best]
             best_parts = np.stack([accumulated[m][rows, best] + parts[m][j[rows, best]]
                                    for m in range(4)])
-            for end, feasible, (e_energy, *e_parts) in extra:
-                position = end / self.de
-                low = np.clip(np.floor(position).astype(int), 0, n - 2)
-                share = np.clip(position - low, 0.0, 1.0)
-                with np.errstate(invalid='ignore'):   # 0 x inf where share is 0 or 1
-                    to_go = (1.0 - share) * value[low] + share * value[low + 1]
-                to_go = np.where(share <= 0.0, value[low],
-                                 np.where(share >= 1.0, value[low + 1], to_go))
-                candidate = np.where(feasible & (end <= self.e[-1]),
-                                     e_energy + lam * e_parts[3] + to_go, np.inf)
-                better = candidate < best_value
-                if better.any():
-                    best_value = np.where(better, candidate, best_value)
-                    for m in range(4):
-                        interpolated = (1.0 - share) * parts[m][low] + share * parts[m][low + 1]
-                        best_parts[m] = np.where(better, e_parts[m] + interpolated,
-                                                 best_parts[m])
+            after = (value, parts, k + 1, envelope_value, envelope_parts)
+            end, feasible, (e_energy, *e_parts), between = extra
+            to_go, parts_at = self._to_go(end, between, after)
+            candidate = np.where(feasible, e_energy + lam * e_parts[3] + to_go,
+                                 np.inf).reshape(3, n)
+            control = np.argmin(candidate, axis=0)
+            better = np.flatnonzero(candidate[control, rows] < best_value)
+            if len(better):
+                chosen = control[better] * n + better    # in the controls' one array
+                best_value[better] = candidate[control[better], better]
+                best_parts[:, better] = np.stack(e_parts)[:, chosen] + parts_at(chosen)
+            to_envelope, from_envelope = self._envelope_table(k)
+            sources, feasible, (e_energy, *e_parts) = to_envelope
+            candidate = np.where(feasible, e_energy + lam * e_parts[3] + envelope_value, np.inf)
+            better = candidate < best_value[sources]
+            best_value[sources[better]] = candidate[better]
+            best_parts[:, sources[better]] = (np.stack(e_parts)[:, better]
+                                              + envelope_parts[:, None])
+            ends, feasible, (e_energy, *e_parts), between = from_envelope
+            to_go, parts_at = self._to_go(ends, between, after)
+            candidate = np.where(feasible, e_energy + lam * e_parts[3] + to_go, np.inf)
+            chosen = int(np.argmin(candidate))
+            envelope_value = float(candidate[chosen])
+            envelope_parts = np.stack(e_parts)[:, chosen] + parts_at(np.array([chosen]))[:, 0]
             value, parts = best_value, best_parts
         if not math.isfinite(value[0]):
             raise ValueError('the oracle finds no way through the leg within the limits')
