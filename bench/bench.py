@@ -622,7 +622,11 @@ def timetable_section_intro() -> list[str]:
         f'{BENCH_ORACLE_STAGES} within {BENCH_ORACLE_DX_BOUNDS_M[0]:.0f}-'
         f'{BENCH_ORACLE_DX_BOUNDS_M[1]:.0f} m and a step of v^2/2 of '
         f'{BENCH_ORACLE_DE_PER_M:g} m/s^2 x the stage; plan over oracle: the plan\'s forecast '
-        'of that energy against it.', '']
+        'of that energy against it. Plan and oracle are computed on the train and line the '
+        'planner is given (nominal mass, resistance and traction; the line\'s grades, curves '
+        'and tunnels), not on a scenario\'s `plant:` section, so plan over oracle compares like '
+        'with like; the closed-loop runs do meet that section (on `mao_2017_modes` its tunnel, '
+        'slope and failing motor, which is why that run spends far more than its plan).', '']
 
 
 def campaign_throughput(scenario: str) -> list[str]:
