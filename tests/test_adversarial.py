@@ -115,9 +115,9 @@ def test_a_drive_stuck_at_its_maximum_from_the_start_is_stopped(line, tmp_path, 
     config = StackConfig(scenario=line, domain_id=domain_id, log_dir=tmp_path / 'logs')
     with Stack(config) as stack:
         controller = ControllerStandIn(stack)
-        # (quoted: a ``-p name:=value`` is YAML, and the parameter is a text)
-        start_plant(stack, line, inject_failure=f"'{{actuator: {names[0]}, kind: stuck, "
-                                                f"force_n: {share}, start_s: 0}}'")
+        # (a text: ``stack.ros_args`` quotes it for ``-p name:=value``, which rcl reads as YAML)
+        start_plant(stack, line, inject_failure=f'{{actuator: {names[0]}, kind: stuck, '
+                                                f'force_n: {share}, start_s: 0}}')
         last = drive_until_standing(stack, controller, scenario, [share] * len(names))
         check_supervised(stack, scenario)
         # issue 29 item 1: the brake holds while the drive pushes; no hop towards the EOA
@@ -148,8 +148,8 @@ def test_a_drive_stuck_at_an_absurd_force_is_refused(line, tmp_path, domain_id):
         assert stack.stop(['plant'])['plant'] == 0
         # at start-up, the same failure stops the plant with a clear message
         start = stack.start_process('plant', {'scenario': line, 'inject_failure':
-                                              f"'{{actuator: {names[0]}, kind: stuck, "
-                                              "force_n: 1.0e+12}'"})
+                                              f'{{actuator: {names[0]}, kind: stuck, '
+                                              'force_n: 1.0e+12}'})
         assert start.wait(timeout=60) != 0
         assert 'exceeds what a drive can physically exert' in stack.log_tail('plant')
 
@@ -346,8 +346,8 @@ def test_a_run_whose_emergency_brake_holds_too_long_ends_with_the_reason(tmp_pat
     with Stack(config) as stack:
         controller = ControllerStandIn(stack)
         start_plant(stack, str(path), emergency_brake_limit_s=20.0,
-                    inject_failure="'{actuator: traction, kind: stuck, force_n: 3.0e+5, "
-                                   "start_s: 0}'")
+                    inject_failure='{actuator: traction, kind: stuck, force_n: 3.0e+5, '
+                                   'start_s: 0}')
         monitor = stack.monitor
         for k in range(3000):  # the ATO asks for nothing; the plant ends the run
             stamp = k * PERIOD_NS

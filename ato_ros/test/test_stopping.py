@@ -16,8 +16,11 @@ from ato_ros.lifecycle import node_usage
 from ato_ros.params import Param
 
 STILL_IMPORTING = textwrap.dedent('''
-    import sys, time
+    import signal, sys, time
     from ato_ros.interrupts import quiet_until_running
+    # Python's own SIGINT handling, even when started from a shell that ignores SIGINT (a
+    # background job): SIG_IGN is inherited and Python then installs no handler of its own
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     if sys.argv[1] == 'quiet':
         quiet_until_running()
     print('importing', flush=True)
