@@ -362,10 +362,19 @@ def test_a_recorder_that_falls_behind_holds_the_lockstep_and_loses_nothing(tmp_p
                                        qos_profile(topic('recorded').qos))
         stack.start()
         monitor = stack.monitor
-        # stopped once it has vouched for a file (a loaded machine can take seconds over its
-        # first bundle: until then the plant counts it from the step at which it appeared)
-        assert stack.spin_until(lambda: monitor.last_stamp_ns > 2_000_000_000 and acknowledged,
-                                120.0), stack.log_tail('recorder')
+        # stopped once it has vouched for a file holding the plant's records too (a loaded
+        # machine can take seconds over its first bundles: until it acknowledges, the plant
+        # counts it from the step at which it appeared; and an acknowledgement made before the
+        # plant's first bundle is written vouches for the profile's topics only, a start-up gap
+        # named in issue 31's note)
+        seen: list[int] = []  # acknowledgements counted when the plant's topics were in
+
+        def vouched() -> bool:
+            if not seen and 'recording /train/state [' in stack.log_tail('recorder', 400):
+                seen.append(len(acknowledged))
+            return (monitor.last_stamp_ns > 2_000_000_000 and bool(seen)
+                    and len(acknowledged) > seen[0])
+        assert stack.spin_until(vouched, 120.0), stack.log_tail('recorder')
         recorder = stack.processes['recorder']
         recorder.send_signal(signal.SIGSTOP)
         try:
