@@ -398,6 +398,10 @@ def test_a_train_stopped_short_by_its_odometer_bias_finishes_its_journey():
     row = engine.run_metrics(run, 0.1)
     assert row['stop_error_m'] == pytest.approx(0.75, abs=0.05)
     assert row['odometer_stop_error_m'] == pytest.approx(0.0, abs=0.05)
+    # a run without the odometer's readings has no odometer stop error (NaN), not a crash
+    unread = dataclasses.replace(run, measured_positions=np.zeros(0))
+    assert unread.odometer_stop_errors_m() == {}
+    assert math.isnan(engine.run_metrics(unread, 0.1)['odometer_stop_error_m'])
     # a train held short of its stop (the old behaviour) is named as unfinished
     stranded = dataclasses.replace(run, positions=np.minimum(run.positions, 14000.0 - 300.0))
     assert 'never stood within its length (200 m) of Midway' in unfinished(stranded)

@@ -93,7 +93,10 @@ class OfflineRun:
     def odometer_stop_errors_m(self) -> dict[str, float]:
         """The stopping error at each stop as the train's own odometer measured it, read as
         ``metrics().stop_errors_m`` is: the part of the stop error the controller can act on
-        (the rest is the odometer's error there, which no law can see)."""
+        (the rest is the odometer's error there, which no law can see); none for a run built
+        without the odometer's readings."""
+        if self.measured_positions.size != self.times_s.size:
+            return {}
         return read_stop_errors(self.times_s, self.measured_positions,
                                 stop_samples(self.plan, self.replans, self.late_readings))
 
