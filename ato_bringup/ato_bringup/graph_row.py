@@ -189,20 +189,35 @@ def rerun_through_graph(campaign, law: str, draw: int, scenario: str | None = No
                         domain_id: int | None = None, progress: bool = True):
     """One row of ``campaign`` made again offline and through the graph: (the offline row, the
     graph's row, notes on what is not expected to agree, the graph run's folder)."""
-    from ato_bringup.run_scenario import unique_run_dir
-    from ato_campaigns.engine import DEFAULT_OUT, base_row, rerun, run_metrics, task_of
-    from ato_common.domains import free_domain
+    from ato_campaigns.engine import DEFAULT_OUT, rerun, task_of
     offline, run = rerun(campaign, law, draw, scenario, configuration)
     entry = next(e for e in campaign.laws if e.label == offline['law'])
     task = task_of(campaign, offline['scenario'], entry, draw)
+    row, notes, log_dir = graph_row_of(task, run, (out or DEFAULT_OUT) / campaign.name / 'graph',
+                                       domain_id=domain_id, progress=progress)
+    return offline, row, notes, log_dir
+
+
+def graph_row_of(task: dict, run: OfflineRun, runs: Path, domain_id: int | None = None,
+                 progress: bool = False, timeout_s: float | None = None
+                 ) -> tuple[dict, list[str], Path]:
+    """The row of ``task`` (a campaign's task, ``engine.task_of``) made through the graph, given
+    its offline run ``run`` (the run's end and journey rule come from it): (the graph's row,
+    notes on what is not expected to agree, the graph run's folder, made in ``runs``). The run
+    takes a free DDS domain unless ``domain_id`` is given, and ends with RunFailed past
+    ``timeout_s`` s of wall time (default: 900 s, or the simulated time if longer), or when a
+    node ends before the plant does (``ato_bringup.runner.run_lockstep``)."""
+    from ato_bringup.run_scenario import unique_run_dir
+    from ato_campaigns.engine import base_row, run_metrics
+    from ato_common.domains import free_domain
     end = task['end_time_s'] or float(run.times_s[-1])
-    log_dir = unique_run_dir((out or DEFAULT_OUT) / campaign.name / 'graph',
-                             f"{entry.label.replace('/', '-')}-draw{draw}")
+    log_dir = unique_run_dir(runs, f"{task['law'].replace('/', '-')}-draw{task['draw']}")
     with contextlib.ExitStack() as held:
         if domain_id is None:
             domain_id = held.enter_context(free_domain())
         config = graph_config(task, end, log_dir, domain_id)
-        outcome = run_lockstep(config, timeout_s=max(900.0, end), progress=progress)
+        outcome = run_lockstep(config, timeout_s=timeout_s or max(900.0, end),
+                               progress=progress)
     assert config.record_to is not None  # graph_config records the run
     every_step = 1.0 / task['rate_hz'] >= SHORTEST_DIAGNOSTICS_S
     graph = graph_run(outcome, measured_positions(config.record_to,
@@ -221,7 +236,7 @@ def rerun_through_graph(campaign, law: str, draw: int, scenario: str | None = No
         notes.append('the offline run was replanned (timetable strategy): the campaign decides '
                      'from every step\'s state, the profile node at its check instants, so the '
                      'two runs are not expected to agree')
-    return offline, row, notes, log_dir
+    return row, notes, log_dir
 
 
 #: what is compared besides the metrics (engine.METRICS)
@@ -251,6 +266,11 @@ def comparison(offline: dict, graph: dict, stored: dict | None = None
             verdict = 'agree' if agree(a, b) else 'DIFFERS'
         rows.append((key, None if stored is None else stored.get(key), a, b, verdict))
     return rows
+
+
+def differing(rows) -> list[str]:
+    """What differs in a ``comparison``: the keys whose verdict is DIFFERS."""
+    return [key for key, *_, verdict in rows if verdict == 'DIFFERS']
 
 
 def _shown(value) -> str:
@@ -305,7 +325,7 @@ def main(argv=None) -> int:
         print(f'note: {note}')
     print(f"tolerance: math.isclose(rel_tol={TOLERANCE['rel_tol']:g}, "
           f"abs_tol={TOLERANCE['abs_tol']:g}); the graph run and its recording: {folder}")
-    differ = [key for key, *_, verdict in rows if verdict == 'DIFFERS']
+    differ = differing(rows)
     print('the graph gives the offline row' if not differ else
           'the graph differs from the offline row in ' + ', '.join(differ), file=sys.stderr)
     return 1 if differ else 0

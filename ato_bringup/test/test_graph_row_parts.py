@@ -97,7 +97,7 @@ def test_the_campaign_command_hands_a_row_through_ros_to_the_graph_rerun(monkeyp
     argv = ['--draw', '1', '--law', 'pid', '--through', 'ros']
     assert campaign_command.main(argv) == 0
     assert calls[0][1:] == ['-m', 'ato_bringup.graph_row', *argv]
-    for wrong in (['--through', 'ros'], [*argv, '--save', 'run.npz']):
+    for wrong in (['--through', 'ros', '--serial'], [*argv, '--save', 'run.npz']):
         with pytest.raises(SystemExit):
             campaign_command.parse_args(wrong)
 

@@ -3,6 +3,7 @@
     python -m ato_campaigns.campaign [FILE] [--scheduler tcp://HOST:8786] [--workers N]
                                           [--serial] [--out runs/campaigns]
                                           [--results-page PAGE]
+    python -m ato_campaigns.campaign FILE --through ros [--workers N] [--out runs/campaigns]
     python -m ato_campaigns.campaign --campaign FILE --draw N --law LABEL
                                           [--configuration published|tuned] [--scenario S]
                                           [--through offline|ros] [--save RUN.npz]
@@ -22,6 +23,11 @@ plant, profile and controller nodes in lockstep, the plant given the draw's trut
 controller its knowledge part) and prints each metric of the two beside the stored one, with
 whether they agree: ``ato_bringup.graph_row``, which this command runs in a process of its own
 with the same arguments (this module is pure: it imports no rclpy).
+
+Without ``--draw``, ``--through ros`` makes every row of the campaign through the ROS graph and
+offline, writes the graph's rows and their report to ``<out>/<name>-ros/`` and prints per row
+whether the two agree: ``python -m ato_bringup.graph_campaign FILE [--workers N] [--out DIR]``,
+run in a process of its own (``--workers``: rows at once, default 1 there).
 """
 
 from __future__ import annotations
@@ -67,7 +73,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                         help='address of a running Dask scheduler (tcp://HOST:8786); default: '
                         "Dask's scheduler-address configuration, else a LocalCluster")
     parser.add_argument('--workers', type=int, default=None,
-                        help='workers of the LocalCluster (default: one per core)')
+                        help='workers of the LocalCluster (default: one per core); with '
+                        '--through ros, rows run at once through the graph (default 1)')
     parser.add_argument('--serial', action='store_true', help='run in this process, in order')
     parser.add_argument('--results-page', type=Path, default=None,
                         help='also write the report, with date, machine and commit, to this '
@@ -86,8 +93,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                            help='the scenario of the row (a campaign of several scenarios)')
     rerunning.add_argument('--through', default='offline', choices=('offline', 'ros'),
                            help='offline (default): the offline loop, in this process; ros: '
-                           'also through the ROS graph in lockstep (ato_bringup.graph_row), '
-                           'each metric beside the offline one')
+                           'also through the ROS graph in lockstep, each metric beside the '
+                           'offline one (ato_bringup.graph_row); without --draw, every row of '
+                           'the campaign (ato_bringup.graph_campaign)')
     rerunning.add_argument('--save', type=Path, default=None, metavar='RUN.npz',
                            help="also write the run's arrays to this file (numpy .npz)")
     args = parser.parse_args(argv)
@@ -97,9 +105,14 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     if (args.draw is None) != (args.law is None):
         parser.error('--draw and --law go together: the row to make again')
     if args.draw is None and (args.save is not None or args.scenario is not None
-                              or args.configuration is not None or args.through != 'offline'):
-        parser.error('--save, --scenario, --configuration and --through are for one row '
-                     'again: give --draw and --law')
+                              or args.configuration is not None):
+        parser.error('--save, --scenario and --configuration are for one row again: give '
+                     '--draw and --law')
+    if args.draw is None and args.through == 'ros' and (
+            args.serial or args.scheduler is not None or args.results_page is not None
+            or args.readme is not None):
+        parser.error('--serial, --scheduler, --results-page and --readme are for the offline '
+                     'campaign; --through ros runs --workers rows at once on this machine')
     if args.through == 'ros' and args.save is not None:
         parser.error('--save writes the offline run\'s arrays; --through ros records the '
                      'graph run (its folder is printed): give one of them')
@@ -114,8 +127,8 @@ def main(argv=None) -> int:
         path = path.resolve().relative_to(Path.cwd())  # as the report names it
     try:
         campaign = load_campaign(path)
-        if args.draw is not None and args.through == 'ros':
-            return through_graph(argv)
+        if args.through == 'ros':
+            return through_graph(argv, args)
         if args.draw is not None:
             return rerun_row(campaign, args)
         return run_all(campaign, args, argv)
@@ -169,10 +182,17 @@ def rerun_row(campaign, args: argparse.Namespace) -> int:
     return 0
 
 
-def through_graph(argv: list[str]) -> int:
-    """``--through ros``: the row through the ROS graph, in a process of its own
-    (``python -m ato_bringup.graph_row`` with the same arguments): its exit code."""
-    return subprocess.call([sys.executable, '-m', 'ato_bringup.graph_row', *argv])
+def through_graph(argv: list[str], args: argparse.Namespace) -> int:
+    """``--through ros``: the row (``--draw``) or the whole campaign through the ROS graph, in
+    a process of its own (``python -m ato_bringup.graph_row`` with the same arguments, or
+    ``python -m ato_bringup.graph_campaign``): its exit code."""
+    if args.draw is not None:
+        return subprocess.call([sys.executable, '-m', 'ato_bringup.graph_row', *argv])
+    command = [sys.executable, '-m', 'ato_bringup.graph_campaign', str(args.campaign),
+               '--out', str(args.out)]
+    if args.workers is not None:
+        command += ['--workers', str(args.workers)]
+    return subprocess.call(command)
 
 
 def stored_row(campaign, out: Path, row: dict) -> dict | None:
