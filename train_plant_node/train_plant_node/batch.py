@@ -1,16 +1,15 @@
 """Many control periods of a :class:`~train_plant_node.simulation.TrainSimulation` at once:
-``run_commands`` holds each row of a table of commands for one period, compiled where it can
-be (``periods.py``), period by period through the simulation's interface elsewhere, with the
-same result to the last bit. For open-loop runs: commands from a file, identification, Monte
-Carlo.
+``run_commands`` holds each row of a table of commands for one period, compiled where it can be
+(``periods.py``), period by period through the simulation's interface elsewhere, with the same
+result to the last bit. For open-loop runs: commands from a file, identification, Monte Carlo.
 
-The compiled path applies where ``advance`` would take its one-step path with nothing
-switching: instant actuators, constant surroundings (no modes, no abrupt change), no failure
-active, one integration step per period, no safety function acting, no dwell, and the ATP's
-odometer exact and working (the odometry's estimate is the truth, its interval the declared
-accuracy since the last balise group, as the kernels take it). Everything else (a scheduled time, a failure,
-a period in which a car of the multi-car model crosses a line boundary, an intervention, a
-stop) runs period by period.
+The compiled path applies where ``advance`` would take its one-step path with nothing switching:
+instant actuators, constant surroundings (no modes, no abrupt change), no failure active, one
+integration step per period, no safety function acting, no dwell, and the ATP's odometer exact
+and working (the odometry's estimate is the truth, its interval the declared accuracy since the
+last balise group, as the kernels take it). Everything else (a scheduled time, a failure, a
+period in which a car of the multi-car model crosses a line boundary, an intervention, a stop)
+runs period by period.
 """
 
 from __future__ import annotations

@@ -7,9 +7,10 @@ limits, the ATP's check, the state snapshot), so a plant driven from Python cann
 faster than 10,000x real time at 10 Hz. These kernels do the same work per period in compiled
 code: the actuator limits (``Actuators.targets``), the integration (the models' step kernels),
 the ATP's anticipated check (``OnboardATP.over_speed`` with ``SampledLimit`` look-ups, on the
-odometry of an exact odometer with its declared interval, ``Odometry.exact``) and the truth (the models' ``outputs``), in the same floating-point operations
-in the same order, so that both paths give the same numbers to the last bit (the tests check
-this). The simulation uses them only where that holds (``batch.compiled_periods``).
+odometry of an exact odometer with its declared interval, ``Odometry.exact``) and the truth (the
+models' ``outputs``), in the same floating-point operations in the same order, so that both
+paths give the same numbers to the last bit (the tests check this). The simulation uses them
+only where that holds (``batch.compiled_periods``).
 """
 
 from __future__ import annotations
