@@ -431,13 +431,15 @@ def test_an_erring_odometer_on_the_shipped_short_line_stops_before_every_eoa(
     """Issue 29's acceptance through the graph on short_line as it ships (its default balise
     groups, its declared SUBSET-041 odometry): before, with no balise groups and a zero
     interval, these odometers left the train past an end of authority. Now the train stops
-    before Midway's EOA, its authority moves on, and it ends at Terminus before its EOA."""
+    before Midway's EOA and its authority moves on after the dwell (the rest of the journey,
+    to Terminus, runs offline: ``ato_simulation/test/test_supervision_under_attack.py``)."""
     text = (files('ato_common') / 'scenarios' / 'short_line.yaml').read_text()
     path = tmp_path / 'short_line_erring.yaml'
     path.write_text(text + yaml.safe_dump({'plant': {'sensors': sensors}}))
     scenario = load_scenario(str(path))
     run = RunSupervision.for_scenario(scenario)
-    config = StackConfig(scenario=str(path), domain_id=domain_id, log_dir=tmp_path / 'logs')
+    config = StackConfig(scenario=str(path), domain_id=domain_id, log_dir=tmp_path / 'logs',
+                         end_time_s=480.0)   # Midway's dwell ends at about 445 s
     with Stack(config) as stack:
         stack.start()
         assert stack.spin_until(lambda: stack.exited('plant'), 900.0), stack.log_tail('plant')
@@ -446,9 +448,8 @@ def test_an_erring_odometer_on_the_shipped_short_line_stops_before_every_eoa(
         assert codes == {'plant': 0, 'profile': 0, 'controller': 0}, stack.log_tail('plant')
         samples = stack.monitor.complete_samples()
         legs = [(int(v['supervised_leg']), stamp) for stamp, _, v in plant_status(stack.monitor)]
+        assert any(leg == 1 for leg, _ in legs)  # the authority moved on
         on_first_leg = max(stamp for leg, stamp in legs if leg == 0)
         assert max(s.positions[0] for t, s in samples if t <= on_first_leg) < \
             run.legs[0].end_of_authority_m
-        final = samples[-1][1]
-        assert final.positions[0] < run.legs[1].end_of_authority_m
-        assert final.positions[0] == pytest.approx(36000.0, abs=10.0)
+        assert samples[-1][1].positions[0] > run.legs[0].supervised_location_m  # on its way

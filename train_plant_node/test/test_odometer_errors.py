@@ -1,20 +1,11 @@
 """What an odometer's errors mean (issue 29's odometry, the sensors): a speed bias that never
-reads a moving train as standing or running backwards, a start position error that the first
-balise group corrects, and a speed bias whose integral the balise groups keep bounded, in the
-ATO's reading as in the ATP's odometry (no ROS)."""
-
-import math
+reads a moving train as standing or running backwards (the reading itself:
+``ato_common/test/test_speed_reading.py``), a start position error that the first balise group
+corrects, and a speed bias whose integral the balise groups keep bounded, in the ATO's reading
+as in the ATP's odometry (no ROS)."""
 
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
 
-from ato_common.plant_setup import (
-    SPEED_BIAS_FULL_MPS,
-    SPEED_BIAS_MAX_MPS,
-    QuantitySensor,
-    speed_reading,
-)
 from ato_common.scenario import parse_scenario
 from ato_common.validation import ConfigError
 from train_plant_node.simulation import TrainSimulation
@@ -32,17 +23,6 @@ def scenario(sensors, balise_groups=None):
         'name': 's', 'train': {'preset': 'crh3_luo_xu'}, 'line': line,
         'planning': {'max_acceleration_mps2': 0.5, 'service_deceleration_mps2': 0.5,
                      'max_jerk_mps3': 0.5}, 'plant': {'sensors': sensors}})
-
-
-@given(speed=st.floats(-100.0, 100.0), bias=st.floats(-SPEED_BIAS_MAX_MPS, SPEED_BIAS_MAX_MPS),
-       scale=st.floats(-0.1, 0.1))
-def test_a_speed_reading_keeps_the_sign_of_the_speed_and_reads_0_only_at_standstill(
-        speed, bias, scale):
-    reading = speed_reading(QuantitySensor(bias=bias, scale_error=scale), speed)
-    assert (reading == 0.0) == (speed == 0.0)
-    assert math.copysign(1.0, reading) == math.copysign(1.0, speed) or speed == 0.0
-    if abs(speed) >= SPEED_BIAS_FULL_MPS:
-        assert reading == pytest.approx((1.0 + scale) * speed + bias * math.copysign(1.0, speed))
 
 
 def test_a_creeping_train_reads_as_moving_forwards_under_a_negative_bias():
@@ -81,9 +61,9 @@ def test_the_first_balise_group_corrects_a_start_position_error_in_both_readings
 
 def test_the_balise_groups_bound_the_drift_of_a_speed_bias():
     """A speed bias alone: the position it integrates is corrected at each balise group, so
-    the error is at most the bias over the time since the last group (on the starting commit
-    the campaign gave reset points only with a scale error, and the ATO's reading drifted
-    without bound)."""
+    the error is at most the bias over the time since the last group (the campaign's draws of
+    a speed bias alone used to drift without bound on a line without groups: every line has
+    them now, ``ato_common/test/test_balise_groups.py``)."""
     groups = [1500.0 * k for k in range(1, 13)]
     sim = TrainSimulation(scenario({'speed': {'bias': 0.2}}, balise_groups=groups))
     errors = run_to(sim, 15000.0)
