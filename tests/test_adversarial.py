@@ -400,26 +400,33 @@ def test_an_odometer_200_m_behind_neither_breaks_the_profile_nor_strands_the_tra
     dwell."""
     path = tmp_path / 'biased.yaml'
     path.write_text(BIASED)
-    scenario = load_scenario(str(path))
-    run = RunSupervision.for_scenario(scenario)
-    config = StackConfig(scenario=str(path), domain_id=domain_id, log_dir=tmp_path / 'logs',
-                         end_time_s=320.0)
+    samples, run = run_past_the_first_stop(str(path), tmp_path, domain_id, 320.0)
+    assert max(s.positions[0] for _, s in samples) < run.legs[1].end_of_authority_m
+
+
+def run_past_the_first_stop(path, tmp_path, domain_id, end_time_s):
+    """The stack on the scenario ``path`` until ``end_time_s``: every node ends with 0, the
+    train stops before the first stop's EOA, the authority moves on after the dwell and the
+    train leaves the stop (not stranded). Returns the monitor's states and the supervision."""
+    run = RunSupervision.for_scenario(load_scenario(path))
+    config = StackConfig(scenario=path, domain_id=domain_id, log_dir=tmp_path / 'logs',
+                         end_time_s=end_time_s)
     with Stack(config) as stack:
         stack.start()
         assert stack.spin_until(lambda: stack.exited('plant') or stack.exited('profile'),
-                                600.0)
+                                900.0), stack.log_tail('plant')
         stack.spin_for(0.5)
         codes = stack.stop()
-        assert codes == {'plant': 0, 'profile': 0, 'controller': 0}, stack.log_tail('profile')
+        assert codes == {'plant': 0, 'profile': 0, 'controller': 0}, \
+            stack.log_tail('profile') + stack.log_tail('plant')
         samples = stack.monitor.complete_samples()
         legs = [(int(v['supervised_leg']), stamp) for stamp, _, v in plant_status(stack.monitor)]
-        assert any(leg == 1 for leg, _ in legs)  # the authority moved on
-        on_first_leg = max(stamp for leg, stamp in legs if leg == 0)
-        assert max(s.positions[0] for t, s in samples if t <= on_first_leg) < \
-            run.legs[0].end_of_authority_m
-        assert max(s.positions[0] for _, s in samples) < run.legs[1].end_of_authority_m
-        # not stranded at M: on its way to B
-        assert samples[-1][1].positions[0] > run.legs[0].supervised_location_m
+    assert any(leg == 1 for leg, _ in legs)  # the authority moved on
+    on_first_leg = max(stamp for leg, stamp in legs if leg == 0)
+    assert max(s.positions[0] for t, s in samples if t <= on_first_leg) < \
+        run.legs[0].end_of_authority_m
+    assert samples[-1][1].positions[0] > run.legs[0].supervised_location_m  # on its way
+    return samples, run
 
 
 @pytest.mark.parametrize('sensors', [
@@ -436,20 +443,4 @@ def test_an_erring_odometer_on_the_shipped_short_line_stops_before_every_eoa(
     text = (files('ato_common') / 'scenarios' / 'short_line.yaml').read_text()
     path = tmp_path / 'short_line_erring.yaml'
     path.write_text(text + yaml.safe_dump({'plant': {'sensors': sensors}}))
-    scenario = load_scenario(str(path))
-    run = RunSupervision.for_scenario(scenario)
-    config = StackConfig(scenario=str(path), domain_id=domain_id, log_dir=tmp_path / 'logs',
-                         end_time_s=480.0)   # Midway's dwell ends at about 445 s
-    with Stack(config) as stack:
-        stack.start()
-        assert stack.spin_until(lambda: stack.exited('plant'), 900.0), stack.log_tail('plant')
-        stack.spin_for(0.5)
-        codes = stack.stop()
-        assert codes == {'plant': 0, 'profile': 0, 'controller': 0}, stack.log_tail('plant')
-        samples = stack.monitor.complete_samples()
-        legs = [(int(v['supervised_leg']), stamp) for stamp, _, v in plant_status(stack.monitor)]
-        assert any(leg == 1 for leg, _ in legs)  # the authority moved on
-        on_first_leg = max(stamp for leg, stamp in legs if leg == 0)
-        assert max(s.positions[0] for t, s in samples if t <= on_first_leg) < \
-            run.legs[0].end_of_authority_m
-        assert samples[-1][1].positions[0] > run.legs[0].supervised_location_m  # on its way
+    run_past_the_first_stop(str(path), tmp_path, domain_id, 480.0)  # Midway's dwell: 445 s
