@@ -200,7 +200,8 @@ def _declares_balise_groups(f: Fields) -> bool:
     """The scenario's inline line gives ``balise_groups`` (an empty list: none at all); a
     TTOBench track has none to give."""
     raw = f.raw('line')
-    return isinstance(raw, dict) and 'ttobench' not in raw and 'balise_groups' in raw
+    return isinstance(raw, dict) and 'ttobench' not in raw and \
+        raw.get('balise_groups') is not None
 
 
 def _capped(line: Line, speed: float) -> Line:

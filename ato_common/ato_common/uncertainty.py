@@ -260,6 +260,7 @@ DEFAULTS = {name: p.default for name, p in PARAMETERS.items()}
 #: hold time of the random disturbance, s
 DISTURBANCE_HOLD_S = 5.0
 
+
 def _distribution(value: Any, where: str, param: Parameter) -> Distribution:
     distribution = _any_distribution(value, where, param)
     if param.allowed:
