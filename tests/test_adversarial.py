@@ -8,8 +8,10 @@ name the cause."""
 
 import math
 import signal
+from importlib.resources import files
 
 import pytest
+import yaml
 from plant_driver import ControllerStandIn, plant_status
 
 from ato_bringup.stack import Stack, StackConfig
@@ -367,7 +369,7 @@ def test_a_run_whose_emergency_brake_holds_too_long_ends_with_the_reason(tmp_pat
 
 
 BIASED = """name: biased
-description: a two-leg line with balise groups; the odometer starts 200 m behind the train
+description: a two-leg line with balise groups; the train starts its mission 200 m off
 source: suite (test)
 train: {preset: crh3_luo_xu}
 line:
@@ -378,8 +380,8 @@ line:
     - {name: M, position_m: 3000, dwell_s: 20}
     - {name: B, position_m: 6000}
   speed_limits: [{start_m: 0, speed_kmh: 160}]
-  balise_groups: [{position_m: 0}, {position_m: 1500}, {position_m: 2800}, {position_m: 4500},
-                  {position_m: 5800}]
+  balise_groups: [{position_m: 1500}, {position_m: 2800}, {position_m: 2980}, {position_m: 4500},
+                  {position_m: 5800}, {position_m: 5980}]
 planning: {max_acceleration_mps2: 0.4, service_deceleration_mps2: 0.5, max_jerk_mps3: 0.1}
 supervision: {location_accuracy_m: 5, odometry_accuracy: 0.05, speed_accuracy_mps: 0.556,
               speed_accuracy_share: 0.02}
@@ -392,28 +394,53 @@ def test_an_odometer_200_m_behind_neither_breaks_the_profile_nor_strands_the_tra
         tmp_path, domain_id):
     """Issue 29 items 3 and 4 through the graph: the profile failed at 0.2 s on a measured
     position before the line; and an odometer that never placed the train in the stop zone
-    kept the authority from moving on. Now the profile plans on, the ATP (relocated at the
-    balise groups) stops the overrunning train before each EOA, and the authority moves on
-    after the dwell."""
+    kept the authority from moving on. Now the profile plans on from the start, the first
+    balise group (1500 m on) corrects the start's error in the ATO's reading and the ATP's
+    odometry, the ATP stops the train before each EOA, and the authority moves on after the
+    dwell."""
     path = tmp_path / 'biased.yaml'
     path.write_text(BIASED)
-    scenario = load_scenario(str(path))
-    run = RunSupervision.for_scenario(scenario)
-    config = StackConfig(scenario=str(path), domain_id=domain_id, log_dir=tmp_path / 'logs',
-                         end_time_s=320.0)
+    samples, run = run_past_the_first_stop(str(path), tmp_path, domain_id, 320.0)
+    assert max(s.positions[0] for _, s in samples) < run.legs[1].end_of_authority_m
+
+
+def run_past_the_first_stop(path, tmp_path, domain_id, end_time_s):
+    """The stack on the scenario ``path`` until ``end_time_s``: every node ends with 0, the
+    train stops before the first stop's EOA, the authority moves on after the dwell and the
+    train leaves the stop (not stranded). Returns the monitor's states and the supervision."""
+    run = RunSupervision.for_scenario(load_scenario(path))
+    config = StackConfig(scenario=path, domain_id=domain_id, log_dir=tmp_path / 'logs',
+                         end_time_s=end_time_s)
     with Stack(config) as stack:
         stack.start()
         assert stack.spin_until(lambda: stack.exited('plant') or stack.exited('profile'),
-                                600.0)
+                                900.0), stack.log_tail('plant')
         stack.spin_for(0.5)
         codes = stack.stop()
-        assert codes == {'plant': 0, 'profile': 0, 'controller': 0}, stack.log_tail('profile')
+        assert codes == {'plant': 0, 'profile': 0, 'controller': 0}, \
+            stack.log_tail('profile') + stack.log_tail('plant')
         samples = stack.monitor.complete_samples()
         legs = [(int(v['supervised_leg']), stamp) for stamp, _, v in plant_status(stack.monitor)]
-        assert any(leg == 1 for leg, _ in legs)  # the authority moved on
-        on_first_leg = max(stamp for leg, stamp in legs if leg == 0)
-        assert max(s.positions[0] for t, s in samples if t <= on_first_leg) < \
-            run.legs[0].end_of_authority_m
-        assert max(s.positions[0] for _, s in samples) < run.legs[1].end_of_authority_m
-        # not stranded at M: on its way to B
-        assert samples[-1][1].positions[0] > run.legs[0].supervised_location_m
+    assert any(leg == 1 for leg, _ in legs)  # the authority moved on
+    on_first_leg = max(stamp for leg, stamp in legs if leg == 0)
+    assert max(s.positions[0] for t, s in samples if t <= on_first_leg) < \
+        run.legs[0].end_of_authority_m
+    assert samples[-1][1].positions[0] > run.legs[0].supervised_location_m  # on its way
+    return samples, run
+
+
+@pytest.mark.parametrize('sensors', [
+    {'position': {'scale_error': -0.1}, 'speed': {'scale_error': -0.1}},
+    {'position': {'bias': -200.0}},
+], ids=['scale -10 %', 'bias -200 m'])
+def test_an_erring_odometer_on_the_shipped_short_line_stops_before_every_eoa(
+        sensors, tmp_path, domain_id):
+    """Issue 29's acceptance through the graph on short_line as it ships (its default balise
+    groups, its declared SUBSET-041 odometry): before, with no balise groups and a zero
+    interval, these odometers left the train past an end of authority. Now the train stops
+    before Midway's EOA and its authority moves on after the dwell (the rest of the journey,
+    to Terminus, runs offline: ``ato_simulation/test/test_supervision_under_attack.py``)."""
+    text = (files('ato_common') / 'scenarios' / 'short_line.yaml').read_text()
+    path = tmp_path / 'short_line_erring.yaml'
+    path.write_text(text + yaml.safe_dump({'plant': {'sensors': sensors}}))
+    run_past_the_first_stop(str(path), tmp_path, domain_id, 480.0)  # Midway's dwell: 445 s

@@ -37,7 +37,7 @@ from ato_campaigns.engine import (
 )
 from ato_common import uncertainty
 from ato_common.run_events import LATE_AFTER_S
-from ato_common.scenario import load_scenario
+from ato_common.scenario import load_scenario, parse_scenario
 from ato_common.validation import ConfigError
 from ato_simulation.loop import run_offline
 
@@ -383,10 +383,16 @@ def test_a_train_stopped_short_by_its_odometer_bias_finishes_its_journey():
     # The cause of pid's "did not finish" under the default uncertainty: an odometer reading
     # 0.75 m ahead makes the ATO stop 0.75 m short of Midway; the plant's ATP took the true
     # position, never saw the train at the stop and held it there for ever. The stop check
-    # now takes the odometer's reading, as the on-board unit reports it.
+    # now takes the odometer's reading, as the on-board unit reports it. (A position bias is
+    # a start-of-mission error the first balise group corrects: on a line declared without
+    # balise groups, with an odometry declared exact, it stays for the run.)
     values = {name: p.nominal for name, p in uncertainty.PARAMETERS.items()}
     values['position_bias_m'] = 0.75
-    run = run_offline(load_scenario('short_line'), 'pid', uncertainty=values)
+    data = yaml.safe_load(resources.files('ato_common').joinpath(
+        'scenarios/short_line.yaml').read_text())
+    data['line']['balise_groups'] = []
+    del data['supervision']
+    run = run_offline(parse_scenario(data), 'pid', uncertainty=values)
     assert unfinished(run) == ''
     assert run.metrics().stop_errors_m['Midway'] == pytest.approx(-0.75, abs=0.05)
     assert run.positions[-1] == pytest.approx(36000.0 - 0.75, abs=0.05)

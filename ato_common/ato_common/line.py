@@ -22,6 +22,20 @@ TUNNEL_RESISTANCE_N_PER_KN_PER_M = 0.00013  # w_t = 0.00013 L_t  [N/kN], L_t in 
 # 79) and high-speed lines under 40 (the list of the steepest gradients on adhesion railways,
 # e.g. Wikipedia's). A steeper grade is a rack or cable railway, or a wrong figure or unit.
 MAX_GRADIENT_PER_MILLE = 140.0
+# The default placement of balise groups on a line that declares none (``default_balise_groups``):
+# precise-stopping groups this far before each stopping point, m. An ATO stops to within half a
+# metre only if its position is corrected close to the stop (platform doors need it): metro
+# lines put several balises over the stopping stage, the last at the stopping point (Beijing's
+# Yizhuang line has five); the suite puts one where the final braking begins and one at the
+# platform, after which the odometry's interval is 5 m + 5 % of 20 m (SUBSET-041 5.3.1.1) ...
+BALISE_GROUPS_BEFORE_STOP_M = (200.0, 20.0)
+# ... and groups spread evenly between them, none further than this apart, m: ETCS level 2
+# lines put a balise group at each block marker board, every 1-2 km on high-speed lines, so
+# that the odometry's interval (5 % of the distance since the last group) stays under 80 m.
+BALISE_GROUP_SPACING_M = 1500.0
+# ... on a line of at most this length, m (the longest high-speed line, Beijing-Hong Kong, is
+# under 2,500 km): a longer one declares its groups (or none) rather than get thousands
+DEFAULT_BALISE_LINE_MAX_M = 5.0e6
 
 
 @dataclass(frozen=True)
@@ -147,6 +161,30 @@ def _balise_groups(f: Fields, length: float, where: str) -> tuple[float, ...]:
                               f'{positions[-1]:g} then {position:g}')
         positions.append(position)
     return tuple(positions)
+
+
+def default_balise_groups(line: Line) -> tuple[float, ...]:
+    """Where an ETCS designer would put the balise groups of a line that declares none: one
+    each ``BALISE_GROUPS_BEFORE_STOP_M`` before each stopping point after the first station
+    (none behind the station before it), and between the line's start, these groups and
+    the line's end, evenly spread groups no more than ``BALISE_GROUP_SPACING_M`` apart. No
+    group at the line's ends: the first lies ahead of the train at its start, so a wrong start
+    position is corrected once the train has run at most one spacing. ConfigError for a line
+    longer than ``DEFAULT_BALISE_LINE_MAX_M``."""
+    if line.length_m > DEFAULT_BALISE_LINE_MAX_M:
+        raise ConfigError(f'line.balise_groups: a line of {line.length_m:g} m (longer than '
+                          f'{DEFAULT_BALISE_LINE_MAX_M:g} m) gets no default placement of balise '
+                          'groups: declare them (balise_groups: [] for none)')
+    anchors = {0.0, line.length_m}
+    positions = [s.position_m for s in line.stations]
+    for previous, stop in zip(positions, positions[1:]):
+        anchors.update(max(stop - d, previous) for d in BALISE_GROUPS_BEFORE_STOP_M)
+    ordered = sorted(anchors)
+    groups = set(ordered[1:-1])
+    for a, b in zip(ordered, ordered[1:]):
+        count = math.ceil((b - a) / BALISE_GROUP_SPACING_M - 1e-9)
+        groups.update(a + (b - a) * k / count for k in range(1, count))
+    return tuple(sorted(x for x in groups if 0.0 < x < line.length_m))
 
 
 def parse_line(data, where: str = 'line') -> Line:

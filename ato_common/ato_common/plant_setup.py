@@ -225,6 +225,28 @@ class ActuatorFailure:
         return f'{self.actuator} {self.kind} ({details[self.kind]}) from {self.start_s:g} s{end}'
 
 
+#: the speed from which a speed sensor's ``bias`` acts in full, m/s (30 km/h: SUBSET-041
+#: 5.3.1.2's low-speed range, in which it asks +/-2 km/h). Below it the bias shrinks in
+#: proportion to the speed (``speed_reading``): an odometer's speed error is a share of the
+#: speed (wheel diameter, radar beam angle) plus a resolution error that vanishes with the
+#: wheel's pulses, so it never reads a moving train as standing or running backwards.
+SPEED_BIAS_FULL_MPS = 30.0 / 3.6
+#: the largest speed bias a scenario may give, m/s: below SPEED_BIAS_FULL_MPS times the
+#: smallest (1 + scale_error), 0.9, so the reading never changes the speed's sign
+SPEED_BIAS_MAX_MPS = 5.0
+
+
+def speed_reading(sensor: QuantitySensor, speed_mps: float) -> float:
+    """What a speed sensor reads of a true speed, before noise: (1 + s) v plus the bias b,
+    b v / SPEED_BIAS_FULL_MPS below that speed (module constant's note): the reading has the
+    sign of the speed and is 0 only at true standstill."""
+    bias = sensor.bias
+    if speed_mps == 0.0 or not bias:
+        return (1.0 + sensor.scale_error) * speed_mps
+    share = min(1.0, abs(speed_mps) / SPEED_BIAS_FULL_MPS)
+    return (1.0 + sensor.scale_error) * speed_mps + bias * math.copysign(share, speed_mps)
+
+
 @dataclass(frozen=True)
 class QuantitySensor:
     """One measured quantity of every car: truth + scale error + bias + white noise, then
@@ -235,7 +257,11 @@ class QuantitySensor:
     ``scale_error`` s is an odometer's relative scale error (a wheel diameter taken as D while
     it is D (1 + s)): a speed reads v (1 + s); a position reads the odometer's last reset
     point r plus (1 + s) times the distance run since, x + s (x - r), where r is the largest of
-    the run's initial position and ``reset_positions_m`` (balise groups) at or behind x."""
+    the run's initial position and ``reset_positions_m`` (balise groups) at or behind x.
+
+    ``bias``: of a speed, an error that acts in full from SPEED_BIAS_FULL_MPS and in proportion
+    to the speed below (``speed_reading``); of a position, the error of the position the train
+    starts its mission with, which the first reset point (a balise group) corrects."""
 
     noise_std: float = 0.0
     bias: float = 0.0
@@ -515,6 +541,10 @@ def _sensors(f: Fields, car_names: Sequence[str]) -> SensorSetup:
                                      for q in ('position', 'speed', 'acceleration'))
     setup = SensorSetup(position, speed, acceleration,
                         seed=int(f.number('seed', 0.0, minimum=0.0, maximum=2**31 - 1)))
+    if abs(speed.bias) > SPEED_BIAS_MAX_MPS:
+        raise ConfigError(f'{f.where}.speed.bias: at most {SPEED_BIAS_MAX_MPS:g} m/s either '
+                          f'way (it acts in full from {SPEED_BIAS_FULL_MPS * 3.6:g} km/h and '
+                          f'must not reverse the reading below), got {speed.bias:g}')
     f.reject_unknown()
     return setup
 

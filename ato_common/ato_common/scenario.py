@@ -29,7 +29,7 @@ from ato_common.braking_curves import (
     tabulated_deceleration,
 )
 from ato_common.files import load_yaml, load_yaml_text
-from ato_common.line import Line, PiecewiseConstant, parse_line
+from ato_common.line import Line, PiecewiseConstant, default_balise_groups, parse_line
 from ato_common.plant_setup import PlantSetup, parse_plant_setup
 from ato_common.trains import TRAIN_PRESETS, TrainParameters, train_preset
 from ato_common.uncertainty import Distribution, parse_uncertainty
@@ -196,6 +196,14 @@ def _parse_line(f: Fields, base: Path) -> tuple[Line, ttobench.TTOBenchJourney |
     return track.line, None
 
 
+def _declares_balise_groups(f: Fields) -> bool:
+    """The scenario's inline line gives ``balise_groups`` (an empty list: none at all); a
+    TTOBench track has none to give."""
+    raw = f.raw('line')
+    return isinstance(raw, dict) and 'ttobench' not in raw and \
+        raw.get('balise_groups') is not None
+
+
 def _capped(line: Line, speed: float) -> Line:
     """The line's static limits capped at the train's maximum speed (part of the MRSP)."""
     limits = line.speed_limit_mps
@@ -273,6 +281,8 @@ def parse_scenario(data, origin: str = '<memory>', base: Path | None = None) -> 
     f = Fields(data, '')
     train, loaded_train = _parse_train(f, base)
     line, journey = _parse_line(f, base)
+    if not _declares_balise_groups(f):  # the default placement, on the run's final stations
+        line = replace(line, balise_groups_m=default_balise_groups(line))
     if loaded_train is not None:
         line = _capped(line, loaded_train.max_speed_mps)
 

@@ -206,20 +206,26 @@ PARAMETERS: dict[str, Parameter] = {p.name: p for p in (
               'an odometer inside that band has a noise of a few cm/s'),
     Parameter('speed_bias_mps', 'm/s', 0.0, -2.0, 2.0,
               Distribution('truncated_normal', 0.0, 0.05, -0.2, 0.2),
-              'constant bias of the measured speed',
+              'bias of the measured speed, in full from 30 km/h and in proportion to the speed '
+              'below (plant_setup.speed_reading: a moving train never reads as standing or '
+              'running backwards); its integral errs the measured position until the next '
+              'balise group of the line',
               'UNISIG SUBSET-041 5.3.1.2, as for speed_noise_mps'),
     Parameter('position_bias_m', 'm', 0.0, -50.0, 50.0,
               Distribution('truncated_normal', 0.0, 0.5, -2.0, 2.0),
-              'constant error of the measured position (the odometer at the start of the run)',
+              'error of the position the train starts its mission with: the measured position '
+              'and the ATP odometry err by it until the first balise group of the line, which '
+              'corrects it (a relocation)',
               'UNISIG SUBSET-041 5.3.1.1: odometry distance error +/-(5 m + 5 % of the '
-              'distance since the last balise); reset at a balise group near a station'),
+              'distance since the last balise); the default is a start position known to a '
+              'few metres (a train that starts on its stored position)'),
     Parameter('odometry_scale_error', '1', 0.0, -0.1, 0.1,
               Distribution('truncated_normal', 0.0, 0.001, -0.005, 0.005),
               'relative scale error s of the odometer (a wheel diameter known as D while it is '
               'D (1 + s)): the measured speed is (1 + s) v and the measured position errs by s '
-              'times the distance since the odometer was last reset: at each station, at a '
-              'balise group every ODOMETER_RESET_SPACING_M and ODOMETER_RESET_BEFORE_STOP_M '
-              'before each stop (plant.sensors.*.scale_error)',
+              'times the distance since the last balise group of the line (the default '
+              'placement of line.default_balise_groups, or the groups the scenario declares; '
+              'plant.sensors.*.scale_error)',
               'EN 15313:2016 wheel wear: a 920 mm wheel may wear to about 850 mm, 8 %, which '
               'the odometer corrects by calibrating the diameter against balise distances; '
               'the default residual, within +/-0.5 % (SUBSET-041 5.3.1.2 speed accuracy), is a '
@@ -253,12 +259,6 @@ NOMINAL = {name: _fixed(p.nominal) for name, p in PARAMETERS.items()}
 DEFAULTS = {name: p.default for name, p in PARAMETERS.items()}
 #: hold time of the random disturbance, s
 DISTURBANCE_HOLD_S = 5.0
-#: where the odometer is reset before each stop (a precise-stopping balise group), m before it;
-#: a suite assumption: ATO stops on a balise group placed shortly before the stopping point
-ODOMETER_RESET_BEFORE_STOP_M = 200.0
-#: the spacing of the balise groups that reset the odometer along the line, m (a suite
-#: assumption: ETCS level 2 lines have a balise group at each block marker, every 1-2 km)
-ODOMETER_RESET_SPACING_M = 1500.0
 
 
 def _distribution(value: Any, where: str, param: Parameter) -> Distribution:
@@ -454,14 +454,6 @@ def perturbed(scenario, values: Mapping[str, float]):
     scale = v['odometry_scale_error']
     speed = _add_error(s.speed, v['speed_noise_mps'], v['speed_bias_mps'], scale)
     position = _add_error(s.position, 0.0, v['position_bias_m'], scale)
-    if scale:
-        stops = [st.position_m for st in scenario.line.stations[1:]]
-        resets = {st.position_m for st in scenario.line.stations} | {
-            max(x - ODOMETER_RESET_BEFORE_STOP_M, 0.0) for x in stops} | {
-            k * ODOMETER_RESET_SPACING_M for k in range(
-                int(scenario.line.length_m // ODOMETER_RESET_SPACING_M) + 1)}
-        position = replace(position, reset_positions_m=tuple(sorted(
-            resets | set(position.reset_positions_m))))
     sensors = replace(s, speed=speed, position=position,
                       seed=(s.seed + zlib.crc32(repr(sorted(v.items())).encode())) % 2**31)
     true_plant = replace(plant, modes=modes, actuators=actuators, failures=failures,

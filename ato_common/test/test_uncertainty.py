@@ -130,10 +130,10 @@ def test_the_truth_is_perturbed_and_the_nominal_scenario_and_its_knowledge_are_n
     position, speed = truth.plant.sensors.position, truth.plant.sensors.speed
     assert position.scale_error == pytest.approx(0.002) and speed.scale_error == \
         pytest.approx(0.002)
-    # the odometer is reset at the stations, at every balise group and before each stop
-    resets = set(position.reset_positions_m)
-    assert {0.0, 14000.0, 36000.0, 14000.0 - u.ODOMETER_RESET_BEFORE_STOP_M,
-            36000.0 - u.ODOMETER_RESET_BEFORE_STOP_M, u.ODOMETER_RESET_SPACING_M} <= resets
+    # the line's balise groups correct the odometer (the plant's sensors reset the ATO's
+    # reading there, the odometry relocates): a draw adds no reset points of its own
+    assert position.reset_positions_m == scenario.plant.sensors.position.reset_positions_m
+    assert scenario.line.balise_groups_m and truth.line == scenario.line
     # the nominal scenario (the controller's) is untouched, and so is its knowledge
     assert knowledge_of(scenario) == known
     assert known.nominal_mass_kg == train.mass_kg and not math.isclose(

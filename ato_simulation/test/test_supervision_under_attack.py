@@ -4,9 +4,10 @@ position bias of +/-200 m and a failed speed sensor; and the rogue ATO (full tra
 step) on the plant itself. In every case the train's true front never passes the end of
 authority of the leg under supervision, the authority at Midway moves on only after a
 continuous standstill of its dwell, and the true speed never exceeds the ceiling (the MRSP plus
-dV_ebi), on short_line with the balise groups and the odometry accuracy an ETCS line and train
-would declare (SUBSET-041 5.3.1: +/-(5 m + 5 %) of the distance since the last balise group;
-the speed's +/-2 km/h at low speed, taken as 2 km/h plus 2 % of the speed)."""
+dV_ebi), on short_line as it ships: with the balise groups the loader places on it
+(``ato_common.line.default_balise_groups``) and the odometry accuracy it declares
+(SUBSET-041 5.3.1: +/-(5 m + 5 %) of the distance since the last balise group; the speed's
++/-(2 km/h + 2 % of the speed))."""
 
 from __future__ import annotations
 
@@ -18,25 +19,23 @@ import pytest
 import yaml
 
 from ato_common.braking_curves import DV_EBI_KMH, RunSupervision, ceiling_margin
+from ato_common.line import BALISE_GROUP_SPACING_M
 from ato_common.scenario import parse_scenario
 from ato_simulation.loop import run_offline
 from train_plant_node.simulation import TrainSimulation
 
 PERIOD_NS = 100_000_000
-#: a balise group every 1.5 km and 200 m before each stop
-BALISE_GROUPS = sorted(set(range(0, 36001, 1500)) | {13800, 35800})
-ODOMETRY = {'location_accuracy_m': 5.0, 'odometry_accuracy': 0.05,
-            'speed_accuracy_mps': 2.0 / 3.6, 'speed_accuracy_share': 0.02}
 
 
 def short_line(plant: dict) -> object:
-    """short_line with its balise groups, its declared odometry accuracy and ``plant``."""
+    """short_line as it ships, with ``plant``."""
     text = resources.files('ato_common').joinpath('scenarios/short_line.yaml').read_text()
     data = copy.deepcopy(yaml.safe_load(text))
-    data['line']['balise_groups'] = [{'position_m': x} for x in BALISE_GROUPS]
-    data['supervision'] = dict(ODOMETRY)
+    assert 'balise_groups' not in data['line'] and 'plant' not in data
     data['plant'] = plant
-    return parse_scenario(data)
+    scenario = parse_scenario(data)
+    assert scenario.line.balise_groups_m and scenario.supervision.odometry_accuracy == 0.05
+    return scenario
 
 
 def check_supervised(scenario, positions, speeds) -> None:
@@ -49,7 +48,9 @@ def check_supervised(scenario, positions, speeds) -> None:
     past = np.flatnonzero(positions >= midway)
     if past.size:  # past Midway's EOA: only after a continuous standstill of the dwell there
         low, _ = run.stop_zone(0)
-        interval = ODOMETRY['location_accuracy_m'] + ODOMETRY['odometry_accuracy'] * 1500.0
+        odometry = scenario.supervision
+        interval = odometry.location_accuracy_m + odometry.odometry_accuracy \
+            * BALISE_GROUP_SPACING_M
         before = slice(0, past[0])
         at_stop = (speeds[before] <= run.STANDSTILL_MPS) & (positions[before] >= low - interval)
         assert _longest_run(at_stop) >= run.dwell_s(0) * 1e9 // PERIOD_NS

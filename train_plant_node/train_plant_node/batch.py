@@ -1,16 +1,15 @@
 """Many control periods of a :class:`~train_plant_node.simulation.TrainSimulation` at once:
-``run_commands`` holds each row of a table of commands for one period, compiled where it can
-be (``periods.py``), period by period through the simulation's interface elsewhere, with the
-same result to the last bit. For open-loop runs: commands from a file, identification, Monte
-Carlo.
+``run_commands`` holds each row of a table of commands for one period, compiled where it can be
+(``periods.py``), period by period through the simulation's interface elsewhere, with the same
+result to the last bit. For open-loop runs: commands from a file, identification, Monte Carlo.
 
-The compiled path applies where ``advance`` would take its one-step path with nothing
-switching: instant actuators, constant surroundings (no modes, no abrupt change), no failure
-active, one integration step per period, no safety function acting, no dwell, and the ATP's
-odometry exact (an exact odometer whose sensors work and a zero declared accuracy: its
-estimate is the truth, as the kernels take it). Everything else (a scheduled time, a failure,
-a period in which a car of the multi-car model crosses a line boundary, an intervention, a
-stop) runs period by period.
+The compiled path applies where ``advance`` would take its one-step path with nothing switching:
+instant actuators, constant surroundings (no modes, no abrupt change), no failure active, one
+integration step per period, no safety function acting, no dwell, and the ATP's odometer exact
+and working (the odometry's estimate is the truth, its interval the declared accuracy since the
+last balise group, as the kernels take it). Everything else (a scheduled time, a failure, a
+period in which a car of the multi-car model crosses a line boundary, an intervention, a stop)
+runs period by period.
 """
 
 from __future__ import annotations
@@ -150,6 +149,12 @@ def packed_supervision(run: RunSupervision) -> tuple:
             np.array(ceilings, dtype=float))
 
 
+@lru_cache(maxsize=8)
+def groups_array(groups: tuple[float, ...]) -> np.ndarray:
+    """A run's balise groups ahead of its start as the kernels take them."""
+    return np.array(groups, dtype=float)
+
+
 def run_compiled(sim, forces: np.ndarray, period_ns: int, out: list[np.ndarray],
                  interventions: np.ndarray) -> int:
     """Up to ``len(forces)`` periods in ``periods``' kernel; returns how many ran."""
@@ -157,20 +162,24 @@ def run_compiled(sim, forces: np.ndarray, period_ns: int, out: list[np.ndarray],
     atp = sim.atp
     offsets, positions, speeds, starts, ceilings = packed_supervision(sim.supervision)
     low, high = sim.supervision.stop_zone(atp.leg)
+    odometry = sim.odometry
+    accuracy = ((0.0, 0.0, 0.0, 0.0) if odometry.exact_accuracy else
+                (odometry.location_accuracy_m, odometry.odometry_accuracy,
+                 odometry.speed_accuracy_mps, odometry.speed_accuracy_share))
     tables = (np.int64(atp.leg), low, high, sim.supervision.STANDSTILL_MPS, offsets, positions,
-              speeds, atp.acceleration_mps2, starts, ceilings)
+              speeds, atp.acceleration_mps2, starts, ceilings, *accuracy,
+              groups_array(odometry.groups_ahead_m))
     traction = sim.scenario.train.traction
     state = np.array(sim.state, dtype=float)
     done, intervention, began, previous = period_kernel(sim.model)(
         state, sim.stamp_ns, period_ns, forces,
         (traction.max_traction_force_n, traction.max_traction_power_w,
          traction.max_emergency_brake_force_n), tables, atp.previous_speed_mps,
-        atp.emergency_brake, *out, interventions,
+        atp.emergency_brake, odometry.fix_m, np.int64(odometry.passed), *out, interventions,
         sim.model.kernel_inputs(sim.surroundings(), period_ns / NS_PER_S))
     if done:
         sim.state = state
         sim.stamp_ns += period_ns * done
-        odometry = sim.odometry
         odometry.exact(float(state[0]), sim.model.lead_speed(state))
         atp.previous_speed_mps = previous
         if began:

@@ -189,13 +189,15 @@ class TrainPlantNode(RunNodeHooks, Node):
             0.02 if self.lockstep else 1.0 / p['real_time_rate_hz'], self.on_timer)
         if not (self.sim.sensors.exact_odometer or self.scenario.line.balise_groups_m):
             self.get_logger().warning(
-                'the odometer errs (plant.sensors) and the line declares no balise groups: the '
-                "ATP's odometry cannot relocate, so an odometer error beyond its declared "
-                'interval goes unseen by the supervision (declare line.balise_groups)')
+                'the odometer errs (plant.sensors) and the line has no balise groups '
+                "(balise_groups: []): the ATP's odometry cannot relocate, so an odometer error "
+                'beyond its declared interval goes unseen by the supervision')
+        groups = self.scenario.line.balise_groups_m
         self.get_logger().info(
             f"scenario {self.scenario.name} ({self.scenario.origin}), model {p['model']}, "
             f"{'lockstep at ' + format(rate, 'g') + ' Hz' if self.lockstep else 'real time'}, "
-            f'actuators {list(self.sim.actuator_names)}'
+            f'actuators {list(self.sim.actuator_names)}, {len(groups)} balise groups'
+            + (f' ({groups[0]:.0f} to {groups[-1]:.0f} m)' if groups else '')
             + (f", the truth of the draw {p['draw_values']}" if drawn is not None else ''))
         freeze_startup_objects()
 

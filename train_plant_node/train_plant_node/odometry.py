@@ -22,13 +22,15 @@ declared odometry accuracy (:class:`ato_common.braking_curves.SupervisionSetting
   (and widens the speed's accuracy by what the train can gain in a cycle); without a count it
   integrates its speed; without both it is lost (``valid`` False) and the ATP brakes.
 
-With an exact odometer and a zero declared accuracy, the estimate is the truth to the last bit
-(the compiled periods of ``periods.py`` take it so).
+With an exact odometer the estimate is the truth to the last bit, its interval the declared
+accuracy since the last balise group passed (``exact``: the compiled periods of ``periods.py``
+compute the same in the same operations).
 """
 
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
 from typing import Sequence
 
 from ato_common.braking_curves import SupervisionSettings
@@ -41,10 +43,11 @@ class Odometry:
     """The odometry of one run (module docstring). ``count_m`` and ``speed_mps``: the
     odometer's first reading (the start of mission); ``standstill_mps``: the speed up to which
     the train stands; ``acceleration_mps2``: the most the train can gain per second (a failed
-    speed channel's accuracy)."""
+    speed channel's accuracy); ``balise_groups_m``: the line's declared balise groups."""
 
     def __init__(self, settings: SupervisionSettings, count_m: float, speed_mps: float,
-                 standstill_mps: float, acceleration_mps2: float):
+                 standstill_mps: float, acceleration_mps2: float,
+                 balise_groups_m: Sequence[float] = ()):
         self.location_accuracy_m = settings.location_accuracy_m
         self.odometry_accuracy = settings.odometry_accuracy
         self.speed_accuracy_mps = settings.speed_accuracy_mps
@@ -60,6 +63,9 @@ class Odometry:
         self.relocations = 0
         self.outside_interval = 0  # balise groups found outside the confidence interval
         self.last_discrepancy_m = 0.0
+        # the balise groups ahead of the start, and how many of them the train has passed
+        self.groups_ahead_m = tuple(x for x in balise_groups_m if x > count_m)
+        self._passed = 0
         self._count = count_m
         self._raw_speed = speed_mps if math.isfinite(speed_mps) else 0.0
         self.position_m = self.min_safe_front_m = self.max_safe_front_m = count_m
@@ -68,13 +74,42 @@ class Odometry:
         self.valid = True
 
     def exact(self, position_m: float, speed_mps: float) -> None:
-        """This cycle's reading of an exact odometer with a zero declared accuracy: the
-        estimate is the reading itself (what ``update`` gives then, without its arithmetic)."""
-        self.position_m = self.min_safe_front_m = self.max_safe_front_m = position_m
-        self.speed_mps = self.max_speed_mps = speed_mps
+        """This cycle's reading of an exact odometer: the estimate is the reading itself, the
+        interval the declared accuracy since the last balise group passed, found from the
+        line's groups (what ``update`` gives then, without its arithmetic: a relocation at a
+        group the count places exactly finds no discrepancy and keeps the scale at 1)."""
+        self.position_m, self.speed_mps = position_m, speed_mps
         self._count, self._raw_speed = position_m, speed_mps
         self.standstill = abs(speed_mps) <= self.standstill_mps
         self.valid = True
+        if self.exact_accuracy:
+            self.min_safe_front_m = self.max_safe_front_m = position_m
+            self.max_speed_mps = speed_mps
+            return
+        groups = self.groups_ahead_m
+        passed = bisect_right(groups, position_m)
+        if passed > self._passed:
+            self.relocations += passed - self._passed
+            self._passed = passed
+            self.lrbg_m = groups[passed - 1]
+            self._fix = (self.lrbg_m, self.lrbg_m)
+            self.last_discrepancy_m = 0.0
+        half = self.location_accuracy_m + self.odometry_accuracy * abs(position_m - self._fix[1])
+        self.min_safe_front_m = position_m - half
+        self.max_safe_front_m = position_m + half
+        accuracy = (self.speed_accuracy_mps + self.speed_accuracy_share * abs(speed_mps)
+                    if speed_mps != 0.0 else 0.0)
+        self.max_speed_mps = speed_mps + accuracy
+
+    @property
+    def fix_m(self) -> float:
+        """The count the estimate is counted from (the last balise group's, or the start's)."""
+        return self._fix[1]
+
+    @property
+    def passed(self) -> int:
+        """How many of the balise groups ahead of the start the train has passed."""
+        return self._passed
 
     def update(self, period_s: float, count_m: float, speed_mps: float,
                passed: Sequence[tuple[float, float]] = ()) -> None:
@@ -111,6 +146,7 @@ class Odometry:
         self._fix = (position_m, count_m)
         self.lrbg_m = position_m
         self.relocations += 1
+        self._passed = max(self._passed, bisect_right(self.groups_ahead_m, position_m))
 
     def _position(self, count_m: float) -> float:
         """The estimated front end for a count: from the fix, the distance counted since it

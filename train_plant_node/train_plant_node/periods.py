@@ -6,10 +6,11 @@ several microseconds of Python around a compiled physics step of one or two (the
 limits, the ATP's check, the state snapshot), so a plant driven from Python cannot run much
 faster than 10,000x real time at 10 Hz. These kernels do the same work per period in compiled
 code: the actuator limits (``Actuators.targets``), the integration (the models' step kernels),
-the ATP's anticipated check (``OnboardATP.over_speed`` with ``SampledLimit`` look-ups, on an
-exact odometry) and the truth (the models' ``outputs``), in the same floating-point operations
-in the same order, so that both paths give the same numbers to the last bit (the tests check
-this). The simulation uses them only where that holds (``batch.compiled_periods``).
+the ATP's anticipated check (``OnboardATP.over_speed`` with ``SampledLimit`` look-ups, on the
+odometry of an exact odometer with its declared interval, ``Odometry.exact``) and the truth (the
+models' ``outputs``), in the same floating-point operations in the same order, so that both
+paths give the same numbers to the last bit (the tests check this). The simulation uses them
+only where that holds (``batch.compiled_periods``).
 """
 
 from __future__ import annotations
@@ -106,47 +107,66 @@ def actuator_targets(out, commanded, speed, intervention, max_force_n, max_power
 
 
 @kernel
-def supervise(atp, position, speed, previous_speed, period_s, intervention):
-    """``OnboardATP.cycle`` on an exact odometry from a period without an intervention (the
-    kernels stop at the first period of one): ``OnboardATP.over_speed`` in the same
-    operations. Returns (intervention after this period, 1 if one began)."""
-    leg, _low, _high, _standstill, offsets, positions, speeds, highest, starts, ceilings = atp
+def exact_odometry(atp, position, speed, fix, passed):
+    """``Odometry.exact`` with a declared accuracy: the balise groups passed, the half-width of
+    the confidence interval and the speed's upper end. Returns (half-width, upper speed, the
+    last group passed or the start, how many groups passed)."""
+    location, odometry, speed_m, speed_share, groups = atp[10], atp[11], atp[12], atp[13], atp[14]
+    i = np.searchsorted(groups, position, side='right')
+    if i > passed:
+        passed = i
+        fix = groups[i - 1]
+    half = location + odometry * abs(position - fix)
+    accuracy = speed_m + speed_share * abs(speed) if speed != 0.0 else 0.0
+    return half, speed + accuracy, fix, passed
+
+
+@kernel
+def supervise(atp, position, speed, previous_speed, period_s, intervention, half, upper):
+    """``OnboardATP.cycle`` on an exact odometry (front ``position`` +/- ``half``, speed
+    ``speed`` up to ``upper``) from a period without an intervention (the kernels stop at the
+    first period of one): ``OnboardATP.over_speed`` in the same operations. Returns
+    (intervention after this period, 1 if one began)."""
+    leg, offsets, positions, speeds, highest, starts, ceilings = \
+        atp[0], atp[4], atp[5], atp[6], atp[7], atp[8], atp[9]
     if intervention:
         return intervention, 0
     measured = (speed - previous_speed) / period_s
     a = max(highest, min(measured, ACCELERATION_CAP_MPS2))
-    ahead = position + speed * period_s + 0.5 * a * period_s * period_s
+    ahead = (position + half) + upper * period_s + 0.5 * a * period_s * period_s
     limit = limit_at(leg, offsets, positions, speeds, ahead)
-    first = np.searchsorted(starts, position, side='right') - 1
+    first = np.searchsorted(starts, position - half, side='right') - 1
     last = np.searchsorted(starts, ahead, side='right') - 1
     if last > first:
         for i in range(max(first, 0), last + 1):
             limit = min(limit, ceilings[i])
-    if speed + a * period_s > limit:
+    if upper + a * period_s > limit:
         return True, 1
     return False, 0
 
 
 @kernel
-def at_stop(atp, position, speed):
-    """``OnboardATP.track_stop``'s zone for the leg: the kernels stop there (the dwell is
-    counted period by period)."""
-    _leg, low, high, standstill = atp[0], atp[1], atp[2], atp[3]
-    return abs(speed) <= standstill and low <= position <= high
+def at_stop(atp, position, speed, half):
+    """``OnboardATP.track_stop``'s zone for the leg, with the confidence interval: the kernels
+    stop there (the dwell is counted period by period)."""
+    low, high, standstill = atp[1], atp[2], atp[3]
+    return abs(speed) <= standstill and position + half >= low and position - half <= high
 
 
 # The kernels below share one signature: the state (updated in place), the time, the commands
 # (one row per period), the traction limits (force N, power W, emergency brake N), the ATP's
-# packed tables (``batch.packed_supervision``), the speed the ATP saw at its last cycle, its
-# intervention state, the truth per period (positions, speeds, accelerations, forces: one
+# packed tables (``batch.packed_supervision``) and its odometry's declared accuracy and balise
+# groups ahead (``batch.run_compiled``), the speed the ATP saw at its last cycle, its
+# intervention state, the odometry's last balise group (or start) and how many it passed, the
+# truth per period (positions, speeds, accelerations, forces: one
 # column per car; the ATP's state), and the model's own inputs (``kernel_inputs`` of the
 # model). They return how many periods they ran (fewer than asked where the interface would
 # have split a step), the intervention state, how many began and the ATP's last speed.
 
 @kernel
 def run_point_mass_periods(state, stamp_ns, period_ns, commands, traction, atp, previous,
-                           intervention, out_positions, out_speeds, out_accelerations,
-                           out_forces, out_intervention, model):
+                           intervention, fix, passed, out_positions, out_speeds,
+                           out_accelerations, out_forces, out_intervention, model):
     p, table, work, max_substep_s = model
     max_force_n, max_power_w, emergency_brake_n = traction
     count = commands.shape[1]
@@ -163,7 +183,9 @@ def run_point_mass_periods(state, stamp_ns, period_ns, commands, traction, atp, 
         position, speed = step_kernel(p, table, work, position, speed, time_s, duration_s,
                                       max_substep_s, exact_sum(forces, count, scratch))
         stamp_ns += period_ns
-        intervention, new = supervise(atp, position, speed, previous, duration_s, intervention)
+        half, upper, fix, passed = exact_odometry(atp, position, speed, fix, passed)
+        intervention, new = supervise(atp, position, speed, previous, duration_s, intervention,
+                                      half, upper)
         previous = speed
         began += new
         # The truth holds the forces for the new state: the ATP's decision, the same command.
@@ -176,7 +198,7 @@ def run_point_mass_periods(state, stamp_ns, period_ns, commands, traction, atp, 
                                                       stamp_ns / 1_000_000_000)
         out_forces[k, 0] = force
         out_intervention[k] = intervention
-        if intervention or at_stop(atp, position, speed):
+        if intervention or at_stop(atp, position, speed, half):
             state[0], state[1] = position, speed
             return k + 1, intervention, began, previous
     state[0], state[1] = position, speed
@@ -185,8 +207,8 @@ def run_point_mass_periods(state, stamp_ns, period_ns, commands, traction, atp, 
 
 @kernel
 def run_multi_car_periods(state, stamp_ns, period_ns, commands, traction, atp, previous,
-                          intervention, out_positions, out_speeds, out_accelerations,
-                          out_forces, out_intervention, model):
+                          intervention, fix, passed, out_positions, out_speeds,
+                          out_accelerations, out_forces, out_intervention, model):
     """``MultiCarModel.step`` when it takes one ETDRK4 step: it stops before a period in which
     a car reaches another line segment (the interface splits that step at the boundary)."""
     props, table, cars, p, linear = model
@@ -212,8 +234,9 @@ def run_multi_car_periods(state, stamp_ns, period_ns, commands, traction, atp, p
             return k, intervention, began, previous  # the interface would add a sliver
         state[:] = moved
         stamp_ns += period_ns
+        half, upper, fix, passed = exact_odometry(atp, state[0], state[n], fix, passed)
         intervention, new = supervise(atp, state[0], state[n], previous, duration_s,
-                                      intervention)
+                                      intervention, half, upper)
         previous = state[n]
         began += new
         actuator_targets(forces, row, state[n], intervention, max_force_n, max_power_w,
@@ -226,7 +249,7 @@ def run_multi_car_periods(state, stamp_ns, period_ns, commands, traction, atp, p
             actuator = int(cars[CAR_ACTUATOR, q])
             out_forces[k, q] = forces[actuator] if actuator >= 0 else 0.0
         out_intervention[k] = intervention
-        if intervention or at_stop(atp, state[0], state[n]):
+        if intervention or at_stop(atp, state[0], state[n], half):
             return k + 1, intervention, began, previous
     return commands.shape[0], intervention, began, previous
 

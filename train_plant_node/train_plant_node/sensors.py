@@ -4,14 +4,18 @@ the ATO (``measured``) and the ATP's odometry (``odometer``) get.
 
 One odometer (a wheel sensor) gives both the distance and the speed:
 
-- speed: (1 + s_v) v + b_v while the train moves (``speed.scale_error`` s_v, ``speed.bias``
-  b_v); a wheel that does not turn reads no speed, so 0 at standstill;
+- speed: (1 + s_v) v + b_v (``speed.scale_error`` s_v, ``speed.bias`` b_v), the bias acting in
+  full from 30 km/h and in proportion to the speed below
+  (:func:`ato_common.plant_setup.speed_reading`): the reading has the sign of the speed and is
+  0 only at true standstill (a wheel that does not turn gives no pulse);
 - distance: (1 + s_x) times the distance run (``position.scale_error`` s_x), plus the
-  integral of the speed's bias (the odometer integrates what it measures: b_v times the time the
-  train moved); the position the ATO reads is that distance since the odometer's last reset
-  point r (the run's initial position, the position sensor's ``reset_positions_m`` or a balise
-  group of the line), plus r and the position's ``bias`` b_x:
-  x + s_x (x - r) + b_v T_moving(since r) + b_x;
+  integral of the speed's bias (the odometer integrates what it measures); the position the
+  ATO reads is that distance since the odometer's last reset point r (the run's initial
+  position, the position sensor's ``reset_positions_m`` or a balise group of the line), plus
+  r, plus the position's ``bias`` b_x until the first reset point (b_x is the error of the
+  position the train starts its mission with: the first balise group corrects it, as it
+  corrects the odometry's):
+  x + s_x (x - r) + integral of the bias since r (+ b_x before the first r);
 - then white noise and quantisation, NaN when dropped out or failed (the ATO's reading only).
 
 The ATP's odometry gets the odometer's count (``odometer``): the position it reads, without
@@ -30,7 +34,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ato_common.plant_setup import QuantitySensor, SensorSetup
+from ato_common.plant_setup import SPEED_BIAS_FULL_MPS, QuantitySensor, SensorSetup, speed_reading
 from ato_common.types import TrainState
 
 
@@ -82,7 +86,9 @@ class Sensors:
         # The odometer's sensors fail at some time of the run (``odometer_failed``).
         self.may_fail = not (math.isinf(position.failed_from_s)
                              and math.isinf(speed.failed_from_s))
-        self.moving_s = 0.0             # how long the train has moved (the speed bias's time)
+        # the time the speed's bias has acted in full so far, s: a period's time, or less
+        # below SPEED_BIAS_FULL_MPS (the bias's integral over the time moved, over the bias)
+        self.moving_s = 0.0
         self._moving_at: dict[float, float] = {start_m: 0.0}  # reset point -> moving_s there
         self._last_m = start_m
 
@@ -96,14 +102,14 @@ class Sensors:
         if position_m == last:
             return []
         before = self.moving_s
-        self.moving_s = before + period_s
+        self.moving_s = before + min(period_s, abs(position_m - last) / SPEED_BIAS_FULL_MPS)
         points = self.resets_m
         if not points:
             return []
         first, end = bisect_right(points, last), bisect_right(points, position_m)
         passed = []
         for point in points[first:end]:
-            moving = before + period_s * (point - last) / (position_m - last)
+            moving = before + (self.moving_s - before) * (point - last) / (position_m - last)
             self._moving_at[point] = moving
             if point in self._balise_groups:
                 passed.append((point, point + self._error(point, self.sensor_resets_m, moving)))
@@ -111,12 +117,12 @@ class Sensors:
 
     # --- what the sensors report ---------------------------------------------------------------
     def _error(self, position_m: float, resets: tuple[float, ...], moving_s: float) -> float:
-        """A reading less the truth at a position, before noise: the bias, the scale error
-        since the last of ``resets`` behind the position (or the start) and the speed's bias
-        integrated over the time moved since the train passed it."""
+        """A reading less the truth at a position, before noise: the start's bias until the
+        first of ``resets``, the scale error since the last of them behind the position (or the
+        start) and the speed's bias integrated since the train passed it."""
         s = self.setup
-        error = s.position.bias
         reset = self.reset_point(position_m, resets)
+        error = s.position.bias if self._from_start(position_m, resets) else 0.0
         if s.position.scale_error:
             error += s.position.scale_error * max(position_m - reset, 0.0)
         if s.speed.bias:
@@ -134,13 +140,19 @@ class Sensors:
             count, speed = position_m, speed_mps
         else:
             count = position_m + self._error(position_m, self.sensor_resets_m, self.moving_s)
-            speed = (1.0 + s.speed.scale_error) * speed_mps + s.speed.bias \
+            speed = speed_reading(s.speed, speed_mps) \
                 if abs(speed_mps) > self.resolution_mps else 0.0
         if s.position.failed(time_s, self.lead):
             count = math.nan
         if s.speed.failed(time_s, self.lead):
             speed = math.nan
         return count, speed
+
+    def _from_start(self, position_m: float, resets: tuple[float, ...]) -> bool:
+        """No reset point at or behind a position lies at or ahead of the run's start: the
+        reading still counts from the start of mission."""
+        i = bisect_right(resets, position_m)
+        return i == 0 or resets[i - 1] < self.start_m
 
     def odometer_failed(self, time_s: float) -> bool:
         """The lead car's position or speed sensor has failed at ``time_s``."""
@@ -157,9 +169,10 @@ class Sensors:
         return max(self.start_m, resets[i - 1] if i else -math.inf)
 
     def position_error(self, position_m: float) -> float:
-        """The ATO's position reading less the truth at a position, m, before noise: the bias,
-        the scale error since the last reset point and the speed's bias integrated since the
-        train passed it (module docstring)."""
+        """The ATO's position reading less the truth at a position, m, before noise: the
+        start's bias until the first reset point or balise group, the scale error since the
+        last one and the speed's bias integrated since the train passed it (module
+        docstring)."""
         return self._error(position_m, self.resets_m, self.moving_s)
 
     def measured(self, truth: TrainState, time_s: float) -> TrainState:
@@ -170,14 +183,12 @@ class Sensors:
         cars = truth.car_names
         positions: Sequence[float] = truth.positions
         if not self._exact_position:
-            bias = s.position.bias
-            positions = [x + (self.position_error(x) - bias) for x in positions]
+            positions = [x + self.position_error(x) for x in positions]
         speeds: Sequence[float] = truth.speeds
         if s.speed.scale_error or s.speed.bias:
-            speeds = [(1.0 + s.speed.scale_error) * v + (s.speed.bias if v != 0.0 else 0.0)
-                      for v in speeds]
+            speeds = [speed_reading(s.speed, v) for v in speeds]
         return TrainState(truth.stamp_ns, cars,
-                          self._read(positions, s.position, cars, time_s),
+                          self._read(positions, s.position, cars, time_s, biased=False),
                           self._read(speeds, s.speed, cars, time_s, biased=False),
                           self._read(self._scaled(truth.accelerations, s.acceleration),
                                      s.acceleration, cars, time_s), truth.forces)

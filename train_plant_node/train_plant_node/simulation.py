@@ -91,8 +91,8 @@ def onboard_units(scenario: Scenario, run: RunSupervision, model: PlantModel, mo
                   state, sensors: SensorSettings | None
                   ) -> tuple[Sensors, Odometry, OnboardATP, bool]:
     """The sensors (truth side), and the EVC's odometry and ATP (knowledge side) of a run from
-    ``state``; and whether the odometry is exact (an exact odometer and a zero declared
-    accuracy: while its sensors work, its estimate is the truth, cheaply)."""
+    ``state``; and whether the odometer is exact (while its sensors work, the odometry's
+    estimate is the truth and its interval the declared accuracy, cheaply: ``Odometry.exact``)."""
     setup = merged_sensors(scenario.plant.sensors, sensors)
     setup.check_cars(model.car_names, model_name)
     start, speed = float(state[0]), model.lead_speed(state)
@@ -100,11 +100,12 @@ def onboard_units(scenario: Scenario, run: RunSupervision, model: PlantModel, mo
                     run.STANDSTILL_MPS)
     acceleration = highest_acceleration(scenario.supervision, scenario.line)
     count, reading = units.odometer(0.0, start, speed)
-    odometry = Odometry(scenario.supervision, count, reading, run.STANDSTILL_MPS, acceleration)
+    odometry = Odometry(scenario.supervision, count, reading, run.STANDSTILL_MPS, acceleration,
+                        scenario.line.balise_groups_m)
     if start in units.balise_groups_m:  # the train stands on a balise group at its start
         odometry.update(0.0, count, reading, [(start, count)])
     atp = OnboardATP(run, acceleration, odometry.speed_mps)
-    return units, odometry, atp, units.exact_odometer and odometry.exact_accuracy
+    return units, odometry, atp, units.exact_odometer
 
 
 class TrainSimulation:
@@ -305,7 +306,10 @@ class TrainSimulation:
         odometry, sensors = self.odometry, self.sensors
         if self._exact_odometry and not (sensors.may_fail and sensors.odometer_failed(
                 self.stamp_ns / NS_PER_S)):
-            odometry.exact(float(self.state[0]), self.model.lead_speed(self.state))
+            position = float(self.state[0])
+            if sensors.may_fail:  # where the train is, should the odometer fail later
+                sensors.follow(position, period_s)
+            odometry.exact(position, self.model.lead_speed(self.state))
         else:
             position, speed = float(self.state[0]), self.model.lead_speed(self.state)
             passed = self.sensors.follow(position, period_s)
