@@ -360,6 +360,7 @@ class EcoProfile:
         self.forced = forced or {}   # region start -> excursion start, instead of the best
         self.h2 = [min(v, c) ** 2 / 2.0 for v, c in zip(holds, grid.ceiling)] + [0.0]
         self.slowing = [0.0] * grid.n
+        self.coast_most = [math.inf] * grid.n    # the highest coasting acceleration: -slowing
         # each interval's stretch (first interval, end node): where its hold speed holds
         self.stretch: list[tuple[int, int]] = []
         first = 0
@@ -388,7 +389,7 @@ class EcoProfile:
                 slowing = self._slowing(i, e)
                 slowed = e[i] - slowing * grid.dx[i]
                 if slowed < coast:
-                    self.slowing[i] = slowing
+                    self.slowing[i], self.coast_most[i] = slowing, -slowing
                 e1, mode = max(min(coast, slowed), hold), COAST   # down to h
             elif e[i] >= hold - 1e-9 and grid.capability(v, i) >= 0.0:
                 e1, mode = hold, HOLD
@@ -436,7 +437,7 @@ class EcoProfile:
         grid, ref, envelope, ref_modes = self.grid, self.ref_e, self.grid.envelope, \
             self.ref_modes
         n, price, cap, dxs, ws, tops = grid.n, self.price, self.cap, grid.dx, grid.w, grid.top
-        slowing = self.slowing
+        coast_most = self.coast_most
         ra, rb, rc, eta, regen, capability = grid.ra, grid.rb, grid.rc, grid.eta, \
             grid.regen_power, grid.capability
         sqrt = math.sqrt
@@ -460,9 +461,8 @@ class EcoProfile:
                 else:
                     middle = e - 0.5 * (ra + rb * v + 2.0 * rc * e + ws[i]) * dx
                     middle = middle if middle > 0.0 else 0.0
-                    a = -(ra + rb * sqrt(2.0 * middle) + 2.0 * rc * middle + ws[i])
-                    if slowing[i] > 0.0 and a > -slowing[i]:
-                        a = -slowing[i]
+                    a = min(-(ra + rb * sqrt(2.0 * middle) + 2.0 * rc * middle + ws[i]),
+                            coast_most[i])
                     top = tops[i] if release is not None and i >= release \
                         else min(tops[i], cap[i])
                 e1 = e + a * dx
