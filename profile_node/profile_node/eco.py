@@ -21,8 +21,7 @@ and leaves it only where the structure requires it:
 
 * from a standstill, after a ceiling rises: full traction up to h (until the braking envelope);
 * before a lower ceiling or the stop: a coast, then braking along the braking envelope (the
-  backward braking curve of the ceilings at d(x)); a coast below a lower ceiling at its start
-  runs on where the reference brakes again before any traction (successive drops);
+  backward braking curve of the ceilings at d(x));
 * above h (a stretch after a passing window with a lower hold speed): a coast down to h, in
   such a stretch at least at the deceleration that reaches h at its end (it must lose time);
 * before and over a steep descent (where coasting at h speeds the train up): a coast, the
@@ -408,12 +407,6 @@ class EcoProfile:
             energy, time = grid.cost(i, e[i], e1)
             cost[i + 1] = cost[i] + energy + price[i] * time
         self.ref_e, self.ref_modes, self.ref_cost = e, modes, cost
-        # whether the reference brakes again from node i before any full traction (a lower
-        # ceiling followed by a still lower one, or the stop)
-        self.brakes_next = [False] * (n + 1)
-        for k in range(n - 1, -1, -1):
-            self.brakes_next[k] = modes[k] == BRAKE or (modes[k] != POWER
-                                                        and self.brakes_next[k + 1])
 
     def _slowing(self, i: int, e: list[float]) -> float:
         """In a stretch after a passing window (a hold speed of its own) entered above its
@@ -497,7 +490,7 @@ class EcoProfile:
                 mode = BRAKE
                 continue
             if mode == COAST and ref_modes[i - 1] == BRAKE and e < ref[i] - 1e-9 \
-                    and i < n and ref_modes[i] != BRAKE and not self.brakes_next[i]:
+                    and i < n and ref_modes[i] != BRAKE:
                 return math.inf, n    # below a lower ceiling at its start: too slow
             if i < region_end:
                 continue
