@@ -39,30 +39,11 @@ def scenario_for(line: str, train: str, supplement: float, objective: str):
         'timetable': {'strategy': 'timetable', 'supplement_percent': supplement}})
 
 
-# Known: the heavy train on the steep climb, regenerating nothing, spends 3.2 % more than the
-# oracle (the plan 0.5 %): the plan coasts from its hold speed before the crest, still on the
-# climb, and the PID law, whose integral term holds the climb's force, lets the speed lag the
-# coast's sudden deceleration and then brakes to catch up (3 kWh of braking on the climb).
-PID_LAG_AT_A_COAST_ON_A_CLIMB = pytest.mark.xfail(
-    strict=True, reason='the PID law brakes after lagging a coast that starts on a climb')
-# Known: the heavy train on the descent, regenerating at its efficiency, spends 3.1 % more net
-# energy than the oracle, which no longer rounds its braking down to its grid
-# (profile_node/oracle.py): the plan itself is 1.6 % over the optimum there (the planner's own
-# gap on a descent) and the PID law adds the rest.
-PLAN_GAP_ON_A_DESCENT = pytest.mark.xfail(
-    strict=True, reason='the plan is 1.6 % over the optimum on the descent and the PID adds '
-    'about 1.5 %')
-KNOWN = {('steep_climb', 'CH_Stadler_KISS_SBB', 'gross'): PID_LAG_AT_A_COAST_ON_A_CLIMB,
-         ('descent', 'CH_Stadler_KISS_SBB', 'net'): PLAN_GAP_ON_A_DESCENT}
-
-
 def cases():
     for line in sorted(LINES['lines']):
         for train in TRAINS:
             for objective, supplement in CASES:
-                known = KNOWN.get((line, train, objective))
-                yield pytest.param(line, train, objective, supplement,
-                                   marks=[known] if known else [])
+                yield pytest.param(line, train, objective, supplement)
 
 
 @pytest.mark.filterwarnings('ignore::ato_common.validation.DataWarning')

@@ -110,15 +110,8 @@ def journey_for(track_path: Path, train_path: Path, tmp_path: Path) -> Path:
     return path
 
 
-# Known (issue 30, not fixed): on the short first leg of Stadelhofen-Altstetten, a passing window
-# splits the leg and the stretch after it cannot slow below the speed it passes at (the
-# least-energy profile only coasts down to a lower hold speed), so the plan arrives 10 s before
-# the arrival window opens.
-PASSING_SPLIT_CANNOT_SLOW = pytest.mark.xfail(
-    strict=True, reason='a stretch after a passing window cannot slow below its passing speed')
 JOURNEYS = [('CH_Fribourg_Bern', 'CH_Stadler_FLIRT_TPF'),
-            pytest.param('CH_Stadelhofen_Altstetten', 'CH_Stadler_KISS_SBB',
-                         marks=PASSING_SPLIT_CANNOT_SLOW),
+            ('CH_Stadelhofen_Altstetten', 'CH_Stadler_KISS_SBB'),
             ('CN_Songjiazhuang_Yizhuang', 'CN_Beijing_Subway')]
 
 

@@ -22,9 +22,12 @@ and leaves it only where the structure requires it:
 * from a standstill, after a ceiling rises: full traction up to h (until the braking envelope);
 * before a lower ceiling or the stop: a coast, then braking along the braking envelope (the
   backward braking curve of the ceilings at d(x));
+* above h (a stretch after a passing window with a lower hold speed): a coast down to h, in
+  such a stretch at least at the deceleration that reaches h at its end (it must lose time);
 * before and over a steep descent (where coasting at h speeds the train up): a coast, the
   speed falling below h before it and rising above h on it (up to the ceiling, held there with
-  the brake), rejoining h after it (or the braking envelope);
+  the brake, released where it is cheapest before the descent's end), rejoining h after it
+  (or the braking envelope);
 * before and over a steep climb (where full traction cannot hold h): full traction, the speed
   rising above h before it (up to the ceiling) and falling on it, rejoining h after it.
 
@@ -170,6 +173,11 @@ class Profile:
     modes: list[str]
     time_s: float
     choices: dict[int, int] = field(default_factory=dict)  # excursion region start -> start
+    # (first, last) intervals of each coast released from its braking hold (``EcoProfile``)
+    released: list[tuple[int, int]] = field(default_factory=list)
+    # per interval: the deceleration a stretch after a passing window slows down at, at least
+    # (``EcoProfile._slowing``; 0 elsewhere), m/s^2
+    slowing: list[float] = field(default_factory=list)
 
 
 class LegGrid:
@@ -351,6 +359,15 @@ class EcoProfile:
         self.grid, self.price = grid, prices
         self.forced = forced or {}   # region start -> excursion start, instead of the best
         self.h2 = [min(v, c) ** 2 / 2.0 for v, c in zip(holds, grid.ceiling)] + [0.0]
+        self.slowing = [0.0] * grid.n
+        self.coast_most = [math.inf] * grid.n    # the highest coasting acceleration: -slowing
+        # each interval's stretch (first interval, end node): where its hold speed holds
+        self.stretch: list[tuple[int, int]] = []
+        first = 0
+        for i in range(grid.n + 1):
+            if i == grid.n or (i > 0 and holds[i] != holds[i - 1]):
+                self.stretch.extend([(first, i)] * (i - first))
+                first = i
         self.cap = [c * c / 2.0 for c in caps]
         self.e0 = start_mps * start_mps / 2.0
         self._reference()
@@ -368,7 +385,12 @@ class EcoProfile:
             hold = h2[i]
             v = math.sqrt(2.0 * hold)
             if e[i] > hold + 1e-9:
-                e1, mode = max(grid.step(COAST, i, e[i]), hold), COAST   # down to h
+                coast = grid.step(COAST, i, e[i])
+                slowing = self._slowing(i, e)
+                slowed = e[i] - slowing * grid.dx[i]
+                if slowed < coast:
+                    self.slowing[i], self.coast_most[i] = slowing, -slowing
+                e1, mode = max(min(coast, slowed), hold), COAST   # down to h
             elif e[i] >= hold - 1e-9 and grid.capability(v, i) >= 0.0:
                 e1, mode = hold, HOLD
                 if grid.ra + grid.rb * v + 2.0 * grid.rc * hold + grid.w[i] < 0.0:
@@ -386,19 +408,36 @@ class EcoProfile:
             cost[i + 1] = cost[i] + energy + price[i] * time
         self.ref_e, self.ref_modes, self.ref_cost = e, modes, cost
 
+    def _slowing(self, i: int, e: list[float]) -> float:
+        """In a stretch after a passing window (a hold speed of its own) entered above its
+        hold line: the deceleration that brings the speed from its entry to the hold line
+        over the stretch (at most the planning deceleration), where a coast would not: a
+        stretch that must lose time after passing its point fast (a coast comes down to a
+        lower hold speed only slowly). 0 in the first stretch; continuous in the hold speed,
+        so the running time is."""
+        grid = self.grid
+        first, last = self.stretch[i]
+        if first == 0:
+            return 0.0
+        need = (e[first] - self.h2[i]) / (grid.xs[last] - grid.xs[first])
+        return min(max(need, 0.0), grid.decel[i])
+
     # --- excursions ---------------------------------------------------------------------
 
-    def run(self, i: int, e: float, mode: str, region_end: int, record=None
-            ) -> tuple[float, int]:
+    def run(self, i: int, e: float, mode: str, region_end: int, record=None,
+            release: int | None = None) -> tuple[float, int]:
         """Cost and end node of an excursion from node i at e in ``mode`` (POWER or COAST)
         until it rejoins the reference after ``region_end``, braking along the envelope where
         it meets it (after which, below the reference, full traction takes it back); inf if
         it stalls or comes below a lower ceiling at its start. ``record``: (mode, e, cost so
-        far) of each node appended. (``LegGrid.step`` and ``LegGrid.cost`` written out: the
-        planner's hot loop.)"""
+        far) of each node appended. A coast is held by the brake at the braking-hold speed
+        (``caps``) up to node ``release`` (by default to its end), then coasts above it; a
+        coast slows at least at the stretch's ``slowing``. (``LegGrid.step`` and
+        ``LegGrid.cost`` written out: the planner's hot loop.)"""
         grid, ref, envelope, ref_modes = self.grid, self.ref_e, self.grid.envelope, \
             self.ref_modes
         n, price, cap, dxs, ws, tops = grid.n, self.price, self.cap, grid.dx, grid.w, grid.top
+        coast_most = self.coast_most
         ra, rb, rc, eta, regen, capability = grid.ra, grid.rb, grid.rc, grid.eta, \
             grid.regen_power, grid.capability
         sqrt = math.sqrt
@@ -422,8 +461,10 @@ class EcoProfile:
                 else:
                     middle = e - 0.5 * (ra + rb * v + 2.0 * rc * e + ws[i]) * dx
                     middle = middle if middle > 0.0 else 0.0
-                    a = -(ra + rb * sqrt(2.0 * middle) + 2.0 * rc * middle + ws[i])
-                    top = min(tops[i], cap[i])
+                    a = min(-(ra + rb * sqrt(2.0 * middle) + 2.0 * rc * middle + ws[i]),
+                            coast_most[i])
+                    top = tops[i] if release is not None and i >= release \
+                        else min(tops[i], cap[i])
                 e1 = e + a * dx
                 if e1 > top:
                     e1 = top
@@ -475,21 +516,26 @@ class EcoProfile:
                     ) -> tuple[int, float]:
         """The start node in [low, high] of the excursion of least local cost (a coarse
         scan, then halving steps around the best), and that cost (inf: none is possible)."""
-        memo: dict[int, float] = {}
-
         def cost(p: int) -> float:
-            if p not in memo:
-                after, end = self.run(p, self.ref_e[p], mode, region_end)
-                memo[p] = self.ref_cost[p] + after - self.ref_cost[end]
-            return memo[p]
-        step = max((high - low) // SCAN_POINTS, 1)
-        best = min(range(low, high + 1, step), key=cost)
-        best = min((best, high), key=cost)
-        while step > 1:
-            step //= 2
-            best = min((p for p in (best - step, best, best + step) if low <= p <= high),
-                       key=cost)
-        return best, cost(best)
+            after, end = self.run(p, self.ref_e[p], mode, region_end)
+            return self.ref_cost[p] + after - self.ref_cost[end]
+        return _least(low, high, cost)
+
+    def _best_release(self, p: int, mode: str, region_end: int) -> int | None:
+        """Where a coast from node ``p`` held by the brake at the braking-hold speed leaves
+        it to coast on (above it: before the end of a steep descent, the speed rising to the
+        ceiling at most, which the braking or the coast after it takes): the node in [p,
+        region_end] of least local cost, or None (held to the excursion's end) where none is
+        cheaper or the coast is never held."""
+        caps, tops = self.cap, self.grid.top
+        if mode != COAST or all(caps[k] >= tops[k] for k in range(p, region_end)):
+            return None
+
+        def release_cost(q: int | None) -> float:
+            after, end = self.run(p, self.ref_e[p], mode, region_end, release=q)
+            return after - self.ref_cost[end]
+        q, least = _least(p, region_end, release_cost)
+        return q if least < release_cost(None) - 1e-12 else None
 
     # --- the whole leg --------------------------------------------------------------------
 
@@ -512,6 +558,7 @@ class EcoProfile:
         grid = self.grid
         e, modes = [self.ref_e[0]], []
         choices: dict[int, int] = {}
+        released: list[tuple[int, int]] = []
         i = 0
         while i < grid.n:
             event = self._next_event(i)
@@ -535,12 +582,34 @@ class EcoProfile:
             if not math.isfinite(cost):
                 i = p
                 continue
+            release = self._best_release(p, kind, end)
             record: list = []
-            _, i = self.run(p, self.ref_e[p], kind, end, record)
+            _, i = self.run(p, self.ref_e[p], kind, end, record, release)
+            if release is not None:
+                released.append((release, i))
             e.extend(x for _, x, _ in record)
             modes.extend(m for m, _, _ in record)
         time = sum(grid.cost(k, e[k], e[k + 1])[1] for k in range(grid.n))
-        return Profile(e, modes, time, choices)
+        return Profile(e, modes, time, choices, released, self.slowing)
+
+
+def _least(low: int, high: int, cost: Callable[[int], float]) -> tuple[int, float]:
+    """The node in [low, high] of least ``cost`` (a coarse scan of about ``SCAN_POINTS``,
+    then halving steps around the best), and that cost."""
+    memo: dict[int, float] = {}
+
+    def remembered(p: int) -> float:
+        if p not in memo:
+            memo[p] = cost(p)
+        return memo[p]
+    step = max((high - low) // SCAN_POINTS, 1)
+    best = min(range(low, high + 1, step), key=remembered)
+    best = min((best, high), key=remembered)
+    while step > 1:
+        step //= 2
+        best = min((p for p in (best - step, best, best + step) if low <= p <= high),
+                   key=remembered)
+    return best, remembered(best)
 
 
 # --- the jerk-limited curve that follows a profile ------------------------------------------
@@ -575,8 +644,12 @@ class LegBuilder:
         def power(v: float, x: float) -> float:
             return capability(v, interval(x), force(x))
 
+        self.slowing: list[float] = []   # the profile's (``build``): none yet
+
         def coast(v: float, x: float) -> float:
-            return -(ra + rb * v + rc * v * v + force(x))
+            a = -(ra + rb * v + rc * v * v + force(x))
+            slowing = self.slowing[interval(x)] if self.slowing else 0.0
+            return -slowing if slowing > 0.0 and a > -slowing else a
         self.power, self.coast = power, coast
 
         def ceiling_at(x: float) -> float:
@@ -586,6 +659,7 @@ class LegBuilder:
 
     def build(self, builder: TrajectoryBuilder, profile: Profile) -> None:
         grid, jerk = self.grid, self.jerk
+        self.slowing = profile.slowing
         runs = profile_runs(grid, profile)
         speeds = [math.sqrt(2.0 * max(e, 0.0)) for e in profile.e]
         for r, (mode, a, b) in enumerate(runs):
@@ -611,10 +685,10 @@ class LegBuilder:
                 while extremum > a and (speeds[extremum - 1] <= speeds[extremum]) == rising:
                     extremum -= 1
                 builder.follow(wanted, jerk, speed=speeds[b], position=grid.xs[b] + 1e3,
-                               cap=cap, speed_from=grid.xs[extremum])
+                               cap=cap, speed_from=grid.xs[extremum], ahead=mode == COAST)
             else:
                 builder.follow(wanted, jerk, position=self._switch(mode, following, b, speeds),
-                               cap=cap)
+                               cap=cap, ahead=mode == COAST)
 
     def _switch(self, mode: str, following, b: int, speeds: list[float]) -> float:
         """Where a run ending at node b by position hands over: the ramp of the acceleration
@@ -677,7 +751,8 @@ class LegBuilder:
             if state.x + bound < end_m:
                 return -1.0
             return state.x + self._braking_distance(state.v, state.a, pieces) - end_m
-        builder.follow(wanted, jerk, position=end_m, cap=cap, until=braking_starts)
+        builder.follow(wanted, jerk, position=end_m, cap=cap, until=braking_starts,
+                       ahead=mode == COAST)
 
 
 class EcoLeg:
@@ -717,7 +792,9 @@ class EcoLeg:
         excursions' starts (``Profile.choices``)."""
         profile, caps = self.profile(starts, speeds, forced)
         grid = self.grid
-        builder_caps = caps
+        builder_caps = list(caps)
+        for first, last in profile.released:   # coasting on above the braking-hold speed
+            builder_caps[first:last] = [math.inf] * (last - first)
 
         def braking_hold(x: float) -> float:
             return builder_caps[min(max(bisect_right(grid.xs, x) - 1, 0), grid.n - 1)]

@@ -102,9 +102,12 @@ class TrajectoryBuilder:
 
     def follow(self, wanted, jerk: float, speed: float | None = None,
                position: float | None = None, cap=math.inf,
-               step_s: float = 1.0, speed_from: float = -math.inf, until=None) -> None:
+               step_s: float = 1.0, speed_from: float = -math.inf, until=None,
+               ahead: bool = False) -> None:
         """Follow the acceleration ``wanted(v, x)`` [m/s^2] (the lower of its values at the
-        step's start and at its predicted end) with |jerk| <= ``jerk``, from any acceleration,
+        step's start and at its predicted end: a limit never exceeded; with ``ahead``, its
+        value at the predicted end: an acceleration tracked without a step's lag, as a coast's
+        is) with |jerk| <= ``jerk``, from any acceleration,
         until the speed reaches ``speed`` (exactly, with zero acceleration; from above or
         below) or the position reaches ``position`` (exactly). The speed never exceeds
         ``cap``: it reaches it with zero acceleration and holds it while ``wanted`` is
@@ -142,7 +145,9 @@ class TrajectoryBuilder:
             if top > self.v and self.a > 0.0 and self._ends_at_speed(top, jerk):
                 continue
             predicted = self.v + self.a * step_s
-            want = min(wanted(predicted, self.x + self.v * step_s), wanted(self.v, self.x))
+            want = wanted(predicted, self.x + self.v * step_s)
+            if not ahead:
+                want = min(want, wanted(self.v, self.x))
             j = min(max((want - self.a) / step_s, -jerk), jerk)
             duration = step_s
             if target is not None:

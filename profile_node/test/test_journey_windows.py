@@ -15,6 +15,7 @@ import pytest
 
 from ato_common.scenario import parse_scenario
 from profile_node.planner import PlanningError, plan_reference
+from profile_node.trajectory import passing_time
 
 DATA = Path(__file__).resolve().parents[2] / 'tests' / 'data'
 TRACK = DATA / 'synthetic' / 'ttobench_track_T_curvy.json'
@@ -100,3 +101,24 @@ def test_run_infeasible_meets_every_window_it_can(tmp_path, train):
     assert within == [True, False, True, True], [c.planned_s for c in plan.timing]
     # the missed window as closely as the train can: the fastest arrival
     assert plan.timing[1].planned_s == pytest.approx(a_to_b, abs=0.5)
+
+
+@pytest.mark.filterwarnings('ignore::UserWarning')
+@pytest.mark.parametrize('train', TRAINS)
+def test_a_stretch_after_a_passing_window_slows_down_to_meet_the_arrival_window(tmp_path,
+                                                                                train):
+    # A passing window mid-way that only the fastest curve (plus 2 s) meets, then an arrival
+    # window that opens 25 s after the fastest arrival: after passing its point fast, the
+    # train must lose time, more than a coast down to a lower hold speed loses (the stretch
+    # used to arrive early, before its window opened).
+    rows = [[0, 0, 0, 0, 0], [6000, None, None, 0, 0], [12000, None, None, 0, 0]]
+    fastest = plan_reference(scenario(tmp_path, train, rows, strategy='fastest'))
+    passing = passing_time(fastest.trajectory, 3000.0)
+    a_to_b = fastest.stops[0].arrival_s - fastest.trajectory.start_time
+    rows = [[0, 0, 0, 0, 0], [3000, None, round(passing + 2.0, 1), None, None],
+            [6000, round(a_to_b + 25.0, 1), round(a_to_b + 32.0, 1), 0, 0],
+            [12000, None, None, 0, 0]]
+    plan = plan_reference(scenario(tmp_path, train, rows))
+    assert passing_time(plan.trajectory, 3000.0) <= passing + 2.0
+    arrival = plan.stops[0].arrival_s
+    assert a_to_b + 25.0 <= arrival <= a_to_b + 32.0
