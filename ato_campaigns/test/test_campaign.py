@@ -513,6 +513,19 @@ def test_a_report_of_too_few_pairs_warns(tmp_path, serial_rows):
     assert 'every other law is told apart' not in text
 
 
+def test_the_report_names_how_its_rows_were_run_from_the_rows(serial_rows):
+    """A campaign's own rows are the offline loop's; rows made another way (through the ROS
+    graph, an external node) say so in their ``through`` column, and the report names that."""
+    from ato_campaigns import report as campaign_report
+    campaign, rows = serial_rows
+    text = campaign_report.markdown(campaign, rows, 'cmd', 1.0, plots=False)
+    assert f'; {campaign_report.OFFLINE}, the plant perturbed' in text
+    through = rows.assign(through='through the ROS graph (the nodes in lockstep)')
+    text = campaign_report.markdown(campaign, through, 'cmd', 1.0, plots=False)
+    assert '; through the ROS graph (the nodes in lockstep), the plant perturbed' in text
+    assert campaign_report.OFFLINE not in text
+
+
 def test_sensitivity_ranks_the_parameter_that_drives_the_error_first():
     table = cs.sensitivity(fixed_table(), 'rms_speed_error_kmh')
     first = table[table['law'] == 'A'].iloc[0]
