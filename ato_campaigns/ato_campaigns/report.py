@@ -225,9 +225,16 @@ OFFLINE = 'offline closed loop'
 
 def how_run(rows) -> str:
     """How the rows were run, from their own ``through`` column (rows made another way than
-    the campaign's offline loop say how, e.g. through the ROS graph), else the offline loop."""
-    kinds = sorted(set(rows['through'].dropna())) if 'through' in rows.columns else []
-    return '; '.join(kinds) or OFFLINE
+    the campaign's offline loop say how, e.g. through the ROS graph; a row without it is the
+    offline loop's); each way with its laws when the rows were run in several."""
+    if 'through' not in rows.columns or rows.empty:
+        return OFFLINE
+    ways = rows['through'].fillna(OFFLINE)
+    kinds = sorted(set(ways))
+    if len(kinds) == 1:
+        return kinds[0]
+    return '; '.join(f"{kind} ({', '.join(sorted(set(rows.loc[ways == kind, 'law'])))})"
+                     for kind in kinds)
 
 
 def _header(campaign: Campaign, rows, elapsed_s: float) -> list[str]:
