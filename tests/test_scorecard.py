@@ -104,3 +104,23 @@ def test_the_broken_node_gives_failing_rows_not_a_crash(campaign_path, tmp_path)
     assert rows['reason'].str.contains('watchdog brakes').all(), rows['reason']
     assert rows['watchdog_events'].gt(0).all()
     assert 'broken/own' in done.stdout and 'watchdog brake' in done.stdout
+
+
+def test_a_node_that_cannot_run_gives_error_rows_with_the_reason(campaign_path, tmp_path):
+    """A node that exits at once: each run is a row with status error and why, the scorecard
+    ends and exits 1."""
+    out = tmp_path / 'out'
+    command = f'{sys.executable} -c "import sys; sys.exit(3)"'
+    done = subprocess.run(
+        [sys.executable, '-m', 'ato_bringup.scorecard', '--controller-command', command,
+         '--campaign', str(campaign_path), '--label', 'gone', '--out', str(out)],
+        capture_output=True, text=True, timeout=900)
+    output = done.stdout + done.stderr
+    assert done.returncode == 1, output
+    rows = read_rows(rows_folder(out, 'score-scorecard-gone'),
+                     load_campaign(campaign_path).fingerprint)
+    assert list(rows['status']) == ['error', 'error'], rows['reason']
+    assert rows['reason'].str.contains('the run through the graph failed: controller exited '
+                                       'with code 3').all(), rows['reason']
+    assert 'failed: gone/own draw 0: the run through the graph failed' in done.stdout
+    assert '0 of 2 runs' in done.stderr

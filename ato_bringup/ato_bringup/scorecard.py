@@ -138,6 +138,7 @@ def run_external(campaign, command: str, label: str, out: Path, workers: int = 1
     """Every run of the external node (``external_row``), ``workers`` at once; its rows written
     to ``<out>/<name>-scorecard-<label>/rows/`` as they finish (that folder's earlier rows are
     replaced). Returns them (a DataFrame)."""
+    from ato_bringup.graph_campaign import first_line
     from ato_campaigns.dataset import check_folder, compact, read_rows, rows_folder, write_row
     from ato_campaigns.engine import data_description, execute
     name = f'{campaign.name}{SUFFIX}{label}'
@@ -158,11 +159,6 @@ def run_external(campaign, command: str, label: str, out: Path, workers: int = 1
     execute(items, external_row, finished, lost_row, serial=workers == 1, workers=workers)
     compact(folder, description)
     return read_rows(folder, campaign.fingerprint)
-
-
-def first_line(text: str, width: int = 120) -> str:
-    line = text.splitlines()[0] if text else ''
-    return line if len(line) <= width else line[:width - 3] + '...'
 
 
 def scorecard_table(campaign, rows, tables: dict, label: str) -> str:
@@ -222,6 +218,7 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     import pandas as pd
 
+    from ato_bringup.graph_campaign import first_line
     from ato_campaigns.dataset import FolderConflict
     from ato_campaigns.engine import load_campaign, run_campaign
     from ato_campaigns.report import statistics, write_report
