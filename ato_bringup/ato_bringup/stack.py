@@ -299,8 +299,9 @@ class StackConfig:
     monitor: str = 'full'
     diagnostics_period_s: float = 1.0  # of the plant and the controller, s of simulated time
     # an ATO node of the user's instead of the suite's controller: its command line (shell
-    # words), started with ``--ros-args -p scenario:=<scenario>`` and the stack's remappings
-    # appended (and ATO_SCENARIO in its environment); '' : the suite's controller
+    # words), started with the contract's parameters (``--ros-args -p scenario:=<scenario> -p
+    # gradient_known:=...``) and the stack's remappings appended (and ATO_SCENARIO in its
+    # environment); '' : the suite's controller
     controller_command: str = ''
     # the plant model; '' : the scenario's (``ato_simulation.applies.plant_model_for``: the
     # multi-car plant for a train described car by car); plant_params may name one too
