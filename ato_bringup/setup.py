@@ -33,6 +33,7 @@ setup(
             'campaign = ato_campaigns.campaign:main',
             'ato_stack = ato_bringup.composed:main',
             'conformance = ato_bringup.conformance:main',
+            'scorecard = ato_bringup.scorecard:main',
         ],
     },
 )

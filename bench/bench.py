@@ -18,7 +18,9 @@
    every built-in scenario.
 5. Campaign throughput (ato_campaigns.campaign): runs per minute of a small campaign with 1 and 2
    Dask workers and their ratio, and the engine's overhead per run (Dask, the time limit, the
-   Parquet row) against the bare offline loop of the same runs.
+   Parquet row) against the bare offline loop of the same runs; and through the ROS graph
+   (``--through ros``, ``ato_bringup.graph_campaign``): rows per minute of a small campaign
+   offline and through the graph, with 1 and 2 workers (``--only graph-campaign``).
 6. Planning: CPU time to plan each built-in scenario's target curve, ``fastest`` and
    ``timetable`` (profile_node.timetable), and the two strategies in closed loop offline (PID,
    nominal plant): arrival against the target time and traction energy.
@@ -713,6 +715,67 @@ def _campaign_on(campaign, workers: int) -> tuple[float, float]:
         return wall_s, _cpu_s() - cpu + sum(after[w] - before[w] for w in after)
 
 
+#: the campaign of the throughput through the ROS graph: a few short runs of the scenario (each
+#: run through the graph costs the start of five processes and a wall-clock lockstep)
+GRAPH_BENCH_DRAWS = 2
+GRAPH_BENCH_END_S = 60.0
+GRAPH_CAMPAIGN_HEADING = '## Campaign throughput through the ROS graph'
+
+
+def graph_campaign_throughput(scenario: str, measured=None) -> list[str]:
+    """The section of the campaign's throughput offline and ``--through ros`` (rows per minute)
+    on the same small campaign, with 1 and 2 workers: offline on the engine's LocalCluster
+    (``_campaign_on``: warmed up before the clock starts), through the graph with
+    ``ato_bringup.graph_campaign`` (1 worker: one row after the other in this process; 2: on a
+    LocalCluster started before the clock starts). Each graph row is made offline too (its end
+    and journey rule) and compared: the identical rows are counted. One round each."""
+    from ato_bringup.graph_campaign import run_graph_campaign, verdict
+    from ato_campaigns.engine import open_client, parse_campaign
+    from ato_campaigns.provenance import provenance
+    measured = measured or provenance()
+    data = {'name': 'bench_ros', 'seed': 1, 'draws': GRAPH_BENCH_DRAWS, 'scenarios': [scenario],
+            'laws': list(BENCH_CAMPAIGN_LAWS), 'uncertainty': 'default',
+            'configurations': ['published'], 'end_time_s': GRAPH_BENCH_END_S}
+    campaign = parse_campaign(data, 'bench_ros', Path.cwd())
+    n = len(campaign.tasks())
+    rows, offline = [], {}
+    for workers in (1, 2):
+        offline[workers] = _campaign_on(campaign, workers)[0]
+        rows.append(f'| offline | {workers} | {n} | {offline[workers]:.1f} s | '
+                    f'{60 * n / offline[workers]:.1f} | 1 | - |')
+        print(rows[-1], flush=True)
+    for workers in (1, 2):
+        client, cluster = open_client(workers=workers) if workers > 1 else (None, None)
+        with tempfile.TemporaryDirectory() as out, contextlib.ExitStack() as held:
+            if client is not None:
+                held.enter_context(cluster)
+                held.enter_context(client)
+            started = time.perf_counter()
+            results = run_graph_campaign(campaign, Path(out), workers, client=client)
+            wall = time.perf_counter() - started
+        same = sum(verdict(result)[0] for result in results)
+        rows.append(f'| through the ROS graph | {workers} | {n} | {wall:.1f} s | '
+                    f'{60 * n / wall:.1f} | {offline[workers] / wall:.3f} | {same} of {n} |')
+        print(rows[-1], flush=True)
+    load = ', '.join(f'{x:.1f}' for x in os.getloadavg())
+    return [
+        GRAPH_CAMPAIGN_HEADING, '',
+        f'Measured on {measured.date_utc}; machine: {measured.machine}; commit: '
+        f'{measured.commit}.', '',
+        f'The same campaign offline (`python -m ato_campaigns.campaign FILE`, the engine\'s '
+        f'LocalCluster, warmed up before the clock starts) and `--through ros` '
+        f'(`ato_bringup.graph_campaign`: each row through the three nodes in lockstep, recorded, '
+        f'in a DDS domain of its own, and made offline again to compare): {GRAPH_BENCH_DRAWS} '
+        f'draws x {len(BENCH_CAMPAIGN_LAWS)} laws ({", ".join(BENCH_CAMPAIGN_LAWS)}) of '
+        f'`{scenario}` cut at {GRAPH_BENCH_END_S:g} s, the default uncertainty; one round each. '
+        'Speed against offline: the offline wall time with as many workers over this one. '
+        '`python bench/bench.py --only graph-campaign --results-page '
+        'docs/results/benchmarks.md` measures only this section and rewrites it on the page.',
+        '', '| path | workers | rows | wall time | rows per minute | speed against offline | '
+        'rows identical to offline |', '|---|---|---|---|---|---|---|', *rows, '',
+        f'Load average at the end: {load} (on {os.cpu_count()} cores).']
+
+
 def _tree_cpu_s() -> float:
     """CPU time of this process and its living children (a worker and its run process)."""
     import psutil
@@ -733,10 +796,11 @@ def main() -> int:
                         help='also write the closed-loop table of the two strategies between '
                         'its markers in this file (make bench: README.md)')
     parser.add_argument('--only', choices=('campaign', 'offline', 'planning', 'lockstep',
-                                            'tuning'),
+                                            'tuning', 'graph-campaign'),
                         default=None,
-                        help='measure only this section (printed, no results page; tuning: '
-                        'with --results-page, that section of the page rewritten)')
+                        help='measure only this section (printed, no results page; tuning '
+                        'and graph-campaign: with --results-page, that section of the page '
+                        'rewritten)')
     args = parser.parse_args()
     with contextlib.ExitStack() as held:
         if args.domain_id is None:
@@ -876,6 +940,12 @@ def measure(args: argparse.Namespace) -> int:
     if args.only == 'lockstep':
         lockstep_section(args.scenario, args.domain_id)
         return 0
+    if args.only == 'graph-campaign':
+        page.add(*graph_campaign_throughput(args.scenario, measured))
+        if args.results_page is not None:
+            written = replace_section(args.results_page, GRAPH_CAMPAIGN_HEADING, page.lines)
+            print(f'\nwrote {written}')
+        return 0
     if args.only == 'tuning':
         page.add(*tuning_section())
         if args.results_page is not None:
@@ -894,6 +964,7 @@ def measure(args: argparse.Namespace) -> int:
              f'| `multi_car` | {plant_accuracy("multi_car", "crh2_4car_mao", 6e3):.2e} m/s |')
     page.add('', *campaign_section)
     page.add(*campaign_throughput(args.scenario))
+    page.add('', *graph_campaign_throughput(args.scenario, measured))
     page.add('', *planning_section)
     page.add(*planning_times())
     page.add('', *comparison_section)

@@ -7,10 +7,11 @@ arguments of the ``ros2`` commands the documentation shows.
     ato topic list [-t] | echo <topic> [--once]
     ato node list [-a]
     ato conformance --controller-command CMD        # checks an ATO node against the contract
+    ato scorecard --controller-command CMD --campaign FILE  # the node through a campaign
 
 ``. scripts/env.sh`` puts it on PATH (``scripts/bin/ato``). With a full ROS 2 install ``ros2``
-does the same (``ato conformance`` has no ros2 counterpart: ``ros2 run ato_bringup
-conformance``).
+does the same (``ato conformance`` and ``ato scorecard`` have no ros2 counterpart: ``ros2 run
+ato_bringup conformance``, ``ros2 run ato_bringup scorecard``).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import sys
 
 from ato_ros.interrupts import quiet_until_running
 
-COMMANDS = ('run', 'launch', 'param', 'topic', 'node', 'conformance')
+COMMANDS = ('run', 'launch', 'param', 'topic', 'node', 'conformance', 'scorecard')
 
 
 def run(argv: list[str]) -> int:
@@ -66,6 +67,9 @@ def main(argv: list[str] | None = None) -> int:
     if command == 'conformance':
         from ato_bringup import conformance
         return conformance.main(rest)
+    if command == 'scorecard':
+        from ato_bringup import scorecard
+        return scorecard.main(rest)
     from ato_bringup import graph_cli
     return graph_cli.main(command, rest)
 

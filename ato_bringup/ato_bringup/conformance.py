@@ -4,14 +4,14 @@
     ros2 run ato_bringup conformance --controller-command "ros2 run my_pkg my_ato" --json r.json
 
 Starts the plant and the profile (the plant holds the ATP supervision) in lockstep with your node
-started as ``CMD --ros-args -p scenario:=<scenario>`` (``ato_common.contract``: the contract,
-docs/reference/ato-contract.md), and checks each case of ``ato_common.contract.CASES``: it
-answers every step, stamps and lays out its commands right, one per step at the control rate,
-refuses a plant of another scenario, survives a restarted plant, stops when told, publishes
-nothing after shutdown, follows a replanned reference and behaves under a failed speed sensor.
-Each case is printed PASS, FAIL or NOT RUN (the harness could not bring the situation about)
-with its evidence (``ato_bringup.conformance_cases``). Exit code: 0 if every case passed, 1
-otherwise, 2 for bad input; the nodes' logs are kept in ``--log-dir``.
+started as ``CMD --ros-args -p scenario:=<scenario> -p gradient_known:=true``
+(``ato_common.contract``: the contract, docs/reference/ato-contract.md), and checks each case of
+``ato_common.contract.CASES``: it answers every step, stamps and lays out its commands right, one
+per step at the control rate, refuses a plant of another scenario, survives a restarted plant,
+stops when told, publishes nothing after shutdown, follows a replanned reference and behaves under
+a failed speed sensor. Each case is printed PASS, FAIL or NOT RUN (the harness could not bring the
+situation about) with its evidence (``ato_bringup.conformance_cases``). Exit code: 0 if every case
+passed, 1 otherwise, 2 for bad input; the nodes' logs are kept in ``--log-dir``.
 
 The main run drives a variant of ``--scenario`` (default short_line) made for the test, written
 beside the logs (``variant.yaml``; its name is the scenario's): a total traction loss at the
@@ -236,8 +236,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog='conformance', description=__doc__.split('\n\n')[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--controller-command', required=True, metavar='CMD',
-                        help='your ATO node\'s command line (--ros-args -p scenario:=<scenario> '
-                             'is appended)')
+                        help='your ATO node\'s command line (the contract\'s parameters '
+                             'are appended: --ros-args -p scenario:=<scenario> -p '
+                             'gradient_known:=true)')
     parser.add_argument('--scenario', default='short_line',
                         help='the scenario whose variant the main run drives (default '
                              '%(default)s)')

@@ -17,13 +17,14 @@ scenario x law and configuration x draw, ``Campaign.tasks``) is made twice, as
   from what was on the wire (``graph_row.graph_row_of``).
 
 The graph's rows are written as the campaign writes its rows (``ato_campaigns.dataset``: one
-Parquet file per finished row, the campaign's fingerprint and description in its metadata, with
-``through: ros graph``) to ``<out>/<name>-ros/rows/``, and the campaign's report
-(``ato_campaigns.report``: report.md, stats/*.csv, report.json, plots) is written on them to
-``<out>/<name>-ros/``. Every invocation makes every row again (the latest written row of a key
-counts). A row whose graph run fails (a node killed or crashed, a run past the campaign's
-``timeout_s`` of wall time, 900 s when it has none, the recording unreadable) is a row with
-status ``error`` and the failure as its reason; the campaign goes on.
+Parquet file per finished row, the campaign's fingerprint and description in its metadata; the
+row and the metadata say how it was made, ``through``: :data:`THROUGH`) to
+``<out>/<name>-ros/rows/``, and the campaign's report (``ato_campaigns.report``: report.md,
+stats/*.csv, report.json, plots; it names how the rows were made from their ``through``) is
+written on them to ``<out>/<name>-ros/``. Every invocation makes every row again (the latest
+written row of a key counts). A row whose graph run fails (a node killed or crashed, a run past
+the campaign's ``timeout_s`` of wall time, 900 s when it has none, the recording unreadable) is
+a row with status ``error`` and the failure as its reason; the campaign goes on.
 
 Then a table: per row, the offline and the graph statuses and whether the status, the reason and
 every metric agree (``graph_row.comparison``, within ``graph_row.TOLERANCE``; the saturation of
@@ -50,8 +51,10 @@ from ato_bringup.runner import RunFailed
 
 #: the folder of a campaign's rows through the graph: ``<out>/<name><SUFFIX>/``
 SUFFIX = '-ros'
-#: what the rows' files say in their metadata about how they were made
-THROUGH = 'ros graph (ato_bringup.graph_campaign: the nodes in lockstep)'
+#: how the graph's rows were made: in each row (its ``through`` column, which the campaign's
+#: report names: ``ato_campaigns.report.how_run``) and in the rows' files' metadata
+THROUGH = ('through the ROS graph (ato_bringup.graph_campaign: the plant, profile and controller '
+           'nodes in lockstep, each row computed from what was on the wire)')
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
@@ -173,6 +176,7 @@ def run_graph_campaign(campaign, out: Path, workers: int = 1, client=None) -> li
     results: list[dict] = []
 
     def finished(result: dict) -> None:
+        result['graph']['through'] = THROUGH
         write_row(folder, result['graph'], description)
         results.append(result)
         ok, words = verdict(result)
@@ -185,22 +189,6 @@ def run_graph_campaign(campaign, out: Path, workers: int = 1, client=None) -> li
     if len(results) == len(items):
         compact(folder, description)
     return results
-
-
-#: what the report of the graph's rows says first (the campaign's report describes the offline
-#: loop's runs)
-REPORT_NOTE = ('**These rows were made through the ROS graph** (`ato_bringup.graph_campaign`): '
-               'the plant, profile and controller nodes in lockstep, each row\'s metrics '
-               'computed from what was on the wire; where the text below says "offline closed '
-               'loop", read "the nodes in lockstep". The same campaign offline: '
-               '`python -m ato_campaigns.campaign FILE`.')
-
-
-def mark_through_graph(report: Path) -> Path:
-    """Put REPORT_NOTE under the title and the command of the campaign's report ``report``."""
-    head, command, body = report.read_text().split('\n\n', 2)
-    report.write_text(f'{head}\n\n{command}\n\n{REPORT_NOTE}\n\n{body}')
-    return report
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -225,9 +213,8 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     rows = read_rows(rows_folder(args.out, campaign.name + SUFFIX), campaign.fingerprint)
     command = ' '.join(['python -m ato_bringup.graph_campaign', *argv])
-    report = mark_through_graph(write_report(
-        campaign, rows, args.out / f'{campaign.name}{SUFFIX}', command,
-        time.monotonic() - started))
+    report = write_report(campaign, rows, args.out / f'{campaign.name}{SUFFIX}', command,
+                          time.monotonic() - started)
     table, same = comparison_table(results)
     print(table)
     for result in results:

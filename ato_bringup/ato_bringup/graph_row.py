@@ -57,6 +57,7 @@ import numpy as np
 from ato_bringup.runner import RunFailed, RunOutcome, run_lockstep
 from ato_bringup.stack import StackConfig
 from ato_common.conventions import TOPICS
+from ato_common.run_events import WATCHDOG, RunEvents, safety_events
 from ato_common.uncertainty import knowledge_options
 from ato_simulation.loop import OfflineRun
 from ato_simulation.plans import cached_plan, late_readings, stop_samples
@@ -78,10 +79,13 @@ WATCHDOG_NORMAL = 'normal'
 SHORTEST_DIAGNOSTICS_S = 0.01
 
 
-def graph_config(task: dict, end_time_s: float, log_dir: Path, domain_id: int) -> StackConfig:
+def graph_config(task: dict, end_time_s: float, log_dir: Path, domain_id: int,
+                 controller_command: str = '') -> StackConfig:
     """The stack that runs ``task`` (a campaign's task, ``engine.task_of``) through the graph:
     the plant with the draw's truth, the controller with its knowledge part, the row's law,
-    settings, rate, envelope and model; recorded; diagnostics at every step."""
+    settings, rate, envelope and model; recorded; diagnostics at every step.
+    ``controller_command``: an ATO node of the user's in place of the suite's controller (told
+    the knowledge part as the contract's ``gradient_known`` parameter)."""
     from train_plant_node.draw_values import draw_values_text
     law, rate = task['law_name'], task['rate_hz']
     gains = {f'{law}.{k}': v if isinstance(v, bool) else float(v)
@@ -90,6 +94,7 @@ def graph_config(task: dict, end_time_s: float, log_dir: Path, domain_id: int) -
     return StackConfig(
         scenario=task['scenario'], controller=law, end_time_s=end_time_s, domain_id=domain_id,
         log_dir=log_dir, record_to=log_dir / 'bag', monitor='lean', model=task['model'],
+        controller_command=controller_command,
         diagnostics_period_s=max(1.0 / rate, SHORTEST_DIAGNOSTICS_S),
         plant_params={'control_rate_hz': rate,
                       'draw_values': draw_values_text(task['values'])},
@@ -207,27 +212,13 @@ def graph_row_of(task: dict, run: OfflineRun, runs: Path, domain_id: int | None 
     takes a free DDS domain unless ``domain_id`` is given, and ends with RunFailed past
     ``timeout_s`` s of wall time (default: 900 s, or the simulated time if longer), or when a
     node ends before the plant does (``ato_bringup.runner.run_lockstep``)."""
-    from ato_bringup.run_scenario import unique_run_dir
-    from ato_campaigns.engine import base_row, run_metrics
-    from ato_common.domains import free_domain
     end = task['end_time_s'] or float(run.times_s[-1])
-    log_dir = unique_run_dir(runs, f"{task['law'].replace('/', '-')}-draw{task['draw']}")
-    with contextlib.ExitStack() as held:
-        if domain_id is None:
-            domain_id = held.enter_context(free_domain())
-        config = graph_config(task, end, log_dir, domain_id)
-        outcome = run_lockstep(config, timeout_s=timeout_s or max(900.0, end),
-                               progress=progress)
-    assert config.record_to is not None  # graph_config records the run
+    outcome, log_dir = run_through_graph(task, end, runs, domain_id=domain_id,
+                                         progress=progress, timeout_s=timeout_s)
     every_step = 1.0 / task['rate_hz'] >= SHORTEST_DIAGNOSTICS_S
-    graph = graph_run(outcome, measured_positions(config.record_to,
-                                                  [k for k, _ in outcome.samples]),
-                      run.journey, every_step, instant_actuators(outcome.scenario, task['values']))
-    row = base_row(task)
-    row.update(run_metrics(graph, 1.0 / task['rate_hz']))
+    row = row_from_wire(task, outcome, log_dir / 'bag', run.journey, every_step)
     notes = []
     if not every_step:
-        row['saturated_fraction'] = math.nan
         notes.append(f"the law runs at {task['rate_hz']:g} Hz, faster than the nodes publish "
                      'diagnostics (100 Hz at most): its saturation per step is not on the wire '
                      '(saturated_fraction not compared), and the steps its faults held are '
@@ -237,6 +228,50 @@ def graph_row_of(task: dict, run: OfflineRun, runs: Path, domain_id: int | None 
                      'from every step\'s state, the profile node at its check instants, so the '
                      'two runs are not expected to agree')
     return row, notes, log_dir
+
+
+def run_through_graph(task: dict, end_time_s: float, runs: Path, domain_id: int | None = None,
+                      progress: bool = False, timeout_s: float | None = None,
+                      controller_command: str = '') -> tuple[RunOutcome, Path]:
+    """``task`` run through the graph to ``end_time_s`` (``graph_config``), recorded in a new
+    folder in ``runs``: (the outcome, the folder). A free DDS domain unless ``domain_id`` is
+    given; RunFailed past ``timeout_s`` s of wall time (default: 900 s, or the simulated time if
+    longer) or when a node ends before the plant does."""
+    from ato_bringup.run_scenario import unique_run_dir
+    from ato_common.domains import free_domain
+    log_dir = unique_run_dir(runs, f"{task['law'].replace('/', '-')}-draw{task['draw']}")
+    with contextlib.ExitStack() as held:
+        if domain_id is None:
+            domain_id = held.enter_context(free_domain())
+        config = graph_config(task, end_time_s, log_dir, domain_id, controller_command)
+        outcome = run_lockstep(config, timeout_s=timeout_s or max(900.0, end_time_s),
+                               progress=progress)
+    return outcome, log_dir
+
+
+def row_from_wire(task: dict, outcome: RunOutcome, bag: Path, journey, every_step: bool
+                  ) -> dict:
+    """The campaign's row of ``task`` computed by its own ``run_metrics`` from the graph run
+    ``outcome`` (recorded in ``bag``) judged with the end rule ``journey``; ``every_step``: the
+    controller's diagnostics came at every step, else ``saturated_fraction`` is NaN (not on the
+    wire)."""
+    from ato_campaigns.engine import base_row, run_metrics
+    graph = graph_run(outcome, measured_positions(bag, [k for k, _ in outcome.samples]),
+                      journey, every_step, instant_actuators(outcome.scenario, task['values']))
+    row = base_row(task)
+    row.update(run_metrics(graph, 1.0 / task['rate_hz'],
+                           watchdog_brakes(outcome.diagnostics, outcome.samples[-1][0])))
+    if not every_step:
+        row['saturated_fraction'] = math.nan
+    return row
+
+
+def watchdog_brakes(diagnostics: list, last_ns: int) -> RunEvents:
+    """The plant's command-watchdog brakes up to ``last_ns`` from its diagnostics (the ATP's
+    interventions are the run's own, ``graph_run``): the campaign's status names them."""
+    safety = safety_events([d for d in diagnostics if d[0] <= last_ns])
+    return RunEvents(tuple(e for e in safety.events if e.kind == WATCHDOG),
+                     {WATCHDOG: safety.count(WATCHDOG)}, safety.tolerance_m)
 
 
 #: what is compared besides the metrics (engine.METRICS)

@@ -98,7 +98,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                         help='the law (default: %(default)s, the baseline)')
     parser.add_argument('--controller-command', default='', metavar='CMD',
                         help='run this ATO node of yours instead of the suite\'s controller '
-                             '(a command line; --ros-args -p scenario:=<scenario> is appended)')
+                             '(a command line; the contract\'s parameters are appended: '
+                             '--ros-args -p scenario:=<scenario> -p gradient_known:=true)')
     parser.add_argument('--model', default=AUTO_MODEL, choices=(AUTO_MODEL, *sorted(MODELS)),
                         help="the plant model (default %(default)s: the scenario's, multi_car "
                              'for a train described car by car)')

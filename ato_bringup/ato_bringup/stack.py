@@ -36,6 +36,7 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_bringup.processes import executable_path
+from ato_common.contract import PARAMETERS
 from ato_common.conventions import normalised_namespace, stack_remaps, status_in_namespace
 from ato_common.scenario import load_scenario
 from ato_common.validation import ConfigError
@@ -298,8 +299,9 @@ class StackConfig:
     monitor: str = 'full'
     diagnostics_period_s: float = 1.0  # of the plant and the controller, s of simulated time
     # an ATO node of the user's instead of the suite's controller: its command line (shell
-    # words), started with ``--ros-args -p scenario:=<scenario>`` and the stack's remappings
-    # appended (and ATO_SCENARIO in its environment); '' : the suite's controller
+    # words), started with the contract's parameters (``--ros-args -p scenario:=<scenario> -p
+    # gradient_known:=...``) and the stack's remappings appended (and ATO_SCENARIO in its
+    # environment); '' : the suite's controller
     controller_command: str = ''
     # the plant model; '' : the scenario's (``ato_simulation.applies.plant_model_for``: the
     # multi-car plant for a train described car by car); plant_params may name one too
@@ -394,13 +396,16 @@ class Stack:
     def start_external_controller(self, scenario: str | None = None) -> subprocess.Popen:
         """The user's ATO node (``StackConfig.controller_command``) as the process
         ``controller``: told the scenario (default the stack's) as the suite's nodes are (a
-        ``scenario`` parameter, and ATO_SCENARIO in its environment), in the stack's
-        namespace."""
+        ``scenario`` parameter, and ATO_SCENARIO in its environment) and the contract's other
+        parameters (``ato_common.contract.PARAMETERS``: ``gradient_known``) from
+        ``controller_params`` or their defaults, in the stack's namespace."""
         words = shlex.split(self.config.controller_command)
         if not words:
             raise ValueError('the controller command is empty')
         scenario = scenario or self.config.scenario
-        args = ros_args({'scenario': scenario}, self.namespace)
+        told = {name: self.config.controller_params.get(name, default)
+                for name, (_, default) in PARAMETERS.items() if name != 'scenario'}
+        args = ros_args({'scenario': scenario, **told}, self.namespace)
         return self.start_process('controller', {}, command=[*words, *args],
                                   env={'ATO_SCENARIO': scenario})
 

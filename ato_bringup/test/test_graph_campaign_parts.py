@@ -133,15 +133,3 @@ def test_the_campaign_command_hands_a_campaign_through_ros_to_graph_campaign(
     for offline_only in ('--serial', '--scheduler=tcp://h:8786', '--readme=README.md'):
         with pytest.raises(SystemExit):
             campaign_command.parse_args([str(campaign_path), '--through', 'ros', offline_only])
-
-
-def test_the_report_of_the_graph_rows_says_first_that_they_were_made_through_the_graph(
-        tmp_path):
-    report = tmp_path / 'report.md'
-    report.write_text('# Campaign c\n\n`python -m ato_bringup.graph_campaign c.yaml`\n\n'
-                      'Campaign `c`: 8 runs; offline closed loop, ...\n\n## Methods\n')
-    graph_campaign.mark_through_graph(report)
-    parts = report.read_text().split('\n\n')
-    assert parts[:3] == ['# Campaign c', '`python -m ato_bringup.graph_campaign c.yaml`',
-                         graph_campaign.REPORT_NOTE]
-    assert parts[3].startswith('Campaign `c`: 8 runs') and parts[4] == '## Methods\n'

@@ -71,6 +71,7 @@ from ato_common.run_events import (
     STATUSES,
     RunEvents,
     late_arrivals,
+    merge,
     run_events,
     run_status,
     stations_of,
@@ -512,9 +513,10 @@ def motion(speeds: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
     return acc, jerk
 
 
-def run_metrics(run, dt: float) -> dict:
+def run_metrics(run, dt: float, watchdog: RunEvents | None = None) -> dict:
     """The per-run metrics of an OfflineRun (METRICS) and its status and reason (``judged``);
-    status diverged if it is not finite."""
+    status diverged if it is not finite. ``watchdog``: the plant's watchdog brakes of a run
+    through the graph (an offline run has none: its controller answers every period)."""
     if not finite(run):
         return {'status': 'diverged', 'reason': 'non-finite state or force'}
     m = run.metrics()
@@ -532,7 +534,7 @@ def run_metrics(run, dt: float) -> dict:
     stop_errors = m.stop_errors_m
     odometer = run.odometer_stop_errors_m()
     return {
-        **judged(run, m),
+        **judged(run, m, watchdog),
         'rms_speed_error_kmh': m.rms_speed_error_kmh,
         'max_speed_error_kmh': m.max_speed_error_kmh,
         'rms_position_error_m': m.rms_position_error_m,
@@ -553,7 +555,7 @@ def run_metrics(run, dt: float) -> dict:
     }
 
 
-def judged(run, metrics) -> dict:
+def judged(run, metrics, watchdog: RunEvents | None = None) -> dict:
     """What went wrong in a finite OfflineRun (``ato_common.run_events``): its ``status`` and
     ``reason`` (``run_status``: did not finish, each kind of event with its first occurrence,
     held commands, late arrivals), its ``events`` in brief, and ``arrival_delay_s``, its
@@ -565,6 +567,8 @@ def judged(run, metrics) -> dict:
     stations = [s for s in stations_of(run.plan) if not (window and s[2] > end)]
     events = run_events(run.scenario, metrics, stations, run.times_s, run.positions,
                         atp_times_s=run.atp_times_s)
+    if watchdog is not None:
+        events = merge(events, watchdog, tolerance_m=events.tolerance_m)
     if window:
         kept = tuple(e for e in events.events if not (e.kind == JOURNEY and math.isnan(e.time_s)))
         events = RunEvents(kept, dict(events.counts, **{JOURNEY: sum(

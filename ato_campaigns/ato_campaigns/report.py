@@ -219,6 +219,24 @@ def write_statistics(campaign: Campaign, tables: dict[str, Any], folder: Path,
 
 # --- the markdown ------------------------------------------------------------------------------
 
+#: how a campaign's own rows are run (rows without a ``through`` column)
+OFFLINE = 'offline closed loop'
+
+
+def how_run(rows) -> str:
+    """How the rows were run, from their own ``through`` column (rows made another way than
+    the campaign's offline loop say how, e.g. through the ROS graph; a row without it is the
+    offline loop's); each way with its laws when the rows were run in several."""
+    if 'through' not in rows.columns or rows.empty:
+        return OFFLINE
+    ways = rows['through'].fillna(OFFLINE)
+    kinds = sorted(set(ways))
+    if len(kinds) == 1:
+        return kinds[0]
+    return '; '.join(f"{kind} ({', '.join(sorted(set(rows.loc[ways == kind, 'law'])))})"
+                     for kind in kinds)
+
+
 def _header(campaign: Campaign, rows, elapsed_s: float) -> list[str]:
     runs = len(rows)
     statuses = rows['status'].value_counts().to_dict() if runs else {}
@@ -231,7 +249,7 @@ def _header(campaign: Campaign, rows, elapsed_s: float) -> list[str]:
             f'{campaign.seed}, fingerprint `{campaign.fingerprint}`: {runs} runs ({counted}); '
             f'the runs took {rows["wall_s"].sum():.0f} s in sum, this command {elapsed_s:.0f} s '
             f'of wall time on {os.cpu_count()} cores (a resumed campaign runs only the missing '
-            'rows); offline closed loop, the plant perturbed by each draw, the controller on the '
+            f'rows); {how_run(rows)}, the plant perturbed by each draw, the controller on the '
             'nominal train. A run is `ok` only when it is clean and punctual: it finished its '
             'journey, with no ATP intervention, every stop within '
             f'+/-{STOP_ERROR_LIMIT_M:g} m, no missed time window and no arrival '

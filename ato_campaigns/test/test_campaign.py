@@ -291,6 +291,24 @@ def test_one_row_is_made_again_offline_printed_and_its_arrays_saved(tmp_path, ca
     assert '--draw and --law go together' in capsys.readouterr().err
 
 
+def test_the_plant_s_watchdog_brakes_of_a_graph_run_are_in_its_status(tmp_path):
+    """A run through the graph hands run_metrics the plant's watchdog brakes (an offline run
+    has none): the status names them, as it names the ATP's interventions."""
+    from ato_common.run_events import WATCHDOG, RunEvent, RunEvents
+    campaign = load_campaign(write(tmp_path, {**TINY, 'draws': 1, 'end_time_s': 20}))
+    row, run = engine.rerun(campaign, 'pid', 0)
+    assert row['status'] != 'watchdog brake'
+    brakes = RunEvents((RunEvent(WATCHDOG, 12.5, 'command watchdog: service brake'),),
+                       {WATCHDOG: 1})
+    dt = 1.0 / campaign.rates_hz[('short_line', PID)]
+    judged = engine.run_metrics(run, dt, brakes)
+    assert judged['status'] == 'watchdog brake'
+    assert '1 watchdog brakes (first at 12.5 s)' in judged['reason']
+    assert {k: v for k, v in judged.items() if k not in ('status', 'reason', 'events')} == {
+        k: v for k, v in engine.run_metrics(run, dt).items()
+        if k not in ('status', 'reason', 'events')}
+
+
 def hang_or_fail(task):
     if task['draw'] == 1 and task['law'] == PID:
         while True:  # a law that never returns
@@ -517,6 +535,23 @@ def test_a_report_of_too_few_pairs_warns(tmp_path, serial_rows):
     text = campaign_report.markdown(campaign, rows, 'cmd', 1.0, plots=False)
     assert f'**Warning: only 4 paired draws** (fewer than {cs.MIN_PAIRS})' in text
     assert 'every other law is told apart' not in text
+
+
+def test_the_report_names_how_its_rows_were_run_from_the_rows(serial_rows):
+    """A campaign's own rows are the offline loop's; rows made another way (through the ROS
+    graph, an external node) say so in their ``through`` column, and the report names that."""
+    from ato_campaigns import report as campaign_report
+    campaign, rows = serial_rows
+    text = campaign_report.markdown(campaign, rows, 'cmd', 1.0, plots=False)
+    assert f'; {campaign_report.OFFLINE}, the plant perturbed' in text
+    through = rows.assign(through='through the ROS graph (the nodes in lockstep)')
+    text = campaign_report.markdown(campaign, through, 'cmd', 1.0, plots=False)
+    assert '; through the ROS graph (the nodes in lockstep), the plant perturbed' in text
+    assert campaign_report.OFFLINE not in text
+    mixed = through.assign(through=through['through'].where(through['law'] != PID))
+    text = campaign_report.markdown(campaign, mixed, 'cmd', 1.0, plots=False)
+    assert (f'; {campaign_report.OFFLINE} ({PID}); through the ROS graph (the nodes in lockstep) '
+            f'({LUO}), the plant perturbed') in text
 
 
 def test_sensitivity_ranks_the_parameter_that_drives_the_error_first():

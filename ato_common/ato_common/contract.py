@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 #: the contract's version (major.minor)
-CONTRACT_VERSION = '1.0'
+CONTRACT_VERSION = '1.1'  # 1.1: the gradient_known parameter (PARAMETERS)
 
 #: the topics an ATO node reads (keys of ``conventions.TOPICS``), and what for
 INPUTS = {
@@ -32,6 +32,16 @@ OPTIONAL_INPUTS = {
 }
 
 
+#: the parameters a node is started with (``--ros-args -p name:=value``, every one, always; the
+#: clauses 'start' and 'knowledge' say what they mean): name -> (ROS type, the value when the
+#: stack was not told one; None: always told). A node declares those it uses (rclpy and rclcpp
+#: ignore an override of a parameter the node does not declare).
+PARAMETERS: dict[str, tuple[str, object]] = {
+    'scenario': ('string', None),
+    'gradient_known': ('bool', True),
+}
+
+
 @dataclass(frozen=True)
 class Clause:
     key: str
@@ -41,11 +51,22 @@ class Clause:
 
 CLAUSES = (
     Clause('start', 'Starting',
-           'The node is started with `--ros-args -p scenario:=<scenario>` appended to its '
-           'command line (a built-in scenario\'s name or a scenario file\'s path, the same the '
-           'plant was given; also in the environment variable `ATO_SCENARIO`), in the stack\'s '
-           'namespace (`-r __ns:=...`) when there is one. Its topics are relative names, so the '
+           'The node is started with `--ros-args -p scenario:=<scenario> -p '
+           'gradient_known:=<true|false>` appended to its command line (the scenario: a '
+           'built-in scenario\'s name or a scenario file\'s path, the same the plant was given; '
+           'also in the environment variable `ATO_SCENARIO`), in the stack\'s namespace '
+           '(`-r __ns:=...`) when there is one. Its topics are relative names, so the '
            'namespace applies to them.'),
+    Clause('knowledge', 'What the node may know',
+           'The nominal train and line of the scenario it was started for (its file, or the '
+           'built-in scenario\'s: the train\'s nominal mass, resistance, traction and '
+           'brakes, the stations, speed limits and gradients), its inputs, and nothing of the '
+           'plant\'s truth (the scenario\'s `plant:` section, a campaign\'s draw). The '
+           'parameter `gradient_known` (`bool`, default `true`) says whether it may use the '
+           'line\'s gradient profile: when it is `false` (a campaign draw that hides the '
+           'gradients from the controller, as from the suite\'s laws) a node that uses the '
+           'gradients declares the parameter and takes the line as flat; a node that uses no '
+           'gradients may ignore it. The parameters, read once at start, do not change.'),
     Clause('units', 'Units and signs',
            'SI throughout: m, m/s, m/s^2, N, s. A force is positive when it pulls the train '
            'forward (traction) and negative when it holds it back: **a braking force is '

@@ -18,7 +18,8 @@ per step, stamped with the step, when the state and the reference of that stamp 
 the same command again for a step sent again (``try_step``); a state stamped before the last
 step starts the law again (``restart``); a NaN measurement holds the last force; SIGINT or
 SIGTERM end it with 0 and nothing published after (rclpy's signal handling shuts the context
-down).
+down). It declares the ``gradient_known`` parameter and ignores it: its law uses no gradient
+profile.
 """
 
 import json
@@ -66,6 +67,11 @@ class PAtoNode(Node):
         self.declare_parameter('kv', 0.3)   # 1/s
         self.declare_parameter('kx', 0.02)  # 1/s^2
         self.declare_parameter('actuators', ['traction'])
+        # The contract's knowledge parameter: whether the line's gradients may be used. This
+        # law uses no gradient profile (no feed-forward of the grade: the speed and position
+        # feedback absorb it), so it is the same law either way: declared to say so.
+        known = self.declare_parameter('gradient_known', True).value
+        self.get_logger().info(f'gradient_known={known}: this law uses no gradient profile')
         self.expected = scenario_name(self.get_parameter('scenario').value)
         self.exit_code = 0
         self.done = False
