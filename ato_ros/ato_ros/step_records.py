@@ -207,15 +207,45 @@ class Written:
     """What a recorder has written of one namespace's step records: the stamp of the latest
     entry of each topic. The namespace's records are in the file up to the oldest of these
     (``on_disk_ns``) once the file is flushed; ``acknowledgement`` says when that has moved by
-    ``ACK_PERIOD_S`` (or back: a restarted plant begins its time again) since the last one."""
+    ``ACK_PERIOD_S`` (or back: a restarted plant begins its time again) since the last one.
+
+    The oldest of the topics written so far vouches only for those topics: the first
+    acknowledgement waits until a bundle of every publisher of the namespace's step records
+    (``publishers``, as the graph counts them) is written, or an acknowledgement made when
+    only the profile's bundles had come would let the plant run a lead past a file without its
+    state. A bundle's topics are one publisher's (each per-step topic has one publisher), so
+    the publishers heard from are the groups of topics that came in a bundle together
+    (``bundled``)."""
 
     def __init__(self, period_s: float = ACK_PERIOD_S):
         self.period_ns = int(round(period_s * 1e9))
         self.latest: dict[str, int] = {}
         self.acknowledged: int | None = None
+        self.publishers = 0  # how many publish the step records (the graph's count)
+        self._group: dict[str, str] = {}  # topic -> a topic of its publisher's bundles
 
     def wrote(self, topic: str, stamp_ns: int) -> None:
         self.latest[topic] = stamp_ns
+
+    def bundled(self, topics) -> None:
+        """A bundle of ``topics`` is written (noted until the first acknowledgement)."""
+        if self.acknowledged is not None:
+            return
+        roots = {self._root(topic) for topic in topics}
+        if roots:
+            first = roots.pop()
+            for root in roots:
+                self._group[root] = first
+
+    def _root(self, topic: str) -> str:
+        group = self._group
+        while group.setdefault(topic, topic) != topic:
+            topic = group[topic]
+        return topic
+
+    def heard_from(self) -> int:
+        """How many publishers' bundles are written (before the first acknowledgement)."""
+        return len({self._root(topic) for topic in list(self._group)})
 
     def on_disk_ns(self) -> int | None:
         return min(self.latest.values()) if self.latest else None
@@ -226,6 +256,8 @@ class Written:
         if stamp is None or (self.acknowledged is not None
                              and 0 <= stamp - self.acknowledged < self.period_ns):
             return None
+        if self.acknowledged is None and self.heard_from() < self.publishers:
+            return None  # a publisher's records are not in the file yet
         self.acknowledged = stamp
         return stamp
 

@@ -160,6 +160,7 @@ class RecorderNode(RunNodeHooks, Node):
         self.step_records = step_records
         self.bundled: set[str] = set()  # namespaces whose step records are subscribed to
         self.written: dict[str, Written] = {}  # namespace -> what is written of its records
+        self.acknowledgers: dict[str, object] = {}  # namespace -> its publisher of `recorded`
         self.step_subscriptions: list[Subscription] = []
         self.direct: set[str] = set()  # per-step topics subscribed to: left out of the records
         self.from_records: set[str] = set()  # per-step topics taken from the step records
@@ -243,6 +244,15 @@ class RecorderNode(RunNodeHooks, Node):
         step records are left out, and it is taken as it comes, each message written at its
         stamp and counted in what is written of the namespace (``Written``): the
         acknowledgements, and so the plant's lead, cover it as they cover the step records."""
+        subscription = self.create_subscription(
+            msg_type, topic, self._per_step_handler(topic, namespace), qos, raw=True)
+        self.subscribed[topic] = subscription
+        self.step_subscriptions.append(subscription)  # taken at the close too
+
+    def _per_step_handler(self, topic: str, namespace: str) -> Callable[[bytes], None]:
+        """What a per-step topic subscribed to beside the step records does with a message:
+        written at its stamp, noted in what is written of the namespace, and acknowledged
+        when that has moved on (the plant may be waiting for it, with no bundle coming)."""
         self.direct.add(topic)
         written = self.written.get(namespace)
         handler = self._handler(topic, stamped=True)
@@ -252,9 +262,8 @@ class RecorderNode(RunNodeHooks, Node):
             stamp = cdr_stamp_ns(data)
             if written is not None and stamp is not None:
                 written.wrote(topic, stamp)
-        subscription = self.create_subscription(msg_type, topic, on_message, qos, raw=True)
-        self.subscribed[topic] = subscription
-        self.step_subscriptions.append(subscription)  # taken at the close too
+                self.acknowledge(namespace)
+        return on_message
 
     def carries_records(self, namespace: str) -> bool:
         """Whether this recorder takes the step records of ``namespace``."""
@@ -323,23 +332,25 @@ class RecorderNode(RunNodeHooks, Node):
             return  # no publisher yet
         self.bundled.add(namespace)
         written = self.written[namespace] = Written()
+        # Taken as they come (an executor's subscription, not the take period's): in lockstep
+        # the plant waits for their acknowledgement (ato_ros.publishing.RecorderLead).
+        acknowledgements = self.acknowledgers[namespace] = self.create_publisher(
+            Header, namespace.rstrip('/') + '/' + RECORDED.name, qos_profile(RECORDED.qos))
         for other in list(self.takes):
             recorded = step_recorded(other)
             if recorded is None or recorded[1] != namespace:
                 continue
-            subscription, _ = self.takes.pop(other)
-            self.taker.destroy_subscription(subscription)
-            del self.subscribed[other]
-            if not self.taken_from_records(other):  # a publisher of its own: as it comes
-                self._subscribe_per_step(other, subscription.msg_type, subscription.qos_profile,
-                                         namespace)
-        # Taken as they come (an executor's subscription, not the take period's): in lockstep
-        # the plant waits for their acknowledgement (ato_ros.publishing.RecorderLead).
-        acknowledgements = self.create_publisher(
-            Header, namespace.rstrip('/') + '/' + RECORDED.name, qos_profile(RECORDED.qos))
+            subscription, _ = self.takes[other]
+            if self.taken_from_records(other):
+                del self.takes[other], self.subscribed[other]
+                self.taker.destroy_subscription(subscription)
+            else:
+                # a publisher of its own (an ATO node outside the suite): the subscription is
+                # kept, or what it published before the new one matched would be lost
+                self.takes[other] = (subscription, self._per_step_handler(other, namespace))
 
         def on_records(data: bytes) -> None:
-            self._on_step_records(data, written, acknowledgements)
+            self._on_step_records(data, written, topic)
         records = self.create_subscription(STEP_RECORDS_MSG, topic, on_records,
                                            subscription_qos(offered), raw=True)
         self.step_subscriptions.append(records)
@@ -349,11 +360,11 @@ class RecorderNode(RunNodeHooks, Node):
                                f'{acknowledgements.topic_name}')
 
     # --- the step records -----------------------------------------------------------------
-    def _on_step_records(self, data: bytes, written: Written, acknowledgements) -> None:
-        """Every message of a bundle under its own topic, at the log time the node gave it
-        (``--log-time receipt``: on receipt); then, once what is written of the namespace's
-        records has moved on by ``ACK_PERIOD_S``, the file flushed and that acknowledged
-        (``recorded``)."""
+    def _on_step_records(self, data: bytes, written: Written, topic: str) -> None:
+        """Every message of a bundle (of step records ``topic``) under its own topic, at the
+        log time the node gave it (``--log-time receipt``: on receipt); then, once what is
+        written of the namespace's records has moved on by ``ACK_PERIOD_S``, the file flushed
+        and that acknowledged (``recorded``)."""
         if self.finished:
             return
         try:
@@ -371,11 +382,21 @@ class RecorderNode(RunNodeHooks, Node):
             messages = self._recorded_entries(entries, written)
         if not self._write_entries(messages):
             return
-        stamp_ns = written.acknowledgement()
+        if written.acknowledged is None:  # the first waits for every publisher's records
+            written.bundled({entry[0] for entry in entries})
+            written.publishers = self.count_publishers(topic)
+        self.acknowledge(namespace_of(topic, 'step_records'))
+
+    def acknowledge(self, namespace: str | None) -> None:
+        """Once what is written of ``namespace``'s step records has moved on by
+        ``ACK_PERIOD_S`` (``Written.acknowledgement``): the file flushed, and that stamp
+        acknowledged on ``recorded`` in the namespace."""
+        written = self.written.get(namespace) if namespace is not None else None
+        stamp_ns = written.acknowledgement() if written is not None else None
         if stamp_ns is not None:
             self.flush()
             if not self.finished:  # a write error stops the recording: nothing to vouch for
-                acknowledgements.publish(encode_header(stamp_ns, self.name))
+                self.acknowledgers[namespace].publish(encode_header(stamp_ns, self.name))
 
     def plain(self, entries) -> bool:
         """Whether every entry of ``entries`` is written as it is: every topic recorded (and
