@@ -89,46 +89,56 @@ def encode_bundle(names: list[str], counts: list[int], body: bytes) -> bytes:
 def decode_bundle(data: bytes) -> list[tuple[str, int, int, bytes]]:
     """The entries of a bundle: (topic, log time ns, publish time ns, message bytes) in the
     order they were published. MessageError names what does not hold."""
+    names, entries = read_bundle(data)
+    return [(names[index], log_ns, publish_ns, message)
+            for index, log_ns, publish_ns, message in entries]
+
+
+def read_bundle(data: bytes) -> tuple[list[str], list[tuple[int, int, int, bytes]]]:
+    """The topics a bundle names and its entries, (index of the topic, log time ns, publish
+    time ns, message bytes), in the order they were published: a recorder writes them with a
+    writer per topic looked up once per bundle. MessageError names what does not hold."""
     if data[:4] != _HEADER:
         raise MessageError(f'step records: encapsulation {data[:4].hex()} is not the CDR_LE '
                            'the loop nodes write')
-    view = memoryview(data)[4:]
+    data = bytes(data)
     try:
-        (count,), at = _U32.unpack_from(view, 0), 4
+        (count,), at = _U32.unpack_from(data, 4), 8
         names, sizes = [], []
         for _ in range(count):
-            (length,) = _U32.unpack_from(view, at)
+            (length,) = _U32.unpack_from(data, at)
             at += 4
-            names.append(bytes(view[at:at + length - 1]).decode())
+            names.append(data[at:at + length - 1].decode())
             at += length + (-length % 4)
-            size, _stride = struct.unpack_from('<II', view, at)
+            size, _stride = struct.unpack_from('<II', data, at)
             sizes.append(size)
             at += 8
-        (offset,), (length,) = _U32.unpack_from(view, at), _U32.unpack_from(view, at + 4)
+        (offset,), (length,) = _U32.unpack_from(data, at), _U32.unpack_from(data, at + 4)
         at += 8
     except (struct.error, UnicodeDecodeError) as error:
         raise MessageError(f'step records: the layout does not parse ({error})') from None
-    if offset != 0 or at + length > len(view):
+    end = at + length
+    if offset != 0 or end > len(data):
         raise MessageError(f'step records: data_offset {offset}, {length} bytes of data where '
-                           f'{len(view) - at} remain')
-    body = view[at:at + length]
-    entries, at, seen = [], 0, [0] * len(names)
-    while at < length:
-        if at + ENTRY.size > length:
-            raise MessageError(f'step records: {length - at} bytes left where an entry header '
+                           f'{len(data) - at} remain')
+    entries: list[tuple[int, int, int, bytes]] = []
+    append, unpack, topics, seen = entries.append, ENTRY.unpack_from, len(names), [0] * len(names)
+    while at < end:
+        if at + ENTRY.size > end:
+            raise MessageError(f'step records: {end - at} bytes left where an entry header '
                                'needs 24')
-        index, size, log_ns, publish_ns = ENTRY.unpack_from(body, at)
+        index, size, log_ns, publish_ns = unpack(data, at)
         at += ENTRY.size
-        if index >= len(names) or at + size > length:
-            raise MessageError(f'step records: entry of topic {index} of {len(names)} and '
-                               f'{size} bytes where {length - at} remain')
-        entries.append((names[index], log_ns, publish_ns, bytes(body[at:at + size])))
+        if index >= topics or at + size > end:
+            raise MessageError(f'step records: entry of topic {index} of {topics} and '
+                               f'{size} bytes where {end - at} remain')
+        append((index, log_ns, publish_ns, data[at:at + size]))
         seen[index] += 1
         at += size + (-size % 8)
     if seen != sizes:
         raise MessageError(f'step records: the layout counts {sizes} messages per topic, the '
                            f'data holds {seen}')
-    return entries
+    return names, entries
 
 
 def namespace_of(topic: str, key: str) -> str | None:

@@ -71,7 +71,7 @@ from ato_common.validation import ConfigError
 from ato_ros.lifecycle import RunNodeHooks, freeze_startup_objects, run_node
 from ato_ros.messages import qos_profile
 from ato_ros.publishing import local_step_recorder
-from ato_ros.step_records import LEAD_S, Written, decode_bundle, namespace_of, step_recorded
+from ato_ros.step_records import LEAD_S, Written, namespace_of, read_bundle, step_recorded
 from ato_ros.wire import MessageError, encode_header
 from recorder.bag import (
     DEFAULT_FLUSH_PERIOD_LOG_S,
@@ -88,7 +88,7 @@ DEFAULT_TAKE_PERIOD_S = 0.05
 #: at most this many messages of one topic per take (the rest at the next)
 MAX_TAKES = 10_000
 CLOCK = TOPICS['clock'].name
-_TOPIC, _STAMP = itemgetter(0), itemgetter(1)
+_TOPIC = itemgetter(0)
 #: how often the recorder asks again who publishes a per-step topic it takes from the step
 #: records (a publisher of its own joining mid-run), in discovery periods
 RECHECK_DISCOVERIES = 10
@@ -368,24 +368,43 @@ class RecorderNode(RunNodeHooks, Node):
         if self.finished:
             return
         try:
-            entries = decode_bundle(data)
+            names, entries = read_bundle(data)
         except MessageError as error:
             self.get_logger().warning(f'step records not read: {error}',
                                       throttle_duration_sec=1.0)
             return
-        if self.plain(entries):
-            # the common case, without a Python step per message beyond the writer's
-            self.clock_from(entries)
-            messages = [(topic, stamp_ns, message) for topic, stamp_ns, _, message in entries]
-            written.latest.update(zip(map(_TOPIC, messages), map(_STAMP, messages)))
-        else:
-            messages = self._recorded_entries(entries, written)
-        if not self._write_entries(messages):
+        if self.plain(names):
+            # the common case: no Python object per message beyond the bundle's entries
+            if not self._write_bundle(names, entries, written):
+                return
+        elif not self._write_entries(self._recorded_entries(
+                [(names[i], log_ns, publish_ns, message)
+                 for i, log_ns, publish_ns, message in entries], written)):
             return
         if written.acknowledged is None:  # the first waits for every publisher's records
-            written.bundled({entry[0] for entry in entries})
+            written.bundled(names)
             written.publishers = self.count_publishers(topic)
         self.acknowledge(namespace_of(topic, 'step_records'))
+
+    def _write_bundle(self, names: list[str], entries, written: Written) -> bool:
+        """A bundle's entries written as they are, each topic's latest stamp noted in
+        ``written`` (and ``--sim-time``'s from the last /clock)."""
+        try:
+            self.writer.write_indexed(names, entries)
+        except BagError as error:
+            self.stop_on_error(error)
+            return False
+        self.received += len(entries)
+        latest, left = written.latest, set(range(len(names)))
+        for index, stamp_ns, *_ in reversed(entries):
+            if index in left:
+                left.discard(index)
+                latest[names[index]] = stamp_ns
+                if not left:
+                    break
+        if self.sim_time and self.clock_topic in names:
+            self.sim_now_ns = latest[self.clock_topic]
+        return True
 
     def acknowledge(self, namespace: str | None) -> None:
         """Once what is written of ``namespace``'s step records has moved on by
@@ -398,11 +417,11 @@ class RecorderNode(RunNodeHooks, Node):
             if not self.finished:  # a write error stops the recording: nothing to vouch for
                 self.acknowledgers[namespace].publish(encode_header(stamp_ns, self.name))
 
-    def plain(self, entries) -> bool:
-        """Whether every entry of ``entries`` is written as it is: every topic recorded (and
-        known to the bag), none subscribed to, each at its stamp, no /clock to read."""
+    def plain(self, topics) -> bool:
+        """Whether every entry of step records of ``topics`` is written as it is: every topic
+        recorded (and known to the bag), none subscribed to, each at its stamp."""
         return self.wanted is None and not self.direct and self.log_time == 'stamp' and \
-            self.writer.topics.keys() >= set(map(_TOPIC, entries))
+            self.writer.topics.keys() >= set(topics)
 
     def clock_from(self, entries) -> None:
         """``--sim-time``: the recorder's time from the last /clock among the entries of step
@@ -451,7 +470,7 @@ class RecorderNode(RunNodeHooks, Node):
         is more than the lead behind (``recorder.background``)."""
         if self.finished or not batch:
             return
-        if self.plain(batch):
+        if self.plain(map(_TOPIC, batch)):
             self.clock_from(batch)
             messages = batch
         else:
