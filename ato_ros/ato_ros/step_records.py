@@ -231,6 +231,7 @@ class Written:
         self.period_ns = int(round(period_s * 1e9))
         self.latest: dict[str, int] = {}
         self.acknowledged: int | None = None
+        self.flushed_ns: int | None = None  # on_disk_ns() when the file was last flushed
         self.publishers = 0  # how many publish the step records (the graph's count)
         self._group: dict[str, str] = {}  # topic -> a topic of its publisher's bundles
 
@@ -259,6 +260,15 @@ class Written:
 
     def on_disk_ns(self) -> int | None:
         return min(self.latest.values()) if self.latest else None
+
+    def flushed(self) -> None:
+        """The file was flushed: everything written so far is on disk."""
+        self.flushed_ns = self.on_disk_ns()
+
+    def needs_flush(self, stamp_ns: int) -> bool:
+        """Whether the file must be flushed before ``stamp_ns`` is acknowledged (not if a
+        flush since the records up to it were written put them on disk already)."""
+        return self.flushed_ns is None or stamp_ns > self.flushed_ns
 
     def acknowledgement(self) -> int | None:
         """The stamp to acknowledge now (then counted as acknowledged), else None."""

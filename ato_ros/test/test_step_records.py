@@ -183,6 +183,16 @@ def test_the_first_acknowledgement_waits_for_a_bundle_of_every_publisher():
     assert written.acknowledgement() == 3 * S
 
 
+def test_an_acknowledgement_asks_for_a_flush_unless_one_came_after_its_records():
+    written = Written(period_s=0.2)
+    written.wrote('/clock', 1 * S)
+    assert written.needs_flush(1 * S)  # never flushed
+    written.flushed()  # e.g. the writer closed its chunk at the end of a write
+    assert not written.needs_flush(1 * S)
+    written.wrote('/clock', 2 * S)
+    assert written.needs_flush(2 * S) and not written.needs_flush(1 * S)
+
+
 def test_the_plant_is_held_past_the_lead_of_the_oldest_recorder_only():
     acks = Acknowledgements(lead_ns=900_000_000)
     assert acks.behind(100 * S) is None  # nobody acknowledges: nothing held

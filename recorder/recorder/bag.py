@@ -228,6 +228,7 @@ class BagWriter:
         self._last_flush = time.monotonic()
         self._last_flush_log_ns: int | None = None
         self.flushed_ns: int | None = None  # the newest log time on disk (flushed)
+        self.flushes = 0  # how often the file was flushed: everything written before is on disk
         # As rosbag2 does: the bag's metadata at the open (no topic yet, the custom data), on
         # disk at once, so that a killed recording keeps its custom data.
         self._write_record(opening_metadata(self.path.name, self.custom_data))
@@ -335,6 +336,7 @@ class BagWriter:
         except (RuntimeError, OSError) as error:
             raise self._failed(error) from None
         self._last_flush = time.monotonic() if now is None else now
+        self.flushes += 1
         if self.start_ns is not None:
             self._last_flush_log_ns = self.flushed_ns = self.end_ns
 

@@ -43,8 +43,9 @@ thread of its own (``recorder.background``), with the same back-pressure.
 SIGINT and SIGTERM close the file properly; a SIGKILL loses at most the last take and flush
 periods: chunks are flushed every ``--flush-period`` of wall time (0.5 s) and every
 ``--flush-period-log`` of log time (0.5 s, simulated time in a lockstep run), whichever comes
-first, and before each acknowledgement (in lockstep, what the plant's lead bounds: 1.7 s of
-simulated time by default); ``ros2 run recorder recover <bag>`` makes a valid bag of the rest.
+first, and before each acknowledgement that no flush since has covered (in lockstep, what
+the plant's lead bounds: 1.7 s of simulated time by default); ``ros2 run recorder recover
+<bag>`` makes a valid bag of the rest.
 """
 
 from __future__ import annotations
@@ -161,6 +162,7 @@ class RecorderNode(RunNodeHooks, Node):
         self.bundled: set[str] = set()  # namespaces whose step records are subscribed to
         self.written: dict[str, Written] = {}  # namespace -> what is written of its records
         self.acknowledgers: dict[str, object] = {}  # namespace -> its publisher of `recorded`
+        self.noted_flushes = 0  # the writer's count of flushes when last looked at
         self.step_subscriptions: list[Subscription] = []
         self.direct: set[str] = set()  # per-step topics subscribed to: left out of the records
         self.from_records: set[str] = set()  # per-step topics taken from the step records
@@ -402,6 +404,7 @@ class RecorderNode(RunNodeHooks, Node):
                 latest[names[index]] = stamp_ns
                 if not left:
                     break
+        self.note_flushes()  # a flush closing the write holds the entries just noted
         if self.sim_time and self.clock_topic in names:
             self.sim_now_ns = latest[self.clock_topic]
         return True
@@ -413,7 +416,8 @@ class RecorderNode(RunNodeHooks, Node):
         written = self.written.get(namespace) if namespace is not None else None
         stamp_ns = written.acknowledgement() if written is not None else None
         if stamp_ns is not None:
-            self.flush()
+            if written.needs_flush(stamp_ns):
+                self.flush()
             if not self.finished:  # a write error stops the recording: nothing to vouch for
                 self.acknowledgers[namespace].publish(encode_header(stamp_ns, self.name))
 
@@ -462,6 +466,7 @@ class RecorderNode(RunNodeHooks, Node):
             self.stop_on_error(error)
             return False
         self.received += len(messages)
+        self.note_flushes()
         return True
 
     def _on_local_records(self, batch: list[tuple[str, int, bytes]]) -> None:
@@ -558,6 +563,7 @@ class RecorderNode(RunNodeHooks, Node):
                 self.stop_on_error(error)
                 return
             self.received += 1
+            self.note_flushes()
         return on_message
 
     # --- the end --------------------------------------------------------------------------
@@ -566,6 +572,20 @@ class RecorderNode(RunNodeHooks, Node):
             self.writer.flush()
         except BagError as error:
             self.stop_on_error(error)
+            return
+        self.noted_flushes = -1  # noted below as any flush of the file
+        self.note_flushes()
+
+    def note_flushes(self) -> None:
+        """After a write or a flush: if the file was flushed since last asked (a bag writer
+        closes its chunk every flush period, within a write), everything written so far is
+        on disk, and an acknowledgement of it needs no flush of its own. A writer that flushes
+        on a thread of its own (``recorder.background``) tells nothing: each is flushed."""
+        flushes = getattr(self.writer, 'flushes', None)
+        if flushes is not None and flushes != self.noted_flushes:
+            self.noted_flushes = flushes
+            for written in self.written.values():
+                written.flushed()
 
     def stop_on_error(self, error: BagError) -> None:
         """A write error (a full disk): say what and where, stop, exit non-zero."""
