@@ -352,7 +352,7 @@ class RecorderNode(RunNodeHooks, Node):
                 self.takes[other] = (subscription, self._per_step_handler(other, namespace))
 
         def on_records(data: bytes) -> None:
-            self._on_step_records(data, written, topic)
+            self._on_step_records(data, written, topic, namespace)
         records = self.create_subscription(STEP_RECORDS_MSG, topic, on_records,
                                            subscription_qos(offered), raw=True)
         self.step_subscriptions.append(records)
@@ -362,11 +362,12 @@ class RecorderNode(RunNodeHooks, Node):
                                f'{acknowledgements.topic_name}')
 
     # --- the step records -----------------------------------------------------------------
-    def _on_step_records(self, data: bytes, written: Written, topic: str) -> None:
-        """Every message of a bundle (of step records ``topic``) under its own topic, at the
-        log time the node gave it (``--log-time receipt``: on receipt); then, once what is
-        written of the namespace's records has moved on by ``ACK_PERIOD_S``, the file flushed
-        and that acknowledged (``recorded``)."""
+    def _on_step_records(self, data: bytes, written: Written, topic: str,
+                         namespace: str) -> None:
+        """Every message of a bundle (of step records ``topic`` of ``namespace``) under its own
+        topic, at the log time the node gave it (``--log-time receipt``: on receipt); then,
+        once what is written of the namespace's records has moved on by ``ACK_PERIOD_S``, the
+        file flushed and that acknowledged (``recorded``)."""
         if self.finished:
             return
         try:
@@ -386,7 +387,7 @@ class RecorderNode(RunNodeHooks, Node):
         if written.acknowledged is None:  # the first waits for every publisher's records
             written.bundled(names)
             written.publishers = self.count_publishers(topic)
-        self.acknowledge(namespace_of(topic, 'step_records'))
+        self.acknowledge(namespace)
 
     def _write_bundle(self, names: list[str], entries, written: Written) -> bool:
         """A bundle's entries written as they are, each topic's latest stamp noted in
@@ -409,11 +410,11 @@ class RecorderNode(RunNodeHooks, Node):
             self.sim_now_ns = latest[self.clock_topic]
         return True
 
-    def acknowledge(self, namespace: str | None) -> None:
+    def acknowledge(self, namespace: str) -> None:
         """Once what is written of ``namespace``'s step records has moved on by
         ``ACK_PERIOD_S`` (``Written.acknowledgement``): the file flushed, and that stamp
         acknowledged on ``recorded`` in the namespace."""
-        written = self.written.get(namespace) if namespace is not None else None
+        written = self.written.get(namespace)
         stamp_ns = written.acknowledgement() if written is not None else None
         if stamp_ns is not None:
             if written.needs_flush(stamp_ns):
@@ -573,7 +574,6 @@ class RecorderNode(RunNodeHooks, Node):
         except BagError as error:
             self.stop_on_error(error)
             return
-        self.noted_flushes = -1  # noted below as any flush of the file
         self.note_flushes()
 
     def note_flushes(self) -> None:
