@@ -60,6 +60,7 @@ from typing import Callable
 
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.subscription import Subscription
 from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -161,7 +162,7 @@ class RecorderNode(RunNodeHooks, Node):
         self.step_records = step_records
         self.bundled: set[str] = set()  # namespaces whose step records are subscribed to
         self.written: dict[str, Written] = {}  # namespace -> what is written of its records
-        self.acknowledgers: dict[str, object] = {}  # namespace -> its publisher of `recorded`
+        self.acknowledgers: dict[str, Publisher] = {}  # namespace -> its `recorded` publisher
         self.noted_flushes = 0  # the writer's count of flushes when last looked at
         self.step_subscriptions: list[Subscription] = []
         self.direct: set[str] = set()  # per-step topics subscribed to: left out of the records
@@ -416,7 +417,7 @@ class RecorderNode(RunNodeHooks, Node):
         acknowledged on ``recorded`` in the namespace."""
         written = self.written.get(namespace)
         stamp_ns = written.acknowledgement() if written is not None else None
-        if stamp_ns is not None:
+        if written is not None and stamp_ns is not None:
             if written.needs_flush(stamp_ns):
                 self.flush()
             if not self.finished:  # a write error stops the recording: nothing to vouch for
