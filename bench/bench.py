@@ -207,7 +207,31 @@ def lockstep_section(scenario: str, domain_id: int) -> list[str]:
                   f'watching the layout\'s {len(layout_topics())} topics', watched,
                   f'{watched.count} messages to the client; {slower(zip(plain, live)):+.0f} % '
                   f'slower steady (median of the pairs; goal at most 10 %)'))
-    return lines + rows
+    verdicts = recording_verdicts(composed, composed_recorded, recorded)
+    print('\n'.join(verdicts), flush=True)
+    return lines + rows + verdicts
+
+
+#: how much slower (steady) the composed stack may run with its recorder, % (issue 31)
+COMPOSED_RECORDER_GOAL_PERCENT = 10.0
+
+
+def recording_verdicts(composed: list[GraphRun], composed_recorded: list[GraphRun],
+                       recorded: list[GraphRun]) -> list[str]:
+    """The two figures recording is accepted by, each against its goal."""
+    cost = slower(zip(composed, composed_recorded))
+    own = recorder_cpu_ms(recorded)
+
+    def met(ok: bool) -> str:
+        return 'met' if ok else 'NOT met'
+    return ['', 'What recording costs, against its goals:', '',
+            f'- composed with the recorder in its process: {cost:+.1f} % slower steady than '
+            f'without (median of {len(composed)} pairs; goal at most '
+            f'{COMPOSED_RECORDER_GOAL_PERCENT:g} %): '
+            f'{met(cost <= COMPOSED_RECORDER_GOAL_PERCENT)}',
+            f'- separate processes: the recorder\'s own CPU {own:.3f} ms per step (median of '
+            f'{len(recorded)} runs; goal at most {RECORDER_CPU_GOAL_MS:g} ms): '
+            f'{met(own <= RECORDER_CPU_GOAL_MS)}']
 
 
 def slower(pairs) -> float:

@@ -175,8 +175,10 @@ class StepRecorder:
         self.names: dict[object, str] = {}  # publisher -> its topic's full name
         self.local: Callable[[list], None] | None = None
         self.batch: list[tuple[str, int, bytes]] = []
-        self.batch_first_ns = 0  # the stamp of the batch's first entry (set with it)
-        self.batch_first_wall = 0.0
+        # when the batch is due: its first entry's stamp plus a bundle's period, or its
+        # wall clock plus a bundle's wall period (set with the first entry)
+        self.batch_due_ns = 0
+        self.batch_due_wall = 0.0
         self.batch_period_ns = self.bundle.period_ns
 
     def attach(self, hand_off: Callable[[list], None]) -> None:
@@ -187,7 +189,7 @@ class StepRecorder:
     def begin_step(self) -> bool:
         """Whether a recorder records, asked when a bundle begins (a recorder that leaves while
         one is under way is sent the rest of it all the same); without one, nothing is kept."""
-        if not len(self.bundle):
+        if not self.bundle.names:
             self.bundling = self.recorders() > 0
             self.active = self.bundling or self.local is not None
         return self.active
@@ -202,16 +204,17 @@ class StepRecorder:
             if self.bundling:
                 self.bundle.add(name, log_time_ns, data)
             if self.local is not None:
-                if not self.batch:
-                    self.batch_first_ns, self.batch_first_wall = log_time_ns, time.monotonic()
-                self.batch.append((name, log_time_ns, data))
+                batch = self.batch
+                if not batch:
+                    self.batch_due_ns = log_time_ns + self.batch_period_ns
+                    self.batch_due_wall = time.monotonic() + self.bundle.wall_period_s
+                batch.append((name, log_time_ns, data))
 
     def end_step(self, stamp_ns: int) -> None:
-        if self.bundle.due(stamp_ns):
+        if self.bundling and self.bundle.due(stamp_ns):
             self.flush_bundle()
-        if self.batch and (stamp_ns - self.batch_first_ns >= self.batch_period_ns
-                           or time.monotonic() - self.batch_first_wall
-                           >= self.bundle.wall_period_s):
+        if self.batch and (stamp_ns >= self.batch_due_ns
+                           or time.monotonic() >= self.batch_due_wall):
             self.hand_off()
 
     def flush_bundle(self) -> None:

@@ -89,46 +89,56 @@ def encode_bundle(names: list[str], counts: list[int], body: bytes) -> bytes:
 def decode_bundle(data: bytes) -> list[tuple[str, int, int, bytes]]:
     """The entries of a bundle: (topic, log time ns, publish time ns, message bytes) in the
     order they were published. MessageError names what does not hold."""
+    names, entries = read_bundle(data)
+    return [(names[index], log_ns, publish_ns, message)
+            for index, log_ns, publish_ns, message in entries]
+
+
+def read_bundle(data: bytes) -> tuple[list[str], list[tuple[int, int, int, bytes]]]:
+    """The topics a bundle names and its entries, (index of the topic, log time ns, publish
+    time ns, message bytes), in the order they were published: a recorder writes them with a
+    writer per topic looked up once per bundle. MessageError names what does not hold."""
     if data[:4] != _HEADER:
         raise MessageError(f'step records: encapsulation {data[:4].hex()} is not the CDR_LE '
                            'the loop nodes write')
-    view = memoryview(data)[4:]
+    data = bytes(data)
     try:
-        (count,), at = _U32.unpack_from(view, 0), 4
+        (count,), at = _U32.unpack_from(data, 4), 8
         names, sizes = [], []
         for _ in range(count):
-            (length,) = _U32.unpack_from(view, at)
+            (length,) = _U32.unpack_from(data, at)
             at += 4
-            names.append(bytes(view[at:at + length - 1]).decode())
+            names.append(data[at:at + length - 1].decode())
             at += length + (-length % 4)
-            size, _stride = struct.unpack_from('<II', view, at)
+            size, _stride = struct.unpack_from('<II', data, at)
             sizes.append(size)
             at += 8
-        (offset,), (length,) = _U32.unpack_from(view, at), _U32.unpack_from(view, at + 4)
+        (offset,), (length,) = _U32.unpack_from(data, at), _U32.unpack_from(data, at + 4)
         at += 8
     except (struct.error, UnicodeDecodeError) as error:
         raise MessageError(f'step records: the layout does not parse ({error})') from None
-    if offset != 0 or at + length > len(view):
+    end = at + length
+    if offset != 0 or end > len(data):
         raise MessageError(f'step records: data_offset {offset}, {length} bytes of data where '
-                           f'{len(view) - at} remain')
-    body = view[at:at + length]
-    entries, at, seen = [], 0, [0] * len(names)
-    while at < length:
-        if at + ENTRY.size > length:
-            raise MessageError(f'step records: {length - at} bytes left where an entry header '
+                           f'{len(data) - at} remain')
+    entries: list[tuple[int, int, int, bytes]] = []
+    append, unpack, topics, seen = entries.append, ENTRY.unpack_from, len(names), [0] * len(names)
+    while at < end:
+        if at + ENTRY.size > end:
+            raise MessageError(f'step records: {end - at} bytes left where an entry header '
                                'needs 24')
-        index, size, log_ns, publish_ns = ENTRY.unpack_from(body, at)
+        index, size, log_ns, publish_ns = unpack(data, at)
         at += ENTRY.size
-        if index >= len(names) or at + size > length:
-            raise MessageError(f'step records: entry of topic {index} of {len(names)} and '
-                               f'{size} bytes where {length - at} remain')
-        entries.append((names[index], log_ns, publish_ns, bytes(body[at:at + size])))
+        if index >= topics or at + size > end:
+            raise MessageError(f'step records: entry of topic {index} of {topics} and '
+                               f'{size} bytes where {end - at} remain')
+        append((index, log_ns, publish_ns, data[at:at + size]))
         seen[index] += 1
         at += size + (-size % 8)
     if seen != sizes:
         raise MessageError(f'step records: the layout counts {sizes} messages per topic, the '
                            f'data holds {seen}')
-    return entries
+    return names, entries
 
 
 def namespace_of(topic: str, key: str) -> str | None:
@@ -207,18 +217,58 @@ class Written:
     """What a recorder has written of one namespace's step records: the stamp of the latest
     entry of each topic. The namespace's records are in the file up to the oldest of these
     (``on_disk_ns``) once the file is flushed; ``acknowledgement`` says when that has moved by
-    ``ACK_PERIOD_S`` (or back: a restarted plant begins its time again) since the last one."""
+    ``ACK_PERIOD_S`` (or back: a restarted plant begins its time again) since the last one.
+
+    The oldest of the topics written so far vouches only for those topics: the first
+    acknowledgement waits until a bundle of every publisher of the namespace's step records
+    (``publishers``, as the graph counts them) is written, or an acknowledgement made when
+    only the profile's bundles had come would let the plant run a lead past a file without its
+    state. A bundle's topics are one publisher's (each per-step topic has one publisher), so
+    the publishers heard from are the groups of topics that came in a bundle together
+    (``bundled``)."""
 
     def __init__(self, period_s: float = ACK_PERIOD_S):
         self.period_ns = int(round(period_s * 1e9))
         self.latest: dict[str, int] = {}
         self.acknowledged: int | None = None
+        self.flushed_ns: int | None = None  # on_disk_ns() when the file was last flushed
+        self.publishers = 0  # how many publish the step records (the graph's count)
+        self._group: dict[str, str] = {}  # topic -> a topic of its publisher's bundles
 
     def wrote(self, topic: str, stamp_ns: int) -> None:
         self.latest[topic] = stamp_ns
 
+    def bundled(self, topics) -> None:
+        """A bundle of ``topics`` is written (noted until the first acknowledgement)."""
+        if self.acknowledged is not None:
+            return
+        roots = {self._root(topic) for topic in topics}
+        if roots:
+            first = roots.pop()
+            for root in roots:
+                self._group[root] = first
+
+    def _root(self, topic: str) -> str:
+        group = self._group
+        while group.setdefault(topic, topic) != topic:
+            topic = group[topic]
+        return topic
+
+    def heard_from(self) -> int:
+        """How many publishers' bundles are written (before the first acknowledgement)."""
+        return len({self._root(topic) for topic in list(self._group)})
+
     def on_disk_ns(self) -> int | None:
         return min(self.latest.values()) if self.latest else None
+
+    def flushed(self) -> None:
+        """The file was flushed: everything written so far is on disk."""
+        self.flushed_ns = self.on_disk_ns()
+
+    def needs_flush(self, stamp_ns: int) -> bool:
+        """Whether the file must be flushed before ``stamp_ns`` is acknowledged (not if a
+        flush since the records up to it were written put them on disk already)."""
+        return self.flushed_ns is None or stamp_ns > self.flushed_ns
 
     def acknowledgement(self) -> int | None:
         """The stamp to acknowledge now (then counted as acknowledged), else None."""
@@ -226,6 +276,8 @@ class Written:
         if stamp is None or (self.acknowledged is not None
                              and 0 <= stamp - self.acknowledged < self.period_ns):
             return None
+        if self.acknowledged is None and self.heard_from() < self.publishers:
+            return None  # a publisher's records are not in the file yet
         self.acknowledged = stamp
         return stamp
 

@@ -159,6 +159,40 @@ def test_an_acknowledgement_comes_once_the_oldest_moved_on_by_its_period():
     assert written.acknowledgement() == 100_000_000
 
 
+def test_the_first_acknowledgement_waits_for_a_bundle_of_every_publisher():
+    """Issue 31: the profile's bundles come first; an acknowledgement of them alone would
+    vouch for a file without the plant's state. The first waits until every publisher of the
+    step records (the graph's count) has a bundle written; later ones do not ask again."""
+    written = Written(period_s=0.2)
+    written.publishers = 3
+    profile = ('/ato/reference', '/ato/distance_to_go', '/ato/permitted_speed')
+    for k in range(5):
+        for topic in profile:
+            written.wrote(topic, k * S)
+        written.bundled(profile[:1 + k % 3])  # one publisher's topics, not always all
+        assert written.acknowledgement() is None, k
+    written.wrote('/ato/command', 2 * S)
+    written.bundled(['/ato/command'])
+    assert written.acknowledgement() is None  # the plant's state is not in the file yet
+    written.wrote('/train/state', 3 * S)
+    written.wrote('/clock', 3 * S)
+    written.bundled(['/train/state', '/clock'])
+    assert written.acknowledgement() == 2 * S
+    written.publishers = 4  # a publisher joining later holds nothing
+    written.wrote('/ato/command', 5 * S)
+    assert written.acknowledgement() == 3 * S
+
+
+def test_an_acknowledgement_asks_for_a_flush_unless_one_came_after_its_records():
+    written = Written(period_s=0.2)
+    written.wrote('/clock', 1 * S)
+    assert written.needs_flush(1 * S)  # never flushed
+    written.flushed()  # e.g. the writer closed its chunk at the end of a write
+    assert not written.needs_flush(1 * S)
+    written.wrote('/clock', 2 * S)
+    assert written.needs_flush(2 * S) and not written.needs_flush(1 * S)
+
+
 def test_the_plant_is_held_past_the_lead_of_the_oldest_recorder_only():
     acks = Acknowledgements(lead_ns=900_000_000)
     assert acks.behind(100 * S) is None  # nobody acknowledges: nothing held

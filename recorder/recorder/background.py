@@ -76,6 +76,13 @@ class BackgroundWriter:
                 self.handed_ns = newest_ns
             self._hold(newest_ns, self.first_ns)
 
+    def write_indexed(self, names: list[str], entries: list) -> None:
+        """The entries of a bundle of step records (``BagWriter.write_indexed``) from another
+        process: queued as ``write_many`` (no back-pressure: the plant of those waits for this
+        recorder's acknowledgements)."""
+        self.write_many([(names[index], log_time_ns, data)
+                         for index, log_time_ns, _, data in entries])
+
     def _on_disk_ns(self, first_ns: int) -> int:
         return first_ns if self.flushed_ns is None else self.flushed_ns
 

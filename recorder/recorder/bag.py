@@ -228,6 +228,7 @@ class BagWriter:
         self._last_flush = time.monotonic()
         self._last_flush_log_ns: int | None = None
         self.flushed_ns: int | None = None  # the newest log time on disk (flushed)
+        self.flushes = 0  # how often the file was flushed: everything written before is on disk
         # As rosbag2 does: the bag's metadata at the open (no topic yet, the custom data), on
         # disk at once, so that a killed recording keeps its custom data.
         self._write_record(opening_metadata(self.path.name, self.custom_data))
@@ -294,7 +295,28 @@ class BagWriter:
             return
         for topic, count in Counter(map(_TOPIC, messages)).items():
             topics[topic].message_count += count
-        first, last = min(map(_LOG_TIME, messages)), max(map(_LOG_TIME, messages))
+        self._wrote(min(map(_LOG_TIME, messages)), max(map(_LOG_TIME, messages)))
+
+    def write_indexed(self, names: Sequence[str],
+                      entries: Sequence[tuple[int, int, int, bytes]]) -> None:
+        """Add the entries of a bundle of step records (``ato_ros.step_records.read_bundle``:
+        the index of the topic in ``names``, log time ns, publish time ns, bytes), in order:
+        as ``write_many``, with the writer of each topic looked up once."""
+        if self.failed:
+            raise BagError(f'{self.path}: the recording stopped after a write error')
+        if not entries:
+            return
+        logs = [self._log[name] for name in names]
+        for index, log_time_ns, _, data in entries:
+            logs[index](data, log_time_ns)
+        topics = self.topics
+        for index, count in Counter(map(_TOPIC, entries)).items():
+            topics[names[index]].message_count += count
+        self._wrote(min(map(_LOG_TIME, entries)), max(map(_LOG_TIME, entries)))
+
+    def _wrote(self, first: int, last: int) -> None:
+        """Messages from log time ``first`` to ``last`` were added: the bag's span, and the
+        chunk closed if a flush period has passed."""
         start = first if self.start_ns is None else min(self.start_ns, first)
         end = self.end_ns = max(self.end_ns, last)
         self.start_ns = start
@@ -314,6 +336,7 @@ class BagWriter:
         except (RuntimeError, OSError) as error:
             raise self._failed(error) from None
         self._last_flush = time.monotonic() if now is None else now
+        self.flushes += 1
         if self.start_ns is not None:
             self._last_flush_log_ns = self.flushed_ns = self.end_ns
 

@@ -43,8 +43,9 @@ thread of its own (``recorder.background``), with the same back-pressure.
 SIGINT and SIGTERM close the file properly; a SIGKILL loses at most the last take and flush
 periods: chunks are flushed every ``--flush-period`` of wall time (0.5 s) and every
 ``--flush-period-log`` of log time (0.5 s, simulated time in a lockstep run), whichever comes
-first, and before each acknowledgement (in lockstep, what the plant's lead bounds: 1.7 s of
-simulated time by default); ``ros2 run recorder recover <bag>`` makes a valid bag of the rest.
+first, and before each acknowledgement that no flush since has covered (in lockstep, what
+the plant's lead bounds: 1.7 s of simulated time by default); ``ros2 run recorder recover
+<bag>`` makes a valid bag of the rest.
 """
 
 from __future__ import annotations
@@ -59,6 +60,7 @@ from typing import Callable
 
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.subscription import Subscription
 from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -71,7 +73,7 @@ from ato_common.validation import ConfigError
 from ato_ros.lifecycle import RunNodeHooks, freeze_startup_objects, run_node
 from ato_ros.messages import qos_profile
 from ato_ros.publishing import local_step_recorder
-from ato_ros.step_records import LEAD_S, Written, decode_bundle, namespace_of, step_recorded
+from ato_ros.step_records import LEAD_S, Written, namespace_of, read_bundle, step_recorded
 from ato_ros.wire import MessageError, encode_header
 from recorder.bag import (
     DEFAULT_FLUSH_PERIOD_LOG_S,
@@ -88,7 +90,7 @@ DEFAULT_TAKE_PERIOD_S = 0.05
 #: at most this many messages of one topic per take (the rest at the next)
 MAX_TAKES = 10_000
 CLOCK = TOPICS['clock'].name
-_TOPIC, _STAMP = itemgetter(0), itemgetter(1)
+_TOPIC = itemgetter(0)
 #: how often the recorder asks again who publishes a per-step topic it takes from the step
 #: records (a publisher of its own joining mid-run), in discovery periods
 RECHECK_DISCOVERIES = 10
@@ -160,6 +162,8 @@ class RecorderNode(RunNodeHooks, Node):
         self.step_records = step_records
         self.bundled: set[str] = set()  # namespaces whose step records are subscribed to
         self.written: dict[str, Written] = {}  # namespace -> what is written of its records
+        self.acknowledgers: dict[str, Publisher] = {}  # namespace -> its `recorded` publisher
+        self.noted_flushes = 0  # the writer's count of flushes when last looked at
         self.step_subscriptions: list[Subscription] = []
         self.direct: set[str] = set()  # per-step topics subscribed to: left out of the records
         self.from_records: set[str] = set()  # per-step topics taken from the step records
@@ -243,6 +247,15 @@ class RecorderNode(RunNodeHooks, Node):
         step records are left out, and it is taken as it comes, each message written at its
         stamp and counted in what is written of the namespace (``Written``): the
         acknowledgements, and so the plant's lead, cover it as they cover the step records."""
+        subscription = self.create_subscription(
+            msg_type, topic, self._per_step_handler(topic, namespace), qos, raw=True)
+        self.subscribed[topic] = subscription
+        self.step_subscriptions.append(subscription)  # taken at the close too
+
+    def _per_step_handler(self, topic: str, namespace: str) -> Callable[[bytes], None]:
+        """What a per-step topic subscribed to beside the step records does with a message:
+        written at its stamp, noted in what is written of the namespace, and acknowledged
+        when that has moved on (the plant may be waiting for it, with no bundle coming)."""
         self.direct.add(topic)
         written = self.written.get(namespace)
         handler = self._handler(topic, stamped=True)
@@ -252,9 +265,8 @@ class RecorderNode(RunNodeHooks, Node):
             stamp = cdr_stamp_ns(data)
             if written is not None and stamp is not None:
                 written.wrote(topic, stamp)
-        subscription = self.create_subscription(msg_type, topic, on_message, qos, raw=True)
-        self.subscribed[topic] = subscription
-        self.step_subscriptions.append(subscription)  # taken at the close too
+                self.acknowledge(namespace)
+        return on_message
 
     def carries_records(self, namespace: str) -> bool:
         """Whether this recorder takes the step records of ``namespace``."""
@@ -323,23 +335,25 @@ class RecorderNode(RunNodeHooks, Node):
             return  # no publisher yet
         self.bundled.add(namespace)
         written = self.written[namespace] = Written()
+        # Taken as they come (an executor's subscription, not the take period's): in lockstep
+        # the plant waits for their acknowledgement (ato_ros.publishing.RecorderLead).
+        acknowledgements = self.acknowledgers[namespace] = self.create_publisher(
+            Header, namespace.rstrip('/') + '/' + RECORDED.name, qos_profile(RECORDED.qos))
         for other in list(self.takes):
             recorded = step_recorded(other)
             if recorded is None or recorded[1] != namespace:
                 continue
-            subscription, _ = self.takes.pop(other)
-            self.taker.destroy_subscription(subscription)
-            del self.subscribed[other]
-            if not self.taken_from_records(other):  # a publisher of its own: as it comes
-                self._subscribe_per_step(other, subscription.msg_type, subscription.qos_profile,
-                                         namespace)
-        # Taken as they come (an executor's subscription, not the take period's): in lockstep
-        # the plant waits for their acknowledgement (ato_ros.publishing.RecorderLead).
-        acknowledgements = self.create_publisher(
-            Header, namespace.rstrip('/') + '/' + RECORDED.name, qos_profile(RECORDED.qos))
+            subscription, _ = self.takes[other]
+            if self.taken_from_records(other):
+                del self.takes[other], self.subscribed[other]
+                self.taker.destroy_subscription(subscription)
+            else:
+                # a publisher of its own (an ATO node outside the suite): the subscription is
+                # kept, or what it published before the new one matched would be lost
+                self.takes[other] = (subscription, self._per_step_handler(other, namespace))
 
         def on_records(data: bytes) -> None:
-            self._on_step_records(data, written, acknowledgements)
+            self._on_step_records(data, written, topic, namespace)
         records = self.create_subscription(STEP_RECORDS_MSG, topic, on_records,
                                            subscription_qos(offered), raw=True)
         self.step_subscriptions.append(records)
@@ -349,39 +363,71 @@ class RecorderNode(RunNodeHooks, Node):
                                f'{acknowledgements.topic_name}')
 
     # --- the step records -----------------------------------------------------------------
-    def _on_step_records(self, data: bytes, written: Written, acknowledgements) -> None:
-        """Every message of a bundle under its own topic, at the log time the node gave it
-        (``--log-time receipt``: on receipt); then, once what is written of the namespace's
-        records has moved on by ``ACK_PERIOD_S``, the file flushed and that acknowledged
-        (``recorded``)."""
+    def _on_step_records(self, data: bytes, written: Written, topic: str,
+                         namespace: str) -> None:
+        """Every message of a bundle (of step records ``topic`` of ``namespace``) under its own
+        topic, at the log time the node gave it (``--log-time receipt``: on receipt); then,
+        once what is written of the namespace's records has moved on by ``ACK_PERIOD_S``, the
+        file flushed and that acknowledged (``recorded``)."""
         if self.finished:
             return
         try:
-            entries = decode_bundle(data)
+            names, entries = read_bundle(data)
         except MessageError as error:
             self.get_logger().warning(f'step records not read: {error}',
                                       throttle_duration_sec=1.0)
             return
-        if self.plain(entries):
-            # the common case, without a Python step per message beyond the writer's
-            self.clock_from(entries)
-            messages = [(topic, stamp_ns, message) for topic, stamp_ns, _, message in entries]
-            written.latest.update(zip(map(_TOPIC, messages), map(_STAMP, messages)))
-        else:
-            messages = self._recorded_entries(entries, written)
-        if not self._write_entries(messages):
+        if self.plain(names):
+            # the common case: no Python object per message beyond the bundle's entries
+            if not self._write_bundle(names, entries, written):
+                return
+        elif not self._write_entries(self._recorded_entries(
+                [(names[i], log_ns, publish_ns, message)
+                 for i, log_ns, publish_ns, message in entries], written)):
             return
-        stamp_ns = written.acknowledgement()
-        if stamp_ns is not None:
-            self.flush()
-            if not self.finished:  # a write error stops the recording: nothing to vouch for
-                acknowledgements.publish(encode_header(stamp_ns, self.name))
+        if written.acknowledged is None:  # the first waits for every publisher's records
+            written.bundled(names)
+            written.publishers = self.count_publishers(topic)
+        self.acknowledge(namespace)
 
-    def plain(self, entries) -> bool:
-        """Whether every entry of ``entries`` is written as it is: every topic recorded (and
-        known to the bag), none subscribed to, each at its stamp, no /clock to read."""
+    def _write_bundle(self, names: list[str], entries, written: Written) -> bool:
+        """A bundle's entries written as they are, each topic's latest stamp noted in
+        ``written`` (and ``--sim-time``'s from the last /clock)."""
+        try:
+            self.writer.write_indexed(names, entries)
+        except BagError as error:
+            self.stop_on_error(error)
+            return False
+        self.received += len(entries)
+        latest, left = written.latest, set(range(len(names)))
+        for index, stamp_ns, *_ in reversed(entries):
+            if index in left:
+                left.discard(index)
+                latest[names[index]] = stamp_ns
+                if not left:
+                    break
+        self.note_flushes()  # a flush closing the write holds the entries just noted
+        if self.sim_time and self.clock_topic in names:
+            self.sim_now_ns = latest[self.clock_topic]
+        return True
+
+    def acknowledge(self, namespace: str) -> None:
+        """Once what is written of ``namespace``'s step records has moved on by
+        ``ACK_PERIOD_S`` (``Written.acknowledgement``): the file flushed, and that stamp
+        acknowledged on ``recorded`` in the namespace."""
+        written = self.written.get(namespace)
+        stamp_ns = written.acknowledgement() if written is not None else None
+        if written is not None and stamp_ns is not None:
+            if written.needs_flush(stamp_ns):
+                self.flush()
+            if not self.finished:  # a write error stops the recording: nothing to vouch for
+                self.acknowledgers[namespace].publish(encode_header(stamp_ns, self.name))
+
+    def plain(self, topics) -> bool:
+        """Whether every entry of step records of ``topics`` is written as it is: every topic
+        recorded (and known to the bag), none subscribed to, each at its stamp."""
         return self.wanted is None and not self.direct and self.log_time == 'stamp' and \
-            self.writer.topics.keys() >= set(map(_TOPIC, entries))
+            self.writer.topics.keys() >= set(topics)
 
     def clock_from(self, entries) -> None:
         """``--sim-time``: the recorder's time from the last /clock among the entries of step
@@ -422,6 +468,7 @@ class RecorderNode(RunNodeHooks, Node):
             self.stop_on_error(error)
             return False
         self.received += len(messages)
+        self.note_flushes()
         return True
 
     def _on_local_records(self, batch: list[tuple[str, int, bytes]]) -> None:
@@ -430,7 +477,7 @@ class RecorderNode(RunNodeHooks, Node):
         is more than the lead behind (``recorder.background``)."""
         if self.finished or not batch:
             return
-        if self.plain(batch):
+        if self.plain(map(_TOPIC, batch)):
             self.clock_from(batch)
             messages = batch
         else:
@@ -518,6 +565,7 @@ class RecorderNode(RunNodeHooks, Node):
                 self.stop_on_error(error)
                 return
             self.received += 1
+            self.note_flushes()
         return on_message
 
     # --- the end --------------------------------------------------------------------------
@@ -526,6 +574,19 @@ class RecorderNode(RunNodeHooks, Node):
             self.writer.flush()
         except BagError as error:
             self.stop_on_error(error)
+            return
+        self.note_flushes()
+
+    def note_flushes(self) -> None:
+        """After a write or a flush: if the file was flushed since last asked (a bag writer
+        closes its chunk every flush period, within a write), everything written so far is
+        on disk, and an acknowledgement of it needs no flush of its own. A writer that flushes
+        on a thread of its own (``recorder.background``) tells nothing: each is flushed."""
+        flushes = getattr(self.writer, 'flushes', None)
+        if flushes is not None and flushes != self.noted_flushes:
+            self.noted_flushes = flushes
+            for written in self.written.values():
+                written.flushed()
 
     def stop_on_error(self, error: BagError) -> None:
         """A write error (a full disk): say what and where, stop, exit non-zero."""

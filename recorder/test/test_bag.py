@@ -69,6 +69,30 @@ def test_round_trip_with_the_mcap_ros2_decoder(tmp_path):
     assert raw == [state_bytes(k) for k in range(100)]
 
 
+def test_a_bundle_of_step_records_is_written_as_its_messages_one_by_one(tmp_path):
+    """write_indexed (a bundle's entries, the recorder's common case) writes the bag that
+    write_many writes of the same messages."""
+    from ato_ros.step_records import Bundle, read_bundle
+    bundle = Bundle(period_s=1e9, wall_period_s=1e9)
+    messages = [(topic, k * 100_000_000, state_bytes(k + offset)) for k in range(20)
+                for topic, offset in (('/train/state', 0), ('/train/state/measured', 50))]
+    for message in messages:
+        bundle.add(*message)
+    bags = []
+    for name, write in (('indexed', lambda w: w.write_indexed(*read_bundle(bundle.take()))),
+                        ('many', lambda w: w.write_many(messages))):
+        writer = BagWriter(tmp_path / name)
+        for topic in ('/train/state/measured', '/train/state'):
+            writer.add_topic(topic, STATE_TYPE, offered_profiles([QoSProfile(depth=10)]))
+        write(writer)
+        info = writer.close()
+        bags.append(([(m.topic, m.log_time_ns, m.data) for m in read_messages(tmp_path / name)],
+                     {t: i.message_count for t, i in info.topics.items()},
+                     (info.start_ns, info.end_ns)))
+    assert bags[0] == bags[1]
+    assert bags[0][1] == {'/train/state': 20, '/train/state/measured': 20}
+
+
 def test_the_folder_is_a_rosbag2_bag_that_rosbags_reads(tmp_path):
     write_bag(tmp_path / 'run').close()
     metadata = yaml.safe_load((tmp_path / 'run' / 'metadata.yaml').read_text())
