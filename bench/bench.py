@@ -50,9 +50,10 @@ from pathlib import Path
 import numpy as np
 
 from ato_bringup.runner import STEADY_WINDOW, prepare, process_cpu_s, run_lockstep
-from ato_bringup.stack import RUN_DIAGNOSTICS_PERIOD_S, StackConfig, executable_path
+from ato_bringup.stack import RUN_DIAGNOSTICS_PERIOD_S, STEP_WAITED, StackConfig, executable_path
 from ato_campaigns.compare import plan_jobs
 from ato_campaigns.provenance import results_page_provenance, write_results_page
+from ato_common.conventions import TOPICS
 from ato_common.domains import free_domain
 from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
 from ato_common.trains import train_preset
@@ -95,7 +96,8 @@ def graph_rtf(scenario: str, executor: str, domain_id: int, record: bool = False
         bag = Path(logs) / 'bag' if record else None
         config = StackConfig(scenario=scenario, domain_id=domain_id, log_dir=Path(logs),
                              record_to=bag, composed=composed, monitor='lean',
-                             diagnostics_period_s=RUN_DIAGNOSTICS_PERIOD_S)
+                             diagnostics_period_s=RUN_DIAGNOSTICS_PERIOD_S,
+                             watched_by=live_view_keys() if live else ())
         if live:
             with watched_live_view(domain_id, Path(logs)) as (watch, received, pid):
                 _, end_s = prepare(config)
@@ -303,6 +305,12 @@ def layout_topics() -> list[str]:
     from ament_index_python.packages import get_package_share_directory
     layout = Path(get_package_share_directory('recorder')) / 'config' / 'foxglove_layout.json'
     return sorted(set(re.findall(r'"(/[a-z_]+(?:/[a-z_]+)*)[.{]', layout.read_text())))
+
+
+def live_view_keys() -> tuple[str, ...]:
+    """The keys (ato_common.conventions) of the loop's topics the live view subscribes to."""
+    names = set(layout_topics())
+    return tuple(key for key in STEP_WAITED if '/' + TOPICS[key].name.lstrip('/') in names)
 
 
 @contextlib.contextmanager

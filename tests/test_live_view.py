@@ -330,3 +330,23 @@ def test_a_watched_multi_car_run_is_summed_up_over_every_step(tmp_path, domain_i
     assert outcome.metrics.samples == len(expected)
     assert outcome.metrics.simulated_time_s == pytest.approx(expected[-1] / 1e9)
     assert watched > 0
+
+
+def test_the_loop_waits_for_a_live_view_besides_the_monitor_and_the_controller(tmp_path,
+                                                                                domain_id):
+    """Each loop node waits for a number of readers, not for names: a live view that subscribes
+    to the state, the reference and /diagnostics before the run starts is counted as well
+    (StackConfig.watched_by), or the view's reader, matched first, would let the loop start
+    before the monitor is matched and the monitor would miss the first steps."""
+    def waits(watched_by):
+        with Stack(StackConfig(scenario='short_line', domain_id=domain_id, monitor='lean',
+                               log_dir=tmp_path / 'logs', watched_by=watched_by)) as stack:
+            params = stack.node_params()
+        return {name: (params[name]['wait_for_subscribers'],
+                       params[name]['wait_for_diagnostics_readers'])
+                for name in ('plant', 'profile', 'controller')}
+    alone = waits(())
+    watched = waits(('state', 'reference', 'diagnostics'))
+    assert watched['plant'] == (alone['plant'][0] + 1, alone['plant'][1] + 1)
+    assert watched['profile'] == (alone['profile'][0] + 1, alone['profile'][1] + 1)
+    assert watched['controller'] == (alone['controller'][0], alone['controller'][1] + 1)

@@ -280,6 +280,10 @@ class Monitor:
         return sorted((k, s) for k, s in self.samples.items() if s.positions)
 
 
+#: the topics whose readers the loop's nodes wait for (``StackConfig.watched_by``)
+STEP_WAITED = ('state', 'reference', 'command', 'diagnostics')
+
+
 @dataclass
 class StackConfig:
     scenario: str
@@ -298,6 +302,11 @@ class StackConfig:
     # subscribes to what it needs on Stack.node)
     monitor: str = 'full'
     diagnostics_period_s: float = 1.0  # of the plant and the controller, s of simulated time
+    # keys of the topics (ato_common.conventions) that another process subscribes to before the
+    # run starts (a live view): the loop waits for those readers too. Each node waits for a
+    # number of readers, not for names, so an unnamed reader matched first would let the loop
+    # start before the monitor is, and the monitor would miss the first steps.
+    watched_by: tuple[str, ...] = ()
     # an ATO node of the user's instead of the suite's controller: its command line (shell
     # words), started with the contract's parameters (``--ros-args -p scenario:=<scenario> -p
     # gradient_known:=...``) and the stack's remappings appended (and ATO_SCENARIO in its
@@ -356,17 +365,19 @@ class Stack:
         recorder = int(c.record_to is not None)
         watch = self.monitor.watch if self.monitor else ()
         # every monitor reads /diagnostics (FULL and LEAN): each node's first status too
-        common['wait_for_diagnostics_readers'] = int('diagnostics' in watch)
+        other = {key: int(key in c.watched_by) for key in STEP_WAITED}
+        common['wait_for_diagnostics_readers'] = int('diagnostics' in watch) + other['diagnostics']
         common['wait_for_recorders'] = recorder
         model = {'model': c.model} if c.model else default_model(c.scenario)
         return {
             'plant': {**common, 'end_time_s': float(c.end_time_s), **model,
-                      'wait_for_subscribers': 1,  # the monitor's truth
+                      'wait_for_subscribers': 1 + other['state'],  # the monitor's truth
                       'diagnostics_period_s': float(c.diagnostics_period_s), **c.plant_params},
             # the controller's and the monitor's reference, watched or batched: none missed
-            'profile': {**common, 'wait_for_subscribers': 2, **c.profile_params},
+            'profile': {**common, 'wait_for_subscribers': 2 + other['reference'],
+                        **c.profile_params},
             'controller': {**common, 'controller': c.controller,
-                           'wait_for_subscribers': 1 + ('command' in watch),
+                           'wait_for_subscribers': 1 + ('command' in watch) + other['command'],
                            'diagnostics_period_s': float(c.diagnostics_period_s),
                            **c.controller_params},
             'recorder': {},
