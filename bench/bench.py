@@ -141,8 +141,11 @@ def graph_row(label: str, run: GraphRun, extra: str = '-') -> str:
             f'{run.teardown_s:.2f} s | {cpu_cell(run)} | {extra} |')
 
 
+LOCKSTEP_HEADING = '## Lockstep through the ROS graph'
+
+
 def lockstep_section(scenario: str, domain_id: int) -> list[str]:
-    lines = ['## Lockstep through the ROS graph', '',
+    lines = [LOCKSTEP_HEADING, '',
              'The run monitor of `run_scenario` (the truth and the reference per step, the '
              f'diagnostics every {RUN_DIAGNOSTICS_PERIOD_S:g} s of simulated time) beside '
              'the three node processes, or the three nodes composed in one (`--composed`, '
@@ -155,7 +158,7 @@ def lockstep_section(scenario: str, domain_id: int) -> list[str]:
              'lowest CPU priority (the plant waits for it when it falls more than '
              'recorder_lead_s behind: the steps held say how often), in the composed stack in '
              'the loop\'s process (`ato_stack --record`: handed the messages directly, written '
-             'by a thread of its own; docs/guide/recording.md). A process that only '
+             'at once on the loop\'s thread; docs/guide/recording.md). A process that only '
              'burns as much CPU as the separate recorder did, at its priority, shows what any '
              'second process of that size costs the loop on this machine before it records '
              f'anything. The recorder and the live view are measured in turns with the runs '
@@ -258,7 +261,7 @@ def recorder_row(label: str, base: list[GraphRun], runs: list[GraphRun]) -> str:
 
 
 #: runs without and with each observer (the recorder, the live view), in turns
-PAIRS = 3
+PAIRS = 5
 #: the separate recorder's own CPU per step, ms: half the 0.23 ms it took before issue 31
 #: (mcap's Python writer, an acknowledgement every 0.2 s, a take every 5 ms)
 RECORDER_CPU_GOAL_MS = 0.115
@@ -830,9 +833,9 @@ def main() -> int:
     parser.add_argument('--only', choices=('campaign', 'offline', 'planning', 'lockstep',
                                             'tuning', 'graph-campaign'),
                         default=None,
-                        help='measure only this section (printed, no results page; tuning '
-                        'and graph-campaign: with --results-page, that section of the page '
-                        'rewritten)')
+                        help='measure only this section (printed, no results page; lockstep, '
+                        'tuning and graph-campaign: with --results-page, that section of the '
+                        'page rewritten)')
     args = parser.parse_args()
     with contextlib.ExitStack() as held:
         if args.domain_id is None:
@@ -970,7 +973,14 @@ def measure(args: argparse.Namespace) -> int:
             print(f'\nwrote {update_readme(args.readme, table, readme_measured, command)}')
         return 0
     if args.only == 'lockstep':
-        lockstep_section(args.scenario, args.domain_id)
+        lines = lockstep_section(args.scenario, args.domain_id)
+        if args.results_page is not None:
+            from ato_campaigns.provenance import provenance
+            now = provenance()
+            lines[1:1] = ['', f'Measured by `python bench/bench.py --only lockstep '
+                              f'--results-page {args.results_page}` on {now.date_utc}; machine: '
+                              f'{now.machine}; commit: {now.commit}; scenario `{args.scenario}`.']
+            print(f'\nwrote {replace_section(args.results_page, LOCKSTEP_HEADING, lines)}')
         return 0
     if args.only == 'graph-campaign':
         page.add(*graph_campaign_throughput(args.scenario, measured))

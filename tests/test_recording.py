@@ -442,6 +442,43 @@ def test_a_composed_stack_records_every_step_in_its_own_process(tmp_path, domain
     assert {'/diagnostics', '/ato/reference/curve', '/train/identity'} <= set(info.topics)
 
 
+def test_a_composed_stack_stopped_at_any_moment_has_within_the_lead_on_disk(tmp_path,
+                                                                          domain_id):
+    """Issue 31: the composed stack's recorder writes on the loop's thread and closes a chunk
+    every 0.9 s of simulated time: the process stopped mid-run (SIGSTOP: what a SIGKILL would
+    leave, copied and recovered) has on disk every step up to at most the lead (``LEAD_S``)
+    before the last one it published; let go, it records every step."""
+    import shutil
+
+    from ato_ros.step_records import LEAD_S
+
+    config = StackConfig(scenario='short_line', domain_id=domain_id, end_time_s=300.0,
+                         composed=True, log_dir=tmp_path / 'logs', record_to=tmp_path / 'bag')
+    with Stack(config) as stack:
+        stack.start()
+        monitor = stack.monitor
+        assert stack.spin_until(lambda: monitor.last_stamp_ns > 20_000_000_000, 120.0), \
+            stack.log_tail('loop')
+        loop = stack.processes['loop']
+        loop.send_signal(signal.SIGSTOP)
+        try:
+            stack.spin_for(1.0)  # what it published before the stop arrives
+            held_at = monitor.last_stamp_ns
+            shutil.copytree(tmp_path / 'bag', tmp_path / 'copy')
+        finally:
+            loop.send_signal(signal.SIGCONT)
+        assert held_at < 290_000_000_000, f'the run was at its end ({held_at} ns) at the stop'
+        assert stack.spin_until(lambda: loop.poll() is not None, 300.0), stack.log_tail('loop')
+        codes = stack.stop()
+    assert codes == {'loop': 0}, codes
+    recover(tmp_path / 'copy')
+    in_file = sorted(state_stamp(m) for m in read_messages(tmp_path / 'copy', ['/train/state']))
+    assert in_file == list(range(0, in_file[-1] + 1, 100_000_000))  # every step, in order
+    assert held_at - in_file[-1] <= round(LEAD_S * 1e9), (held_at, in_file[-1])
+    stamps = sorted({state_stamp(m) for m in read_messages(tmp_path / 'bag', ['/train/state'])})
+    assert stamps == list(range(0, 300_000_000_001, 100_000_000))
+
+
 def test_an_ato_node_of_ones_own_is_recorded_beside_the_step_records(tmp_path, domain_id):
     """Issue 32: an ATO node outside the suite publishes ato/command itself, beside the plant
     and the profile, whose per-step topics come in their step records. The recorder records

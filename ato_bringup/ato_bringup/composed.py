@@ -17,10 +17,11 @@ diagnostics: per-node parameters come from a parameters file with a section per 
 ``--record`` adds the recorder to the process (``recorder.node``; what follows ``--record`` up to
 ``--ros-args`` are the recorder's own options, ``-o FOLDER`` among them; the recorder's time is
 the simulated time of the step records, as ``--sim-time``). It takes the per-step messages of the
-loop nodes from them directly, without the middleware, and writes the bag on a thread of its own
-with the Foxglove SDK's compiled MCAP writer; the other topics (the diagnostics, the target
-curve, ...) it subscribes to as a recorder in its own process does. It is built after the loop
-nodes and its bag is closed after theirs have handed on their last steps.
+loop nodes from them directly, without the middleware, and writes them at once with the Foxglove
+SDK's compiled MCAP writer, on the loop's thread (``recorder.node`` says why); the other topics
+(the diagnostics, the target curve, ...) it subscribes to as a recorder in its own process does.
+It is built after the loop nodes and its bag is closed after theirs have handed on their last
+steps.
 
 The process ends when any of the nodes is finished (the plant at ``end_time_s``; the profile or
 the controller refusing another scenario's plant) or on SIGINT/SIGTERM; its exit code is the

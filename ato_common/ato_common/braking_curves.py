@@ -66,6 +66,11 @@ DV_EBI_KMH = (7.5, 15.0)
 DV_SBI_KMH = (5.5, 10.0)
 DV_WARNING_KMH = (4.0, 5.0)
 DV_SPEEDS_KMH = (110.0, 210.0)
+#: the limits with a ceiling: their dV over the MRSP (None: the MRSP itself); the EBD and SBD
+#: have none
+CEILING_DV_KMH: dict[str, tuple[float, float] | None] = {
+    'ebi': DV_EBI_KMH, 'sbi': DV_SBI_KMH, 'warning': DV_WARNING_KMH, 'permitted': None,
+    'indication': None}
 
 # Integration step of the deceleration curves (m) and the speed up to which they are drawn.
 CURVE_STEP_M = 2.0
@@ -347,14 +352,19 @@ class SpeedSupervision:
         lowest = min((c(position_m) for c in self.curves[name]), default=math.inf)
         if name == 'sbi':
             lowest = min(lowest, self.curve('ebi', position_m))
-        mrsp = self.mrsp(position_m)
-        ceiling = {'ebi': mrsp + ceiling_margin(mrsp, DV_EBI_KMH),
-                   'sbi': mrsp + ceiling_margin(mrsp, DV_SBI_KMH),
-                   'warning': mrsp + ceiling_margin(mrsp, DV_WARNING_KMH),
-                   'permitted': mrsp, 'indication': mrsp}.get(name, math.inf)
         if position_m > self.supervised_location_m:
             return 0.0
-        return max(min(lowest, ceiling), 0.0)
+        return max(min(lowest, self.ceiling_at(name, position_m)), 0.0)
+
+    def ceiling_at(self, name: str, position_m: float) -> float:
+        """The ceiling of a named limit at a position: the MRSP plus the name's dV (``ebi``,
+        ``sbi``, ``warning``), the MRSP itself (``permitted``, ``indication``), none (inf) for
+        the EBD and SBD."""
+        if name not in CEILING_DV_KMH:
+            return math.inf
+        mrsp = self.mrsp(position_m)
+        dv = CEILING_DV_KMH[name]
+        return mrsp + ceiling_margin(mrsp, dv) if dv else mrsp
 
     def binding_target(self, position_m: float) -> Target | None:
         """The target whose permitted curve is the permitted speed at a position (None where
@@ -369,7 +379,7 @@ class SpeedSupervision:
         ``indication``). A train whose front may lie anywhere in an interval is bound by the
         lowest ceiling over it (SUBSET-026 3.6.4: the max safe front end for the start of a
         restriction, the min safe front end for its end)."""
-        dv = {'ebi': DV_EBI_KMH, 'sbi': DV_SBI_KMH, 'warning': DV_WARNING_KMH}.get(name)
+        dv = CEILING_DV_KMH.get(name)
         return (list(self.mrsp.starts),
                 [v + (ceiling_margin(v, dv) if dv else 0.0) for v in self.mrsp.values])
 

@@ -181,8 +181,8 @@ class BagWriter:
     """A bag being written. ``add_topic`` registers a topic (its schema and channel), ``write``
     and ``write_many`` add messages (raw CDR bytes at a log time), ``flush`` closes the open chunk
     (what a SIGKILL cannot take back), ``close`` finishes the file and writes metadata.yaml.
-    One thread at a time: the recorder writes from its node's thread or, in the composed stack,
-    from a writer thread of its own (:class:`recorder.background.BackgroundWriter`)."""
+    One thread at a time: the recorder writes from its node's thread (in the composed stack,
+    the loop's thread). The SDK's writer holds Python's lock while it writes and compresses."""
 
     def __init__(self, folder: Path, compression: str = 'zstd',
                  chunk_size: int = DEFAULT_CHUNK_SIZE,

@@ -37,15 +37,19 @@ priority, on the CPU the loop leaves (what ``run_scenario`` does in lockstep).
 
 In the composed stack (``ato_stack --record FOLDER``, ``ato_bringup.composed``) the recorder is
 a node of the loop's process: the step records of its namespace are handed to it by the loop
-nodes without the middleware (``ato_ros.publishing.StepRecorder.attach``) and written by a
-thread of its own (``recorder.background``), with the same back-pressure.
+nodes without the middleware (``ato_ros.publishing.StepRecorder.attach``) and written at
+once, on the loop's thread, by the compiled writer (which holds Python's lock while it writes
+and compresses, so a thread of its own could not run beside the loop: it would only add the
+hand-offs). Its chunks are flushed every ``IN_PROCESS_FLUSH_PERIOD_LOG_S`` of log time unless
+``--flush-period-log`` says otherwise: a killed process loses at most the plant's lead of the
+separate processes (``LEAD_S``), with no acknowledgement.
 
 SIGINT and SIGTERM close the file properly; a SIGKILL loses at most the last take and flush
 periods: chunks are flushed every ``--flush-period`` of wall time (0.5 s) and every
-``--flush-period-log`` of log time (0.5 s, simulated time in a lockstep run), whichever comes
-first, and before each acknowledgement that no flush since has covered (in lockstep, what
-the plant's lead bounds: 1.7 s of simulated time by default); ``ros2 run recorder recover
-<bag>`` makes a valid bag of the rest.
+``--flush-period-log`` of log time (``RECORDER_FLUSH_PERIOD_LOG_S``, simulated time in a
+lockstep run), whichever comes first, and before each acknowledgement that no flush since has
+covered (in lockstep, what the plant's lead bounds: 1.7 s of simulated time by default);
+``ros2 run recorder recover <bag>`` makes a valid bag of the rest.
 """
 
 from __future__ import annotations
@@ -68,15 +72,20 @@ from std_msgs.msg import Header
 from std_msgs.msg import UInt8MultiArray as STEP_RECORDS_MSG
 
 from ato_common.conventions import TOPICS
-from ato_common.types import nanoseconds
 from ato_common.validation import ConfigError
 from ato_ros.lifecycle import RunNodeHooks, freeze_startup_objects, run_node
 from ato_ros.messages import qos_profile
 from ato_ros.publishing import local_step_recorder
-from ato_ros.step_records import LEAD_S, Written, namespace_of, read_bundle, step_recorded
+from ato_ros.step_records import (
+    LEAD_S,
+    PERIOD_S,
+    Written,
+    namespace_of,
+    read_bundle,
+    step_recorded,
+)
 from ato_ros.wire import MessageError, encode_header
 from recorder.bag import (
-    DEFAULT_FLUSH_PERIOD_LOG_S,
     DEFAULT_FLUSH_PERIOD_S,
     BagError,
     BagWriter,
@@ -87,6 +96,16 @@ from recorder.rosbag2_format import cdr_stamp_ns, starts_with_stamp
 LOG_TIMES = ('stamp', 'receipt')
 #: how often the recorder takes what its subscriptions hold, s of wall time
 DEFAULT_TAKE_PERIOD_S = 0.05
+#: a recorder in a process of its own closes a chunk at least this often, s of log time: the
+#: plant's lead, which bounds what a killed recorder of a lockstep run loses in any case; its
+#: acknowledgements flush more often (every ``ACK_PERIOD_S`` of the step records' stamps), and a
+#: shorter period would only close chunks that an acknowledgement closes again a moment later
+RECORDER_FLUSH_PERIOD_LOG_S = LEAD_S
+#: the composed stack's recorder closes a chunk at least this often, s of log time: what a
+#: killed process loses is the loop nodes' batch in the making (under ``PERIOD_S`` of stamps,
+#: ``ato_ros.publishing.StepRecorder``) and what was written since the last flush (under this),
+#: at most the plant's lead for a recorder in another process (``LEAD_S``)
+IN_PROCESS_FLUSH_PERIOD_LOG_S = LEAD_S - PERIOD_S
 #: at most this many messages of one topic per take (the rest at the next)
 MAX_TAKES = 10_000
 CLOCK = TOPICS['clock'].name
@@ -133,9 +152,8 @@ BACKGROUND_NICE = 19
 
 
 class RecorderNode(RunNodeHooks, Node):
-    """The recorder. ``writer``: a :class:`recorder.bag.BagWriter`, or in the composed stack a
-    :class:`recorder.background.BackgroundWriter` (``in_process``: the step records of its own
-    namespace are handed to it in the process)."""
+    """The recorder. ``writer``: a :class:`recorder.bag.BagWriter`; ``in_process`` (the
+    composed stack): the step records of its own namespace are handed to it in the process."""
 
     def __init__(self, writer, topics: list[str] | None, discovery_period_s: float,
                  log_time: str = 'stamp', sim_time: bool = False,
@@ -458,12 +476,9 @@ class RecorderNode(RunNodeHooks, Node):
                 written.wrote(topic, stamp_ns)
         return messages
 
-    def _write_entries(self, messages, newest_ns: int | None = None) -> bool:
+    def _write_entries(self, messages) -> bool:
         try:
-            if newest_ns is None:
-                self.writer.write_many(messages)
-            else:
-                self.writer.write_many(messages, newest_ns)
+            self.writer.write_many(messages)
         except BagError as error:
             self.stop_on_error(error)
             return False
@@ -473,8 +488,7 @@ class RecorderNode(RunNodeHooks, Node):
 
     def _on_local_records(self, batch: list[tuple[str, int, bytes]]) -> None:
         """The per-step messages of the loop nodes of this process (composed stack), handed on
-        by their step recorder: written by the writer's thread; the loop waits here while that
-        is more than the lead behind (``recorder.background``)."""
+        by their step recorder: written at once, on the loop's thread."""
         if self.finished or not batch:
             return
         if self.plain(map(_TOPIC, batch)):
@@ -482,7 +496,7 @@ class RecorderNode(RunNodeHooks, Node):
             messages = batch
         else:
             messages = self._recorded_entries(batch)
-        self._write_entries(messages, batch[-1][1])
+        self._write_entries(messages)
 
     def _add_recorded_topic(self, topic: str) -> bool:
         """A topic first met in the step records: its type from the conventions, its QoS as
@@ -580,10 +594,9 @@ class RecorderNode(RunNodeHooks, Node):
     def note_flushes(self) -> None:
         """After a write or a flush: if the file was flushed since last asked (a bag writer
         closes its chunk every flush period, within a write), everything written so far is
-        on disk, and an acknowledgement of it needs no flush of its own. A writer that flushes
-        on a thread of its own (``recorder.background``) tells nothing: each is flushed."""
-        flushes = getattr(self.writer, 'flushes', None)
-        if flushes is not None and flushes != self.noted_flushes:
+        on disk, and an acknowledgement of it needs no flush of its own."""
+        flushes = self.writer.flushes
+        if flushes != self.noted_flushes:
             self.noted_flushes = flushes
             for written in self.written.values():
                 written.flushed()
@@ -609,11 +622,8 @@ class RecorderNode(RunNodeHooks, Node):
         self.finished = True  # a message still delivered is not written to a closed file
         try:
             info = self.writer.close()
-            waited = getattr(self.writer, 'waited_s', 0.0)
             self.get_logger().info(f'closed {info.path}: {info.message_count} messages on '
-                                   f'{len(info.topics)} topics, {info.duration_s:.1f} s' + (
-                                       f'; the loop waited {waited:.2f} s of wall time in all '
-                                       'for the bag writer' if waited else ''))
+                                   f'{len(info.topics)} topics, {info.duration_s:.1f} s')
         except BagError as error:
             self.get_logger().error(str(error))
             self.exit_code = 1
@@ -633,9 +643,10 @@ def parse_args(argv: list[str], prog: str = 'recorder') -> argparse.Namespace:
     parser.add_argument('--flush-period', type=float, default=DEFAULT_FLUSH_PERIOD_S,
                         help='close a chunk at least this often, s of wall time (what a '
                              'SIGKILL can lose)')
-    parser.add_argument('--flush-period-log', type=float, default=DEFAULT_FLUSH_PERIOD_LOG_S,
+    parser.add_argument('--flush-period-log', type=float, default=None,
                         help='close a chunk at least this often, s of log time (simulated '
-                             'time with use_sim_time)')
+                             f'time with use_sim_time; default {RECORDER_FLUSH_PERIOD_LOG_S:g}, '
+                             f'{IN_PROCESS_FLUSH_PERIOD_LOG_S:g} in the composed stack)')
     parser.add_argument('--log-time', choices=LOG_TIMES, default='stamp',
                         help="stamp: the suite's stamped topics at their stamp, others on "
                              'receipt (default); receipt: every topic on receipt')
@@ -661,8 +672,10 @@ def parse_args(argv: list[str], prog: str = 'recorder') -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def bag_writer(options: argparse.Namespace) -> BagWriter:
-    """The bag the options ask for; BagError or ValueError naming what is wrong."""
+def bag_writer(options: argparse.Namespace,
+               flush_period_log_s: float = RECORDER_FLUSH_PERIOD_LOG_S) -> BagWriter:
+    """The bag the options ask for (``flush_period_log_s`` unless they give
+    ``--flush-period-log``); BagError or ValueError naming what is wrong."""
     output = options.output or Path('runs') / datetime.now().strftime('rec-%Y%m%d-%H%M%S')
     custom_data = {'log_time': options.log_time,
                    'recorded_utc': datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M:%S UTC')}
@@ -675,19 +688,23 @@ def bag_writer(options: argparse.Namespace) -> BagWriter:
         raise ValueError(f'--take-period {options.take_period:g}: must be over 0 and at most '
                          '1 s')
     return BagWriter(output, options.compression, flush_period_s=options.flush_period,
-                     flush_period_log_s=options.flush_period_log, custom_data=custom_data)
+                     flush_period_log_s=(flush_period_log_s if options.flush_period_log is None
+                                         else options.flush_period_log),
+                     custom_data=custom_data)
 
 
 class InProcessRecorder:
     """The composed stack's recorder (``ato_stack --record``), to be built after the loop nodes
     of the process: the recorder's own options (``argv``, as ``recorder`` takes them;
-    ``--sim-time`` implied), its bag written by a thread of its own. ConfigError names a wrong
-    option. Calling it builds the node; ``release`` closes the bag of a node never built."""
+    ``--sim-time`` implied), its bag written on the loop's thread (the module's docstring says
+    why), flushed every ``IN_PROCESS_FLUSH_PERIOD_LOG_S`` of log time unless the options say
+    otherwise. ConfigError names a wrong option. Calling it builds the node; ``release`` closes
+    the bag of a node never built."""
 
     def __init__(self, argv: list[str]):
         try:
             self.options = parse_args(argv, prog='ato_stack --record')
-            self.writer = bag_writer(self.options)
+            self.writer = bag_writer(self.options, IN_PROCESS_FLUSH_PERIOD_LOG_S)
         except (ValueError, BagError) as error:
             raise ConfigError(str(error)) from None
         except SystemExit:
@@ -695,12 +712,9 @@ class InProcessRecorder:
         self.node: RecorderNode | None = None
 
     def __call__(self) -> RecorderNode:
-        from recorder.background import BackgroundWriter
         o = self.options
-        writer = BackgroundWriter(self.writer, nanoseconds(LEAD_S))
-        self.node = RecorderNode(writer, o.topics, o.discovery_period, o.log_time, True,
+        self.node = RecorderNode(self.writer, o.topics, o.discovery_period, o.log_time, True,
                                  o.take_period, o.step_records, in_process=True)
-        writer.on_slow = self.node.get_logger().warning
         return self.node
 
     def release(self) -> None:
