@@ -42,6 +42,7 @@ from ato_bringup.conformance_cases import (
     HORIZON_S,
     RESTART_S,
     STOP_LIMIT_S,
+    STOP_WALL_FACTOR,
     Epoch,
     Observation,
     Schedule,
@@ -59,6 +60,7 @@ from ato_common.types import NS_PER_S
 from ato_common.validation import ConfigError
 from ato_ros import wire
 from ato_ros.messages import qos_profile, topic
+from ato_ros.stall import StallWatch
 from ato_simulation.plans import cached_plan, run_end_time_s
 
 #: wall time a run may stand still (no new step) before the harness calls it stalled, s
@@ -150,8 +152,15 @@ def stop_node(stack, observer: Observer, observation: Observation) -> None:
     observer.stopping = True
     observation.stop_sent_s = time.monotonic()
     process.send_signal(signal.SIGINT)
-    stack.spin_until(lambda: process.poll() is not None, STOP_LIMIT_S + 1.0)
+    watch = StallWatch(process.pid)
+
+    def ended() -> bool:  # or past the limit of time without progress, or of wall time
+        stalled = watch.update()
+        return process.poll() is not None or stalled > STOP_LIMIT_S + 1.0 or \
+            watch.wall_s() > STOP_WALL_FACTOR * STOP_LIMIT_S + 1.0
+    stack.spin_until(ended, STOP_WALL_FACTOR * STOP_LIMIT_S + 2.0)
     observation.stop_took_s = time.monotonic() - observation.stop_sent_s
+    observation.stop_stalled_s = watch.update()
     observation.stop_exit = process.poll()
     stack.spin_for(0.5)
     observation.after_stop = list(observer.after_stop)

@@ -26,8 +26,14 @@ SENSOR = (0.75, 0.8)       # the speed sensor failed (NaN)
 HORIZON_S = 200.0
 #: the restarted plant's run, s of simulated time
 RESTART_S = 20.0
-#: a node told to stop must end within this, s of wall time (launch's SIGINT-to-SIGTERM)
+#: a node told to stop must end within this, s of wall time (launch's SIGINT-to-SIGTERM), not
+#: counting the time the machine kept it waiting for a CPU: on a loaded machine (the harness's
+#: own processes, two cores) a node can be runnable for seconds without a CPU, and a limit in
+#: wall time would judge the machine. The time counted is ``ato_ros.stall``'s: wall time in
+#: which the node made no progress although it could have.
 STOP_LIMIT_S = 5.0
+#: ... and within this many times the limit of wall time in any case
+STOP_WALL_FACTOR = 4.0
 #: the node following the replanned reference: its RMS position error to the streamed
 #: reference at most this fraction of its error to the first plan's curve
 FOLLOWS_RATIO = 0.5
@@ -103,7 +109,9 @@ class Observation:
     original_positions: dict[int, float] = field(default_factory=dict)  # the first plan's
     stop_sent_s: float = math.nan  # wall time of the stop signal
     stop_exit: int | None = None  # the node's exit code after it (None: it did not end)
-    stop_took_s: float = math.nan
+    stop_took_s: float = math.nan  # wall time from the signal to the exit (or the harness's
+    # giving up)
+    stop_stalled_s: float = math.nan  # of which without progress it could have made
     after_stop: list[Sent] = field(default_factory=list)
     other_scenario: str = ''
     other_commands: int = 0
@@ -232,13 +240,15 @@ def survives_restart(o: Observation) -> CaseResult:
 def stops_when_told(o: Observation) -> CaseResult:
     if math.isnan(o.stop_sent_s):
         return CaseResult('stops_when_told', None, 'the node was not running to be stopped')
+    starved = (f'{o.stop_took_s:.2f} s of wall time, {o.stop_stalled_s:.2f} s of it without '
+               'progress it could have made')
     if o.stop_exit is None:
-        return CaseResult('stops_when_told', False, f'still running {STOP_LIMIT_S:g} s after '
-                                                    'SIGINT')
-    ok = o.stop_exit == 0 and o.stop_took_s <= STOP_LIMIT_S
-    return CaseResult('stops_when_told', ok, f'SIGINT: exit code {o.stop_exit} after '
-                                             f'{o.stop_took_s:.2f} s (limit {STOP_LIMIT_S:g} s, '
-                                             'code 0)')
+        return CaseResult('stops_when_told', False, f'still running {starved} after SIGINT '
+                                                    f'(limit {STOP_LIMIT_S:g} s)')
+    ok = o.stop_exit == 0 and o.stop_stalled_s <= STOP_LIMIT_S and \
+        o.stop_took_s <= STOP_WALL_FACTOR * STOP_LIMIT_S
+    return CaseResult('stops_when_told', ok, f'SIGINT: exit code {o.stop_exit} after {starved} '
+                                             f'(limit {STOP_LIMIT_S:g} s, code 0)')
 
 
 def no_command_after_shutdown(o: Observation) -> CaseResult:

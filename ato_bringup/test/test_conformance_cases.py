@@ -37,6 +37,7 @@ def clean_observation() -> Observation:
     observation = Observation(ACTUATORS, PERIOD, schedule, main, clean_epoch(201, 20.0))
     observation.original_positions = {k: v[0] + 500.0 for k, v in main.truth.items()}
     observation.stop_sent_s, observation.stop_exit, observation.stop_took_s = 1e6, 0, 0.3
+    observation.stop_stalled_s = 0.3
     observation.other_scenario, observation.other_commands, observation.other_exit = 'x', 0, 2
     return observation
 
@@ -60,7 +61,7 @@ def test_each_fault_fails_its_case():
     o.main.commands.append(Sent(60 * PERIOD, 'law', ACTUATORS, (2.0,), 0.0))  # ... stepped twice
     o.restarted.stalled = 'the plant stood at the step of 0.0 s'
     o.other_commands, o.other_exit = 3, None
-    o.stop_exit, o.stop_took_s = 0, 7.0
+    o.stop_exit, o.stop_took_s, o.stop_stalled_s = 0, 7.0, 6.5
     o.after_stop = [Sent(0, '', ACTUATORS, (0.0,), o.stop_sent_s + 0.01)]
     for k in o.main.truth:  # the train follows the first plan, not the stream
         o.main.truth[k] = (o.original_positions[k], 1.0)
@@ -76,10 +77,28 @@ def test_each_fault_fails_its_case():
     assert 'more commands than states at 6.0 s' in {r.name: r for r in judge(o)}['rate'].evidence
     assert '3 commands' in results['refuses_other_scenario'].evidence
     assert 'stood at the step' in results['survives_restart'].evidence
-    assert 'after 7.00 s' in results['stops_when_told'].evidence
+    assert 'after 7.00 s of wall time, 6.50 s of it without progress' in \
+        results['stops_when_told'].evidence
     assert '1 commands after the stop signal' in results['no_command_after_shutdown'].evidence
     assert '0.0 m from the first plan' in results['follows_replanned_reference'].evidence
     assert '1 non-finite commands' in results['failed_sensor'].evidence
+
+
+def test_a_stop_is_timed_without_the_time_the_machine_kept_the_node_waiting_for_a_cpu():
+    """A node on a loaded machine that takes 9 s of wall time to end, runnable all along (it
+    waited for a CPU), stops within the limit; one that slept 6 s of them does not, nor one
+    past the bound of wall time however busy."""
+    from ato_bringup.conformance_cases import STOP_LIMIT_S, STOP_WALL_FACTOR
+    o = clean_observation()
+    o.stop_took_s, o.stop_stalled_s = 9.0, 0.4
+    assert verdicts(o)['stops_when_told'] is True
+    o.stop_stalled_s = STOP_LIMIT_S + 1.0
+    assert verdicts(o)['stops_when_told'] is False
+    o.stop_took_s, o.stop_stalled_s = STOP_WALL_FACTOR * STOP_LIMIT_S + 1.0, 0.0
+    assert verdicts(o)['stops_when_told'] is False
+    o.stop_exit, o.stop_took_s = None, STOP_WALL_FACTOR * STOP_LIMIT_S + 1.0
+    result = {r.name: r for r in judge(o)}['stops_when_told']
+    assert result.passed is False and result.evidence.startswith('still running')
 
 
 def test_a_situation_the_harness_could_not_bring_about_is_not_run():

@@ -15,7 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 #: the contract's version (major.minor)
-CONTRACT_VERSION = '1.1'  # 1.1: the gradient_known parameter (PARAMETERS)
+CONTRACT_VERSION = '1.2'  # 1.1: the gradient_known parameter (PARAMETERS); 1.2: read the
+# identity before the first command (a clarification)
 
 #: the topics an ATO node reads (keys of ``conventions.TOPICS``), and what for
 INPUTS = {
@@ -120,8 +121,9 @@ CLAUSES = (
            '(`std_msgs/msg/String`, JSON `{{"scenario": <name>, "sha256": <hash of the '
            'resolved scenario>}}`). If `scenario` is not the name of the scenario you were '
            'started for (a file\'s `name:`), command nothing, log both names and exit with a '
-           'non-zero code (the suite\'s nodes exit with 2). The hash is the suite\'s own '
-           'digest: compare it if you compute it the same way, else the name.'),
+           'non-zero code (the suite\'s nodes exit with 2); so read it before your first '
+           'command (on a loaded machine the first states can come before it). The hash is the '
+           'suite\'s own digest: compare it if you compute it the same way, else the name.'),
     Clause('restart', 'A restarted plant',
            'A state stamped before your last step is a new run (the plant was started again): '
            'start your law again from that step (reset integrators and estimates) and answer '

@@ -13,7 +13,8 @@ default scenario's train (short_line: CRH3, Luo & Xu); give your train's as para
 (``--ros-args -p mass_kg:=... -p actuators:="[car_2, car_3]"``).
 
 What the contract asks, and where it is done here: the scenario named in train/identity is the
-one it was started for, else it commands nothing and exits with 2 (``on_identity``); one command
+one it was started for, else it commands nothing and exits with 2 (``on_identity``; no command
+before the identity is read: on a loaded machine the first states can come before it); one command
 per step, stamped with the step, when the state and the reference of that stamp are both there,
 the same command again for a step sent again (``try_step``); a state stamped before the last
 step starts the law again (``restart``); a NaN measurement holds the last force; SIGINT or
@@ -75,6 +76,7 @@ class PAtoNode(Node):
         self.expected = scenario_name(self.get_parameter('scenario').value)
         self.exit_code = 0
         self.done = False
+        self.identified = False  # the plant's identity read, and the one expected
         self.states, self.references = {}, {}
         self.last_stamp = -1
         self.last_command = None
@@ -90,6 +92,10 @@ class PAtoNode(Node):
             self.get_logger().error(f'the plant simulates {plant}, I was started for '
                                     f'{self.expected}: refusing to drive')
             self.exit_code, self.done = 2, True
+            return
+        self.identified = True
+        for stamp in sorted(self.states):  # the steps that came before it
+            self.try_step(stamp)
 
     def on_state(self, msg: JointTrajectory) -> None:
         stamp = nanoseconds(msg.header.stamp)
@@ -102,7 +108,7 @@ class PAtoNode(Node):
         self.try_step(stamp)
 
     def try_step(self, stamp: int) -> None:
-        if self.done:
+        if self.done or not self.identified:
             return
         if stamp == self.last_stamp:  # the step sent again: the same command again
             if self.states.pop(stamp, None) is not None and self.last_command is not None:
