@@ -973,10 +973,10 @@ def measure(args: argparse.Namespace) -> int:
             print(f'\nwrote {update_readme(args.readme, table, readme_measured, command)}')
         return 0
     if args.only == 'lockstep':
+        from ato_campaigns.provenance import provenance
+        now = provenance()  # the load average at the start
         lines = lockstep_section(args.scenario, args.domain_id)
         if args.results_page is not None:
-            from ato_campaigns.provenance import provenance
-            now = provenance()
             lines[1:1] = ['', f'Measured by `python bench/bench.py --only lockstep '
                               f'--results-page {args.results_page}` on {now.date_utc}; machine: '
                               f'{now.machine}; commit: {now.commit}; scenario `{args.scenario}`.']

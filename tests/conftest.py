@@ -39,8 +39,12 @@ def temporary_folder(request, tmp_path_factory):
 
 @pytest.fixture(scope='session', autouse=True)
 def stress_load(request):
-    """``--stress-load N``: N processes that keep a CPU each busy for the whole session."""
-    busy = [subprocess.Popen([sys.executable, '-c', 'while True: pass'])
+    """``--stress-load N``: N processes that keep a CPU each busy for the whole session, and
+    end with it however it ends: each polls whether its parent (this session) is still there,
+    so a session killed before its teardown does not leave them loading the machine."""
+    burn = (f'import os\nwhile os.getppid() == {os.getpid()}:\n'
+            '    for _ in range(1_000_000): pass')
+    busy = [subprocess.Popen([sys.executable, '-c', burn])
             for _ in range(request.config.getoption('stress_load'))]
     yield len(busy)
     for process in busy:
