@@ -30,11 +30,12 @@ from trajectory_msgs.msg import JointTrajectory
 class BrokenAtoNode(PAtoNode):
     def __init__(self):
         super().__init__()
+        self.identified = True  # defect: any plant will do, from the first state
         self.curve = None
         self.create_subscription(JointTrajectory, 'ato/reference/curve', self.on_curve, LATCHED)
 
     def on_identity(self, msg) -> None:
-        pass  # defect: any plant will do
+        pass  # defect: never read
 
     def on_curve(self, msg: JointTrajectory) -> None:
         self.curve = msg
