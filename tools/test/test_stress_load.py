@@ -16,8 +16,9 @@ GRAPH_TESTS = textwrap.dedent('''
 
 
     def test_the_busy_processes_run_beside(stress_load):
-        ps = subprocess.run(['ps', '-eo', 'args'], capture_output=True, text=True).stdout
-        assert stress_load == 2 and ps.count('while True: pass') >= 2
+        ps = subprocess.run(['ps', '-eww', '-o', 'args'], capture_output=True,
+                            text=True).stdout
+        assert stress_load == 2 and ps.count('range(1_000_000): pass') >= 2
 
 
     def test_a_failure_shows_the_logs(tmp_path):
