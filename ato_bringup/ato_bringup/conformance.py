@@ -26,6 +26,7 @@ import argparse
 import contextlib
 import json
 import signal
+import subprocess
 import sys
 import time
 from dataclasses import asdict
@@ -60,7 +61,7 @@ from ato_common.types import NS_PER_S
 from ato_common.validation import ConfigError
 from ato_ros import wire
 from ato_ros.messages import qos_profile, topic
-from ato_ros.stall import StallWatch
+from ato_ros.stall import StallWatch, wait_for_exit
 from ato_simulation.plans import cached_plan, run_end_time_s
 
 #: wall time a run may stand still (no new step) before the harness calls it stalled, s
@@ -153,12 +154,9 @@ def stop_node(stack, observer: Observer, observation: Observation) -> None:
     observation.stop_sent_s = time.monotonic()
     process.send_signal(signal.SIGINT)
     watch = StallWatch(process.pid)
-
-    def ended() -> bool:  # or past the limit of time without progress, or of wall time
-        stalled = watch.update()
-        return process.poll() is not None or stalled > STOP_LIMIT_S + 1.0 or \
-            watch.wall_s() > STOP_WALL_FACTOR * STOP_LIMIT_S + 1.0
-    stack.spin_until(ended, STOP_WALL_FACTOR * STOP_LIMIT_S + 2.0)
+    with contextlib.suppress(subprocess.TimeoutExpired):  # judged from the times below
+        wait_for_exit(process, STOP_LIMIT_S + 1.0, STOP_WALL_FACTOR * STOP_LIMIT_S + 1.0,
+                      idle=lambda: stack.spin_for(0.05), watch=watch)
     observation.stop_took_s = time.monotonic() - observation.stop_sent_s
     observation.stop_stalled_s = watch.update()
     observation.stop_exit = process.poll()

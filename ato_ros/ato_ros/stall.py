@@ -82,13 +82,18 @@ class StallWatch:
 
 
 def wait_for_exit(process: subprocess.Popen, stall_limit_s: float, wall_limit_s: float,
-                  poll_s: float = 0.05) -> int:
+                  poll_s: float = 0.05, idle: Callable[[], None] | None = None,
+                  watch: StallWatch | None = None) -> int:
     """``process.wait`` with the limits of this module: the exit code, or
     ``subprocess.TimeoutExpired`` once the process has been stalled for ``stall_limit_s`` or
-    has run for ``wall_limit_s`` since the call."""
-    watch = StallWatch(process.pid)
+    has run for ``wall_limit_s`` since the call. Between looks: ``idle()`` (e.g. spin an
+    executor), else a sleep of ``poll_s``; ``watch``: the caller's, to read the times after."""
+    watch = watch or StallWatch(process.pid)
     while process.poll() is None:
         if watch.update() > stall_limit_s or watch.wall_s() > wall_limit_s:
             raise subprocess.TimeoutExpired(process.args, watch.wall_s())
-        time.sleep(poll_s)
+        if idle is None:
+            time.sleep(poll_s)
+        else:
+            idle()
     return process.returncode
