@@ -1,5 +1,6 @@
 """The recorder's acknowledgements of step records at the edges of a run (issue 31): the first
-one, and an ATO node of one's own that the recorder saw before the loop's step records."""
+one, one that a plant's subscription matches only after it was sent, and an ATO node of one's
+own that the recorder saw before the loop's step records."""
 
 import rclpy
 from sensor_msgs.msg import JointState
@@ -53,6 +54,36 @@ def test_the_first_acknowledgement_waits_for_every_publisher_of_step_records(tmp
         assert stack.spin_until(lambda: acknowledged, 30.0), stack.log_tail('recorder')
         # the oldest of the two publishers' records, which both are in the file
         assert from_time(acknowledged[0].stamp) == stamps[3]
+        assert stack.stop()['recorder'] == 0
+
+
+def test_a_plant_that_matches_the_recorder_late_still_gets_its_acknowledgement(tmp_path,
+                                                                              domain_id):
+    """Discovery is not symmetric: the plant may see the recorder's publisher of ``recorded``
+    (and count it as a recorder to wait for) before the recorder's side has matched the plant's
+    subscription. An acknowledgement sent in that window reached nobody, no new step records
+    came (the plant held), and a run waited for the recorder for ever (make test-stress: the
+    plant held at 1.8 s for 300 s, the recorder's file holding those 1.8 s). A subscription that
+    matches after the recorder has acknowledged receives its latest acknowledgement."""
+    with Stack(StackConfig(scenario='short_line', domain_id=domain_id,
+                           log_dir=tmp_path / 'logs')) as stack:
+        spec = topic('step_records')
+        plant = stack.node.create_publisher(UInt8MultiArray, spec.name, qos_profile(spec.qos))
+        stack.start_process('recorder', {}, ['-o', str(tmp_path / 'bag')])
+        assert stack.spin_until(lambda: plant.get_subscription_count() >= 1, 60.0), \
+            stack.log_tail('recorder')
+        stamps = [k * STEP for k in range(round(ACK_PERIOD_S * 10) + 3)]
+        plant.publish(_bundle('/clock', stamps, wire.encode_clock))
+        written = 'recording /clock [rosgraph_msgs/msg/Clock] from the step records'
+        assert stack.spin_until(lambda: written in stack.log_tail('recorder', 200), 60.0), \
+            stack.log_tail('recorder')
+        stack.spin_for(1.0)  # acknowledged by now, to no subscriber
+        acknowledged = []
+        stack.node.create_subscription(Header, topic('recorded').name, acknowledged.append,
+                                       qos_profile(topic('recorded').qos))
+        assert stack.spin_until(lambda: acknowledged, 30.0), 'no acknowledgement reached ' \
+            'a subscription made after it was sent'
+        assert from_time(acknowledged[-1].stamp) == stamps[-1]
         assert stack.stop()['recorder'] == 0
 
 

@@ -39,7 +39,10 @@ CLOCK = QosSpec(reliable=True, transient_local=False, depth=10)
 # lost a replan's status that way). Keep-all, as the streams.
 DIAGNOSTICS = QosSpec(reliable=True, transient_local=False, depth=0)
 # Only the latest acknowledgement of each recorder matters; several recorders share the topic.
-ACKNOWLEDGEMENTS = QosSpec(reliable=True, transient_local=False, depth=10)
+# Transient local: discovery is not symmetric, and a plant that already waits for a recorder
+# may match its acknowledgements only after they were sent; it then gets the latest one (each
+# recorder keeps its own) instead of waiting for one that no new step record will bring.
+ACKNOWLEDGEMENTS = QosSpec(reliable=True, transient_local=True, depth=10)
 
 
 # How often each topic is published. Per lockstep step the loop needs only the measured state,
