@@ -115,16 +115,25 @@ def test_controller_commands_nothing_on_a_stale_measurement(tmp_path, domain_id)
 
 
 def test_controller_never_commands_nan_on_a_failed_sensor(tmp_path, domain_id):
-    """A test node plays the plant: the measured speed turns NaN (a failed sensor) and back."""
+    """A test node plays the plant: the measured speed turns NaN (a failed sensor) and back.
+    Like the plant, it says which scenario it simulates, and the controller commands nothing
+    before it has read that: on a loaded machine the first states can be taken before the
+    identity, and the harness's refusal case saw the controller command a plant of another
+    scenario once before refusing it (make test-stress)."""
     from rosgraph_msgs.msg import Clock
+    from std_msgs.msg import String
     from trajectory_msgs.msg import JointTrajectory
 
+    from ato_common.identity import scenario_identity
+    from ato_common.scenario import load_scenario
     from ato_common.types import TrainState
     from ato_ros.messages import state_to_msg
 
     config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path)
     with Stack(config) as stack:
         node = stack.node
+        identity = node.create_publisher(String, topic('identity').name,
+                                         qos_profile(topic('identity').qos))
         clock_pub = node.create_publisher(Clock, '/clock', qos_profile(topic('clock').qos))
         state_pub = node.create_publisher(JointTrajectory, topic('state_measured').name,
                                           qos_profile(topic('state_measured').qos))
@@ -137,6 +146,14 @@ def test_controller_never_commands_nan_on_a_failed_sensor(tmp_path, domain_id):
         assert stack.spin_until(lambda: state_pub.get_subscription_count() >= 1
                                 and clock_pub.get_subscription_count() >= 1, 120.0)
         speeds = [0.0] * 5 + [math.nan] * 10 + [math.inf] * 5 + [0.5] * 5
+        first = state_to_msg(TrainState(0, ('train',), (0.0,), (0.0,), (0.0,), (0.0,)))
+        for _ in range(20):  # the first step, said again, before the identity
+            clock_pub.publish(Clock(clock=to_time(0)))
+            state_pub.publish(first)
+            stack.spin_for(0.1)
+        assert 0 not in monitor.samples or not monitor.samples[0].command, \
+            'commanded before the plant said which scenario it simulates'
+        identity.publish(String(data=scenario_identity(load_scenario('short_line'))))
         for k, speed in enumerate(speeds):
             stamp = k * 100_000_000
             state = TrainState(stamp, ('train',), (0.0,), (speed,), (0.0,), (0.0,))

@@ -23,8 +23,9 @@ Graph: ``wait_for_subscribers`` holds back only the first command; an observer t
 later does not stop the loop. A state stamped before the last step (lockstep) is a restarted
 plant: the controller starts its law again from that step. The plant's latched identity
 (``train/identity``) must be the controller's own scenario: on another one the controller
-refuses to drive (exit code 2, naming both). A failed publish is counted and reported, never
-fatal.
+refuses to drive (exit code 2, naming both); it commands nothing before it has read it (in
+lockstep the plant sends the step again until the command comes). A failed publish is counted
+and reported, never fatal.
 """
 
 from __future__ import annotations
@@ -195,6 +196,7 @@ class AtoControllerNode(RunNodeHooks, Node):
         self.stale_steps = 0  # real-time periods without a command for a stale input
         self.stale_reported_wall = 0.0
         self.subscribers_met = False  # wait_for_subscribers holds back the first command only
+        self.identified = False  # the plant's identity read, and ours (watch_plant_identity)
         self.restarts = 0
         self.publishing = Publishing(self)
         self.status_name = status_name(self, 'law')
@@ -302,6 +304,8 @@ class AtoControllerNode(RunNodeHooks, Node):
             return
         if stamp_ns not in self.states or stamp_ns not in self.references:
             return
+        if not self.identified:
+            return  # nothing to a plant it may refuse; the plant re-sends the step
         if not self.subscribers_met:
             recorders = self.params['wait_for_recorders']
             if first_unmatched(((self.command_pub, self.params['wait_for_subscribers']),
@@ -343,7 +347,7 @@ class AtoControllerNode(RunNodeHooks, Node):
 
     def on_timer(self) -> None:
         state, reference = self.states.get(0), self.references.get(0)
-        if state is None or reference is None:
+        if state is None or reference is None or not self.identified:
             return
         now = time.monotonic()
         for what, received in (('measurement', self.state_received_wall),
