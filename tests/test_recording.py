@@ -422,6 +422,12 @@ def test_a_composed_stack_records_every_step_in_its_own_process(tmp_path, domain
                                        QoSProfile(depth=1000))
         stack.start()
         assert stack.spin_until(lambda: len(states) > 10, 120.0), stack.log_tail('loop')
+        # A participant's node names come in a discovery message of their own, which a loaded
+        # machine can deliver after the endpoints (the name then reads _NODE_NAME_UNKNOWN_).
+        def named() -> bool:
+            return all(i.node_name != '_NODE_NAME_UNKNOWN_' for i in
+                       stack.node.get_publishers_info_by_topic('/ato/step_records'))
+        assert stack.spin_until(named, 60.0), 'the node names never came'
         publishers = stack.node.get_publishers_info_by_topic('/ato/step_records')
         subscribers = stack.node.get_subscriptions_info_by_topic('/ato/step_records')
         assert stack.spin_until(lambda: stack.processes['loop'].poll() is not None, 300.0)
