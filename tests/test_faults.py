@@ -116,10 +116,11 @@ def test_controller_commands_nothing_on_a_stale_measurement(tmp_path, domain_id)
 
 def test_controller_never_commands_nan_on_a_failed_sensor(tmp_path, domain_id):
     """A test node plays the plant: the measured speed turns NaN (a failed sensor) and back.
-    Like the plant, it says which scenario it simulates, and the controller commands nothing
-    before it has read that: on a loaded machine the first states can be taken before the
-    identity, and the harness's refusal case saw the controller command a plant of another
-    scenario once before refusing it (make test-stress)."""
+    Like the plant, it says which scenario it simulates, and neither the controller nor the
+    profile sends anything (a command, a reference) before it has read that: on a loaded
+    machine the first states can be taken before the identity, and the harness's refusal case
+    saw the controller command a plant of another scenario once before refusing it (make
+    test-stress)."""
     from rosgraph_msgs.msg import Clock
     from std_msgs.msg import String
     from trajectory_msgs.msg import JointTrajectory
@@ -153,6 +154,8 @@ def test_controller_never_commands_nan_on_a_failed_sensor(tmp_path, domain_id):
             stack.spin_for(0.1)
         assert 0 not in monitor.samples or not monitor.samples[0].command, \
             'commanded before the plant said which scenario it simulates'
+        assert 0 not in monitor.samples or math.isnan(monitor.samples[0].ref_position), \
+            'a reference before the plant said which scenario it simulates'
         identity.publish(String(data=scenario_identity(load_scenario('short_line'))))
         for k, speed in enumerate(speeds):
             stamp = k * 100_000_000

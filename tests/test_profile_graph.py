@@ -8,10 +8,11 @@ import os
 import subprocess
 
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Float64
+from std_msgs.msg import Float64, String
 from trajectory_msgs.msg import JointTrajectory
 
 from ato_bringup.stack import EXECUTABLES, Stack, StackConfig, executable_path
+from ato_common.identity import scenario_identity
 from ato_common.scenario import load_scenario
 from ato_ros.messages import from_time, qos_profile, reference_from_msg, to_time, topic
 from profile_node.planner import plan_reference
@@ -37,6 +38,10 @@ def test_profile_follows_the_clock_and_a_late_subscriber_gets_the_whole_curve(tm
                                         'preview_horizon_s': 2.0, 'preview_step_s': 1.0})
         clock = stack.node.create_publisher(Clock, topic('clock').name,
                                             qos_profile(topic('clock').qos))
+        # as the plant does: its scenario, latched (the profile streams nothing before it)
+        identity = stack.node.create_publisher(String, topic('identity').name,
+                                               qos_profile(topic('identity').qos))
+        identity.publish(String(data=scenario_identity(load_scenario('short_line'))))
         monitor = stack.monitor
         assert stack.spin_until(lambda: clock.get_subscription_count() > 0 and all(
             stack.node.count_publishers(topic(name).name) > 0

@@ -14,7 +14,9 @@ one period ahead: the controller then finds it waiting when the plant's state ar
 takes the profile off the loop's critical path. A tick whose reference was not sent ahead (the
 first ones, a changed period, a re-sent tick) gets it at once. Real time: the same on a wall-
 clock timer, with the curve's time origin taken from the plant's first state message (its stamp
-minus its run time). The whole curve is latched once at start-up.
+minus its run time). The whole curve is latched once at start-up. No reference goes out before
+the plant's latched identity has been read and is this scenario's (``watch_plant_identity``: a
+plant of another scenario is refused, exit 2); in lockstep the plant re-sends the tick meanwhile.
 
 Resume: a plant that starts again (its run time goes back; in lockstep its /clock) gives the
 curve its time origin again, so the reference starts from the start of the run, not the dead
@@ -180,6 +182,8 @@ class ProfileNode(RunNodeHooks, Node):
                                           qos_profile(topic('curve').qos))
         self.publishing(curve_pub, self.curve_msg())
         self._curve_pub = curve_pub  # keep the latched publisher alive
+        # the plant's identity read, and ours (watch_plant_identity): no reference before it
+        self.identified = False
         watch_plant_identity(self, self.identity, 'refusing to stream the target curve')
         if self.lockstep:
             self.start_lockstep_plans()
@@ -314,6 +318,8 @@ class ProfileNode(RunNodeHooks, Node):
                                                        status=[status]))
 
     def on_clock(self, data: bytes) -> None:
+        if not self.identified:
+            return  # nothing to a plant it may refuse; the plant re-sends the tick
         if not self.subscribers_met:
             recorders = self.params['wait_for_recorders']
             if first_unmatched(((self.reference_pub, self.params['wait_for_subscribers']),
@@ -467,7 +473,7 @@ class ProfileNode(RunNodeHooks, Node):
         self.report_decision(kind, now_ns, position, self.plan, time_s)
 
     def on_timer(self) -> None:
-        if self.time_origin_ns is not None:
+        if self.time_origin_ns is not None and self.identified:
             now = self.get_clock().now().nanoseconds
             if not self.plan_reported:
                 self.publish_plan(now, f'{self.plan.strategy} plan')
