@@ -297,7 +297,10 @@ class RecorderLead:
     one that leaves lets go. The publishers of ``recorded`` are counted at most every
     ``SUBSCRIBERS_REFRESH_S`` of wall time and named again when their number changes.
     ``on_release`` is called when an acknowledgement, or a recorder's leaving, lets a held step
-    go; ``check`` (the node's timer, while holding) names the recorders in the graph again."""
+    go; ``check`` (the node's timer, while holding) names the recorders in the graph again. An
+    acknowledgement stamped past the latest step asked about is an earlier run's (the
+    acknowledgements are latched, and a plant started again finds a running recorder's last
+    one): ignored."""
 
     def __init__(self, node, lead_s: float, on_release: Callable[[], None],
                  refresh_s: float = SUBSCRIBERS_REFRESH_S):
@@ -305,6 +308,7 @@ class RecorderLead:
         self.node, self.on_release, self.refresh_s = node, on_release, refresh_s
         self.acknowledgements = Acknowledgements(nanoseconds(lead_s))
         self.held: int | None = None  # the stamp of the step that waits
+        self.latest_ns: int | None = None  # the latest step asked about (``holds``)
         self.held_since = 0.0
         self.steps_held = 0  # steps that waited, and for how long in all (s of wall time)
         self.held_s = 0.0
@@ -320,10 +324,24 @@ class RecorderLead:
                 f'{self.subscription.topic_name}: an acknowledgement that does not read '
                 f'({error}): ignored', throttle_duration_sec=1.0)
             return
+        if self.latest_ns is None or stamp_ns > self.latest_ns:
+            # Later than any step of this run: a recorder's latched acknowledgement of an earlier
+            # run (the plant started again beside it), which vouches for nothing of this one.
+            self.node.get_logger().info(
+                f'{self.subscription.topic_name}: recorder {recorder} acknowledged '
+                f'{seconds(stamp_ns):.3f} s, past this run\'s latest step: an earlier run\'s, '
+                'ignored', throttle_duration_sec=1.0)
+            return
         self.acknowledgements.acknowledged(recorder, stamp_ns)
         self.release_if_free()
 
-    def holds(self, stamp_ns: int) -> bool:
+    def holds(self, stamp_ns: int, last: bool = False) -> bool:
+        """Whether the step at ``stamp_ns`` must wait; ``last``: the run's last step, which
+        waits for nothing (the plant ends with it and closes what it publishes)."""
+        self.latest_ns = stamp_ns
+        if last:
+            self.held = None
+            return False
         now = time.monotonic()
         if now - self.asked >= self.refresh_s:
             self.asked = now

@@ -303,8 +303,8 @@ class TrainPlantNode(RunNodeHooks, Node):
     def publish_step(self) -> None:
         stamp = self.stamp_ns()
         new_step = self.step_messages is None or self.step_messages[0] != stamp
-        if new_step and self.recorder_lead is not None and not (
-                self.end_ns and stamp >= self.end_ns) and self.recorder_lead.holds(stamp):
+        if new_step and self.recorder_lead is not None and self.recorder_lead.holds(
+                stamp, last=bool(self.end_ns and stamp >= self.end_ns)):
             return  # published once a recorder acknowledges (RecorderLead.on_release)
         if new_step:
             # Once per step: a re-sent step must repeat the same measurement (sensor noise is
