@@ -425,9 +425,10 @@ def test_a_composed_stack_records_every_step_in_its_own_process(tmp_path, domain
         # A participant's node names come in a discovery message of their own, which a loaded
         # machine can deliver after the endpoints (the name then reads _NODE_NAME_UNKNOWN_).
         def named() -> bool:
-            return all(i.node_name != '_NODE_NAME_UNKNOWN_' for i in
-                       stack.node.get_publishers_info_by_topic('/ato/step_records'))
-        assert stack.spin_until(named, 60.0), 'the node names never came'
+            found = stack.node.get_publishers_info_by_topic('/ato/step_records')
+            return bool(found) and all(i.node_name != '_NODE_NAME_UNKNOWN_' for i in found)
+        assert stack.spin_until(named, 60.0), \
+            'no publisher of the step records with a known node name within 60 s'
         publishers = stack.node.get_publishers_info_by_topic('/ato/step_records')
         subscribers = stack.node.get_subscriptions_info_by_topic('/ato/step_records')
         assert stack.spin_until(lambda: stack.processes['loop'].poll() is not None, 300.0)
