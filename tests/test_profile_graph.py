@@ -106,6 +106,39 @@ def test_profile_follows_the_clock_and_a_late_subscriber_gets_the_whole_curve(tm
         assert stack.stop(['profile'])['profile'] == 0
 
 
+def test_a_tick_that_came_before_the_plant_identity_is_answered_when_it_comes(tmp_path,
+                                                                             domain_id):
+    """The profile answers no tick before the plant's identity, and answers the latest one it
+    had once the identity comes, its step records sent at once: an ATO node that does not wait
+    for the reference lets the plant run on without re-sending a tick, and a recorder (here the
+    test's subscription to the step records) vouches for nothing before the profile's records,
+    so an unanswered tick held such a loop for good (CI, a loaded machine)."""
+    from std_msgs.msg import UInt8MultiArray
+
+    config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path)
+    with Stack(config) as stack:
+        records = []
+        subscribe(stack, 'step_records', UInt8MultiArray, records)
+        stack.start_process('profile', {'scenario': 'short_line', 'lockstep': True,
+                                        'use_sim_time': True, 'wait_for_subscribers': 1})
+        clock = stack.node.create_publisher(Clock, topic('clock').name,
+                                            qos_profile(topic('clock').qos))
+        assert stack.spin_until(lambda: clock.get_subscription_count() > 0 and all(
+            stack.node.count_publishers(topic(name).name) > 0
+            for name in ('reference', 'step_records')), 60.0), stack.log_tail('profile')
+        tick = 7 * PERIOD_NS
+        clock.publish(Clock(clock=to_time(tick)))  # reliable, matched: it reaches the profile
+        stack.spin_for(2.0)
+        assert tick not in stack.monitor.samples and not records, 'answered before the identity'
+        identity = stack.node.create_publisher(String, topic('identity').name,
+                                               qos_profile(topic('identity').qos))
+        identity.publish(String(data=scenario_identity(load_scenario('short_line'))))
+        # the tick is not sent again: the profile answers the one it had
+        assert stack.spin_until(lambda: tick in stack.monitor.samples and records, 30.0), \
+            stack.log_tail('profile')
+        assert stack.stop(['profile'])['profile'] == 0
+
+
 def test_a_malformed_ttobench_line_stops_the_profile_before_it_starts(tmp_path, domain_id):
     track = tmp_path / 'track.json'
     track.write_text(json.dumps({

@@ -394,13 +394,14 @@ class RecorderLead:
                 f'{recorder}, {what} (lead {seconds(acknowledgements.lead_ns):g} s)')
 
 
-def watch_plant_identity(node, own_identity: str, refusal: str):
+def watch_plant_identity(node, own_identity: str, refusal: str,
+                         on_identified: Callable[[], None] | None = None):
     """Subscribe ``node`` to the plant's latched identity (``train/identity``): a plant that
     simulates another scenario than ``own_identity``'s (or an identity that is not one) makes
     the node log ``refusal`` with both scenarios named and stop with exit code 2; the expected
-    one sets ``node.identified``. A node that must send nothing to a plant it would refuse
-    waits for ``identified``: on a loaded machine the plant's first states can be taken before
-    its identity."""
+    one sets ``node.identified`` and then calls ``on_identified`` (once). A node that must send
+    nothing to a plant it would refuse waits for ``identified``: on a loaded machine the
+    plant's first states can be taken before its identity."""
     from std_msgs.msg import String
 
     from ato_common.identity import identity_mismatch
@@ -414,8 +415,10 @@ def watch_plant_identity(node, own_identity: str, refusal: str):
             node.get_logger().error(f'{refusal}: {mismatch}')
             node.exit_code = 2
             node.finished = True
-        elif not node.finished:
+        elif not node.finished and not node.identified:
             node.identified = True
+            if on_identified is not None:
+                on_identified()
     return node.create_subscription(String, topic('identity').name, on_identity,
                                     qos_profile(topic('identity').qos))
 

@@ -16,7 +16,8 @@ first ones, a changed period, a re-sent tick) gets it at once. Real time: the sa
 clock timer, with the curve's time origin taken from the plant's first state message (its stamp
 minus its run time). The whole curve is latched once at start-up. No reference goes out before
 the plant's latched identity has been read and is this scenario's (``watch_plant_identity``: a
-plant of another scenario is refused, exit 2); in lockstep the plant re-sends the tick meanwhile.
+plant of another scenario is refused, exit 2); in lockstep the latest tick that came before it
+is answered when it comes (the plant re-sends a tick only while it waits for a command).
 
 Resume: a plant that starts again (its run time goes back; in lockstep its /clock) gives the
 curve its time origin again, so the reference starts from the start of the run, not the dead
@@ -184,7 +185,9 @@ class ProfileNode(RunNodeHooks, Node):
         self._curve_pub = curve_pub  # keep the latched publisher alive
         # the plant's identity read, and ours (watch_plant_identity): no reference before it
         self.identified = False
-        watch_plant_identity(self, self.identity, 'refusing to stream the target curve')
+        self.unanswered_tick: bytes | None = None  # the latest tick that came before it
+        watch_plant_identity(self, self.identity, 'refusing to stream the target curve',
+                             self.on_identified)
         if self.lockstep:
             self.start_lockstep_plans()
             # Not spun (a node of its own, on no executor): the measured state is taken from
@@ -317,9 +320,23 @@ class ProfileNode(RunNodeHooks, Node):
         self.publishing(self.diag_pub, DiagnosticArray(header=Header(stamp=to_time(stamp_ns)),
                                                        status=[status]))
 
+    def on_identified(self) -> None:
+        """The plant's identity is this scenario's: the latest tick that came before it is
+        answered now, and its step records sent at once. The plant re-sends a tick only while
+        it waits for a command; an ATO node of one's own that does not wait for the reference
+        lets it run on without one, up to a recorder's lead, and a recorder vouches for nothing
+        before it has the profile's records (``ato_ros.step_records.Written``): a tick left
+        unanswered here would hold the loop for good."""
+        data, self.unanswered_tick = self.unanswered_tick, None
+        if data is not None and self.lockstep:
+            self.on_clock(data)
+            self.records.flush()
+
     def on_clock(self, data: bytes) -> None:
         if not self.identified:
-            return  # nothing to a plant it may refuse; the plant re-sends the tick
+            # nothing to a plant it may refuse: answered once its identity comes (on_identified)
+            self.unanswered_tick = data
+            return
         if not self.subscribers_met:
             recorders = self.params['wait_for_recorders']
             if first_unmatched(((self.reference_pub, self.params['wait_for_subscribers']),
