@@ -17,7 +17,9 @@ The main run drives a variant of ``--scenario`` (default short_line) made for th
 beside the logs (``variant.yaml``; its name is the scenario's): a total traction loss at the
 start (the train stands while its reference leaves, and the profile plans the leg again from
 where it stands), then a failed speed sensor, over at most 200 s of simulated time; then a new
-plant for 20 s. Your node must be able to drive the scenario's train.
+plant for 20 s. Your node must be able to drive the scenario's train. The plant starts once the
+harness is matched to your node's ato/command publisher (what a node sends before that never
+reaches the harness), or after ``MATCH_S`` of wall time without it, saying so.
 """
 
 from __future__ import annotations
@@ -68,6 +70,8 @@ from ato_simulation.plans import cached_plan, run_end_time_s
 STALL_S = 30.0
 #: how long a node given another scenario's plant is watched, s of wall time
 OTHER_WATCH_S = 10.0
+#: how long the main run waits for the harness to hear the node's commands, s of wall time
+MATCH_S = 60.0
 
 
 class Observer:
@@ -79,14 +83,21 @@ class Observer:
         self.epoch = Epoch()
         self.stopping = False
         self.after_stop: list[Sent] = []
-        for key, msg_type, callback, raw in (
+        self.subscriptions = {
+            key: node.create_subscription(msg_type, topic(key).name, callback,
+                                          qos_profile(topic(key).qos), raw=raw)
+            for key, msg_type, callback, raw in (
                 ('state_measured', JointTrajectory, self.on_measured, True),
                 ('state', JointTrajectory, self.on_truth, True),
                 ('reference', JointTrajectory, self.on_reference, True),
                 ('command', JointState, self.on_command, True),
-                ('diagnostics', DiagnosticArray, self.on_diagnostics, False)):
-            node.create_subscription(msg_type, topic(key).name, callback,
-                                     qos_profile(topic(key).qos), raw=raw)
+                ('diagnostics', DiagnosticArray, self.on_diagnostics, False))}
+
+    def hears_commands(self) -> bool:
+        """Whether a publisher of ato/command (the node's) is matched to the harness: what a
+        publisher sends before it is matched never reaches the harness (volatile), so the run
+        must not start before (the plant matches it on its own, and would be answered)."""
+        return self.subscriptions['command'].get_publisher_count() > 0
 
     def on_measured(self, data: bytes) -> None:
         stamp = wire.stamp_of(data)
@@ -177,7 +188,14 @@ def main_run(args, variant: Path, schedule: Schedule, domain_id: int) -> Observa
                                          'wait_for_diagnostics_readers': 1})
     with Stack(config) as stack:
         observer = Observer(stack.node)
-        stack.start()
+        stack.start(order=('controller', 'profile'))
+        node = stack.processes['controller']
+        if not stack.spin_until(lambda: observer.hears_commands() or node.poll() is not None,
+                                MATCH_S):
+            print(f'conformance: no publisher of {topic("command").name} matched within '
+                  f'{MATCH_S:g} s of wall time; the run starts all the same (a node that creates '
+                  'it late may lose its first commands to the harness)', file=sys.stderr)
+        stack.start_process('plant', stack.node_params()['plant'])
         run_epoch(stack, observer, schedule.horizon_s)
         main = observer.epoch
         observer.epoch = Epoch()
