@@ -28,7 +28,9 @@ class Process:
 
 class FakeStack:
     """Just enough of ``ato_bringup.stack.Stack``: the graph matches the node's publisher of
-    ato/command after a few spins; the plant ends at once."""
+    ato/command after ``matched_after`` spins (None: never); the plant ends at once."""
+
+    matched_after: int | None = MATCHED_AFTER
 
     def __init__(self, config):
         self.events: list[str] = []
@@ -41,7 +43,9 @@ class FakeStack:
                 self.name = name
 
             def get_publisher_count(self):
-                return int(self.name.endswith('command') and stack.spins >= MATCHED_AFTER)
+                after = stack.matched_after
+                return int(self.name.endswith('command') and after is not None
+                           and stack.spins >= after)
 
         self.node = SimpleNamespace(create_subscription=lambda _type, name, *a, **k:
                                     Subscription(name))
@@ -83,3 +87,16 @@ def test_the_plant_starts_once_the_harness_hears_the_node(monkeypatch, tmp_path)
     events = FakeStack.last.events
     assert events[:2] == ['controller (spin 0)', 'profile (spin 0)'], events
     assert events[2] == f'plant (spin {MATCHED_AFTER})', events
+
+
+def test_a_node_never_heard_is_named_and_the_run_starts_all_the_same(monkeypatch, tmp_path,
+                                                                      capsys):
+    """A node that creates its publisher late (or never) is not waited for without end: the
+    harness says so and starts the plant after ``MATCH_S``."""
+    monkeypatch.setattr(conformance, 'Stack', FakeStack)
+    monkeypatch.setattr(FakeStack, 'matched_after', None)
+    args = SimpleNamespace(log_dir=tmp_path, controller_command='my_ato')
+    conformance.main_run(args, 'short_line', Schedule(20.0), 0)
+    assert [event.split()[0] for event in FakeStack.last.events[:3]] == [
+        'controller', 'profile', 'plant']
+    assert 'no publisher of ato/command matched within 60 s' in capsys.readouterr().err
