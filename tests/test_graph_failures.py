@@ -152,6 +152,23 @@ def test_the_last_step_reaches_its_subscribers_before_the_plant_exits(tmp_path, 
         assert np.all(np.diff(stamps) == PERIOD_NS)
 
 
+def test_a_first_step_waiting_for_a_recorder_that_never_comes_says_so(tmp_path, domain_id):
+    """A lockstep plant told to wait for a recorder (wait_for_recorders) that never subscribes
+    (none started; or one recording a list of topics without /diagnostics) does not wait
+    silently: after command_wait_limit_s it names the topic it waits on, again each period."""
+    config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path)
+    with Stack(config) as stack:
+        stack.start_process('plant', {**stack.node_params()['plant'], 'wait_for_recorders': 1,
+                                      'command_wait_limit_s': 0.5})
+
+        def reports() -> int:
+            return stack.log_tail('plant', 200).count(
+                'of wall time: /ato/step_records has fewer subscribers than the first step '
+                'waits for')
+        assert stack.spin_until(lambda: reports() >= 2, 60.0), stack.log_tail('plant')
+        assert stack.monitor.last_stamp_ns == -1, 'the plant stepped without its recorder'
+
+
 @pytest.mark.parametrize('name', ['plant', 'profile', 'controller'])
 def test_help_prints_usage_and_every_parameter_and_starts_nothing(name):
     package, executable = EXECUTABLES[name]

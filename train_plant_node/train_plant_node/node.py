@@ -240,6 +240,7 @@ class TrainPlantNode(RunNodeHooks, Node):
         self.step_messages: list | None = None
         self.steps_published = 0  # re-sent steps included: what a recording must hold
         self.ready_since: float | None = None
+        self.start_wait_since: float | None = None  # when the first step began to wait
         self.wrong_stamp_commands = 0   # dropped for their stamp (lockstep and real time)
         self.last_wrong_stamp = ''      # why the last one was dropped
         self.failures_reported = 0
@@ -512,6 +513,23 @@ class TrainPlantNode(RunNodeHooks, Node):
             if parameter.name == 'inject_failure':
                 self.inject_failure(parameter.value)
 
+    def report_start_wait(self, topic: str, now: float) -> None:
+        """A first step that waited beyond command_wait_limit_s for the subscribers it waits for
+        is reported (WARN log), again each such period: a run never waits silently."""
+        if self.start_wait_since is None:
+            self.start_wait_since = now
+        waited, limit = now - self.start_wait_since, self.params['command_wait_limit_s']
+        if waited < limit or now - self.waiting_reported_wall < limit:
+            return
+        self.waiting_reported_wall = now
+        self.get_logger().warning(
+            f'not started after {waited:.1f} s of wall time: {topic} has fewer subscribers than '
+            f'the first step waits for (wait_for_subscribers {self.params["wait_for_subscribers"]} '
+            f'on train/state; wait_for_recorders {self.params["wait_for_recorders"]} on '
+            f'ato/step_records and, with wait_for_diagnostics_readers '
+            f'{self.params["wait_for_diagnostics_readers"]}, on /diagnostics: a recorder of a '
+            'list of topics without /diagnostics never subscribes to it)')
+
     def inject_failure(self, text: str) -> None:
         """Apply an accepted ``inject_failure`` text at once."""
         failures, repaired = parse_failure_injection(text, self.sim.actuator_names,
@@ -527,10 +545,13 @@ class TrainPlantNode(RunNodeHooks, Node):
         if self.finished:
             return
         if not self.started:
-            if (self.truth_pub.get_subscription_count() < self.params['wait_for_subscribers']
-                    or self.unmatched_output()):
-                return
             now = time.monotonic()
+            unmatched = self.truth_pub.topic_name if (
+                self.truth_pub.get_subscription_count() < self.params['wait_for_subscribers']
+            ) else self.unmatched_output()
+            if unmatched:
+                self.report_start_wait(unmatched, now)
+                return
             if self.ready_since is None:
                 self.ready_since = now
             if now - self.ready_since < self.params['start_delay_s']:
