@@ -7,7 +7,8 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-from typing import Callable
+from collections import Counter
+from typing import Callable, Protocol
 
 from rclpy.duration import Duration as RclpyDuration
 from rclpy.impl.implementation_singleton import rclpy_implementation
@@ -150,6 +151,25 @@ class StepRecordsPublisher:
         return self.publisher.wait_for_all_acked(timeout)
 
 
+class LocalRecorder(Protocol):
+    """A recorder in the loop's process (the composed stack's, ``recorder.node``), as a
+    :class:`StepRecorder` hands it the per-step messages."""
+
+    def log_for(self, topic: str) -> Callable[[bytes, int], None] | None:
+        """What writes one message of ``topic`` (its bytes, its log time ns), or None if the
+        recorder does not record the topic from the step records. Asked once per topic until
+        :meth:`StepRecorder.forget`."""
+
+    def wrote(self, counts: dict[str, int], first_ns: int, last_ns: int) -> int:
+        """``counts`` messages of each topic were written since the last call, at log times
+        ``first_ns`` to ``last_ns``; returns the log time at which to be told again (when the
+        recorder's file is due for a flush)."""
+
+
+def _not_recorded(data: bytes, log_time_ns: int) -> None:
+    """The write of a topic the in-process recorder does not record."""
+
+
 class StepRecorder:
     """A loop node's step records (``ato_ros.step_records``): its per-step messages for the
     recorders. Each step the node asks ``begin_step`` (is a recorder there?), ``add``s every
@@ -158,10 +178,10 @@ class StepRecorder:
 
     A recorder in another process subscribes to ``step_records``: the messages are bundled
     (``Bundle``) and the bundle published once it is due. A recorder in the same process (the
-    composed stack's, ``recorder.node``) is attached instead (:meth:`attach`): it is handed the
-    messages themselves, (topic, log time ns, bytes), a list at a time, with no middleware in
-    between; its hand-off may block the loop while the recorder's writer is more than its lead
-    behind (back-pressure, as ``RecorderLead`` for a recorder in another process)."""
+    composed stack's, ``recorder.node``) is attached instead (:meth:`attach`): each message is
+    written as it is added, by the function the recorder gave for its topic (the compiled
+    writer's own call, with no Python object per message), and what was written is told to the
+    recorder when its file is due for a flush (:meth:`report`)."""
 
     def __init__(self, node, publishing: Publishing):
         spec = TOPICS['step_records']
@@ -173,18 +193,28 @@ class StepRecorder:
         self.active = False
         self.bundling = False  # a recorder in another process subscribes
         self.names: dict[object, str] = {}  # publisher -> its topic's full name
-        self.local: Callable[[list], None] | None = None
-        self.batch: list[tuple[str, int, bytes]] = []
-        # when the batch is due: its first entry's stamp plus a bundle's period, or its
-        # wall clock plus a bundle's wall period (set with the first entry)
-        self.batch_due_ns = 0
-        self.batch_due_wall = 0.0
-        self.batch_period_ns = self.bundle.period_ns
+        self.local: LocalRecorder | None = None
+        self.logs: dict[object, Callable[[bytes, int], None]] = {}  # publisher -> its write
+        self.unrecorded: set[object] = set()  # publishers the local recorder does not record
+        # what was written since the last report: each message's publisher and log time
+        # (two appends per message; counted when the recorder is told)
+        self.written: list[object] = []
+        self.log_times: list[int] = []
+        self.report_due_ns = 0
 
-    def attach(self, hand_off: Callable[[list], None]) -> None:
-        """An in-process recorder: ``hand_off`` takes each due list of the node's per-step
-        messages, (topic, log time ns, bytes), in the order they were added."""
-        self.local = hand_off
+    def attach(self, recorder: LocalRecorder) -> None:
+        """An in-process recorder: each message added is written by ``recorder.log_for`` of its
+        topic, and what was written is reported with ``recorder.wrote``."""
+        self.local = recorder
+        self.logs.clear()
+        self.unrecorded.clear()
+
+    def forget(self) -> None:
+        """Report what was written and ask the recorder again how to write each topic (what it
+        records changed: it stopped, or a topic is now taken from elsewhere)."""
+        self.report()
+        self.logs.clear()
+        self.unrecorded.clear()
 
     def begin_step(self) -> bool:
         """Whether a recorder records, asked when a bundle begins (a recorder that leaves while
@@ -198,39 +228,55 @@ class StepRecorder:
         """A per-step message of ``publisher`` (its bytes as published), logged at
         ``log_time_ns``; only while ``active``."""
         if self.active:
-            name = self.names.get(publisher)
-            if name is None:
-                name = self.names[publisher] = publisher.topic_name
             if self.bundling:
+                name = self.names.get(publisher)
+                if name is None:
+                    name = self.names[publisher] = publisher.topic_name
                 self.bundle.add(name, log_time_ns, data)
             if self.local is not None:
-                batch = self.batch
-                if not batch:
-                    self.batch_due_ns = log_time_ns + self.batch_period_ns
-                    self.batch_due_wall = time.monotonic() + self.bundle.wall_period_s
-                batch.append((name, log_time_ns, data))
+                log = self.logs.get(publisher)
+                if log is None:
+                    log = self._log_for(publisher)
+                log(data, log_time_ns)
+                self.written.append(publisher)
+                self.log_times.append(log_time_ns)
+
+    def _log_for(self, publisher) -> Callable[[bytes, int], None]:
+        assert self.local is not None
+        log = self.local.log_for(publisher.topic_name)
+        if log is None:
+            self.unrecorded.add(publisher)
+            log = _not_recorded
+        self.logs[publisher] = log
+        return log
 
     def end_step(self, stamp_ns: int) -> None:
         if self.bundling and self.bundle.due(stamp_ns):
             self.flush_bundle()
-        if self.batch and (stamp_ns >= self.batch_due_ns
-                           or time.monotonic() >= self.batch_due_wall):
-            self.hand_off()
+        if self.log_times and self.log_times[-1] >= self.report_due_ns:
+            self.report()
+
+    def report(self) -> None:
+        """Tell the in-process recorder what was written since the last report."""
+        if not self.log_times or self.local is None:
+            return
+        written, times = self.written, self.log_times
+        self.written, self.log_times = [], []
+        counts: dict[str, int] = {}
+        for publisher, count in Counter(written).items():
+            if publisher not in self.unrecorded:
+                counts[publisher.topic_name] = counts.get(publisher.topic_name, 0) + count
+        self.report_due_ns = self.local.wrote(counts, min(times), max(times))
 
     def flush_bundle(self) -> None:
         data = self.bundle.take()
         if data is not None:
             self.publishing(self.publisher.publisher, data)
 
-    def hand_off(self) -> None:
-        batch, self.batch = self.batch, []
-        if batch and self.local is not None:
-            self.local(batch)
-
     def flush(self) -> None:
         """Hand on everything kept (the last steps' records)."""
         self.flush_bundle()
-        self.hand_off()
+        self.report()
 
     def close(self, timeout_s: float = RECORDS_DELIVERY_TIMEOUT_S) -> bool:
         """Hand on what is left and wait until every recorder in another process has it (False

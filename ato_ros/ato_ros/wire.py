@@ -59,7 +59,7 @@ _HEADER = b'\x00\x01\x00\x00'  # what the encoders write: CDR_LE, options 0
 
 
 def _time_parts(stamp_ns: int) -> tuple[int, int]:
-    return stamp_ns // NS_PER_S, stamp_ns % NS_PER_S
+    return divmod(stamp_ns, NS_PER_S)
 
 
 def _duration_parts(time_s: float) -> tuple[int, int]:
@@ -149,12 +149,30 @@ class _Layout:
             slots[i] = False
         self._slots = tuple(i for i, is_slot in enumerate(slots) if is_slot)
         self.size = 4 + self._unpack.size
+        self.pack_values = self._slots_packer()
         return self
 
+    def _slots_packer(self):
+        """A function of the slots' values, one argument each, that packs the message in one
+        ``Struct.pack`` with the constant parts in between: generated once per layout, so a
+        per-step message costs one call instead of a walk over the layout (the constants are
+        the function's globals, never text in its source)."""
+        arguments, parts, constants = [], [], {}
+        for index, part in enumerate(self._order):
+            if part is None:
+                arguments.append(f'v{len(arguments)}')
+                parts.append(arguments[-1])
+            else:
+                constants[f'c{index}'] = part
+                parts.append(f'c{index}')
+        source = (f'def pack_values({", ".join(arguments)}):\n'
+                  f'    return HEADER + PACK({", ".join(parts)})\n')
+        scope = {'HEADER': _HEADER, 'PACK': self._pack.pack, **constants}
+        exec(source, scope)  # noqa: S102 - source built above from argument names only
+        return scope['pack_values']
+
     def pack(self, values: Sequence) -> bytes:
-        it = iter(values)
-        return _HEADER + self._pack.pack(*[next(it) if part is None else part
-                                           for part in self._order])
+        return self.pack_values(*values)
 
     def unpack(self, data: bytes) -> list | None:
         # (the middleware may pad the end: rmw_serialize gives up to 8 bytes more)
@@ -214,7 +232,7 @@ _FLOAT64 = struct.Struct('<d')
 
 def encode_clock(stamp_ns: int) -> bytes:
     """``rosgraph_msgs/msg/Clock``."""
-    return _HEADER + _CLOCK.pack(*_time_parts(stamp_ns))
+    return _HEADER + _CLOCK.pack(*divmod(stamp_ns, NS_PER_S))
 
 
 def encode_float64(value: float) -> bytes:
@@ -230,8 +248,8 @@ def encode_state(state: TrainState, stamp_ns: int | None = None,
     n = len(state.car_names)
     layout = _trajectory_layout('', tuple(state.car_names), 1, n, True)
     stamp = state.stamp_ns if stamp_ns is None else stamp_ns
-    return layout.pack((*_time_parts(stamp), *state.positions, *state.speeds,
-                          *state.accelerations, *state.forces, *_duration_parts(run_time_s)))
+    return layout.pack_values(*divmod(stamp, NS_PER_S), *state.positions, *state.speeds,
+                              *state.accelerations, *state.forces, *_duration_parts(run_time_s))
 
 
 def encode_reference(reference: Reference) -> bytes:
@@ -252,7 +270,7 @@ def encode_joint_forces(stamp_ns: int, names: Sequence[str], forces: Sequence[fl
     ``position`` and ``velocity``: the command (``frame_id`` = the law) and the actuator forces
     (``ato_ros.messages.command_to_msg``, ``actuator_forces_to_msg``)."""
     layout = _joint_state_layout(frame_id, tuple(names))
-    return layout.pack((*_time_parts(stamp_ns), *(float(f) for f in forces)))
+    return layout.pack_values(*divmod(stamp_ns, NS_PER_S), *map(float, forces))
 
 
 @lru_cache(maxsize=16)

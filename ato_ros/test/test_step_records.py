@@ -265,28 +265,60 @@ def _step_recorder():
     return StepRecorder(node, lambda publisher, data: publisher.publish(data)), node
 
 
-def test_an_in_process_recorder_is_handed_the_messages_a_period_at_a_time():
-    """The composed stack's recorder (StepRecorder.attach): no bundle, no publish; the messages
-    themselves, in order, once they span a bundle's period of stamps, and the rest at a flush;
-    the nodes count it as a recorder on the step records."""
+class _LocalRecorder:
+    """A recorder in the loop's process as the step recorder sees it (LocalRecorder): writes
+    each topic but ``/not_recorded``, and wants to be told every ``every_ns`` of log time."""
+
+    def __init__(self, every_ns: int):
+        self.every_ns, self.written, self.told, self.asked = every_ns, [], [], []
+
+    def log_for(self, topic):
+        self.asked.append(topic)
+        if topic == '/not_recorded':
+            return None
+        return lambda data, log_time_ns: self.written.append((topic, log_time_ns, data))
+
+    def wrote(self, counts, first_ns, last_ns):
+        self.told.append((dict(counts), first_ns, last_ns))
+        return last_ns + self.every_ns
+
+
+def test_an_in_process_recorder_is_written_each_message_as_it_is_added():
+    """The composed stack's recorder (StepRecorder.attach): no bundle, no publish; each message
+    written as it is added, by the function the recorder gave for its topic (asked once per
+    topic until forget), in order; what was written told when the recorder asked to be, and
+    at a flush; the nodes count it as a recorder on the step records."""
     records, node = _step_recorder()
     assert not records.begin_step() and records.publisher.get_subscription_count() == 0
-    handed = []
-    records.attach(handed.append)
+    every_ns = 1_000_000_000
+    local = _LocalRecorder(every_ns)
+    records.attach(local)
     assert records.publisher.get_subscription_count() == 1
-    state, clock = _Publisher('/train/state'), _Publisher('/clock')
-    period_ns = round(PERIOD_S * 1e9)
-    steps = period_ns // 100_000_000 + 1  # the batch is handed on at the step it spans a period
-    total = steps + 3
+    state, clock, other = (_Publisher('/train/state'), _Publisher('/clock'),
+                           _Publisher('/not_recorded'))
+    total = 14
     for k in range(total):
         stamp = k * 100_000_000
         assert records.begin_step()
         records.add(clock, stamp, b'c%d' % k)
         records.add(state, stamp, b's%d' % k)
+        records.add(other, stamp, b'o%d' % k)
+        assert local.written[-1] == ('/train/state', stamp, b's%d' % k)  # at once
         records.end_step(stamp)
     records.flush()
-    assert [len(batch) for batch in handed] == [2 * steps, 2 * (total - steps)]
-    assert [entry for batch in handed for entry in batch] == [
-        (name, k * 100_000_000, b'%s%d' % (tag, k)) for k in range(total)
-        for name, tag in (('/clock', b'c'), ('/train/state', b's'))]
+    assert local.asked == ['/clock', '/train/state', '/not_recorded']
+    assert local.written == [(name, k * 100_000_000, b'%s%d' % (tag, k)) for k in range(total)
+                             for name, tag in (('/clock', b'c'), ('/train/state', b's'))]
+    # told at the first step (no due time yet), then once what was written reached the time
+    # the recorder gave, then at the flush
+    assert local.told == [({'/clock': 1, '/train/state': 1}, 0, 0),
+                          ({'/clock': 10, '/train/state': 10}, 100_000_000, 1_000_000_000),
+                          ({'/clock': 3, '/train/state': 3}, 1_100_000_000, 1_300_000_000)]
+    told = len(local.told)
+    records.forget()  # what the recorder records changed: each topic asked for again
+    assert len(local.told) == told  # nothing written since the flush: nothing to tell
+    assert records.begin_step()
+    records.add(state, 1_400_000_000, b's14')
+    assert local.asked == ['/clock', '/train/state', '/not_recorded', '/train/state']
+    assert local.written[-1] == ('/train/state', 1_400_000_000, b's14')
     assert node.publishers[0].published == []  # nobody subscribed through the middleware

@@ -110,6 +110,10 @@ DEFAULT_FLUSH_PERIOD_S = 0.5
 DEFAULT_FLUSH_PERIOD_LOG_S = 0.5
 _TOPIC, _LOG_TIME = itemgetter(0), itemgetter(1)
 COMPRESSIONS = {'zstd': MCAPCompression.Zstd, 'lz4': MCAPCompression.Lz4, 'none': None}
+#: the compressor's level of each compression (0: the compressor's own default): zstd at level
+#: 1, as rosbag2 Jazzy's MCAP plugin writes by default (the mcap library's
+#: ``CompressionLevel::Default``, which it maps to zstd level 1), where zstd's own default is 3
+COMPRESSION_LEVELS = {'zstd': 1, 'lz4': 0, 'none': 0}
 
 
 def recover_command(path) -> str:
@@ -197,6 +201,7 @@ class BagWriter:
         # A context of its own: the writer records exactly the channels this bag registers.
         self._context = foxglove.Context()
         options = MCAPWriteOptions(profile='ros2', compression=COMPRESSIONS[compression],
+                                   compression_level=COMPRESSION_LEVELS[compression],
                                    chunk_size=chunk_size, compression_threads=0)
         try:
             self.folder.mkdir(parents=True, exist_ok=True)
@@ -313,6 +318,25 @@ class BagWriter:
         for index, count in Counter(map(_TOPIC, entries)).items():
             topics[names[index]].message_count += count
         self._wrote(min(map(_LOG_TIME, entries)), max(map(_LOG_TIME, entries)))
+
+    def log_function(self, topic: str) -> Callable[[bytes, int], None]:
+        """The compiled call that adds one message of ``topic`` (a channel of this bag): its
+        bytes, its log time ns. What it added is not counted until :meth:`wrote` is told."""
+        if self.failed:
+            raise BagError(f'{self.path}: the recording stopped after a write error')
+        return self._log[topic]
+
+    def wrote(self, counts: dict[str, int], first: int, last: int) -> int:
+        """``counts`` messages of each topic were added by :meth:`log_function`'s calls, at
+        log times ``first`` to ``last``: counted, and the chunk closed if a flush period has
+        passed (BagError if the file cannot be written); returns the log time of the next
+        flush by log time."""
+        topics = self.topics
+        for topic, count in counts.items():
+            topics[topic].message_count += count
+        self._wrote(first, last)
+        assert self._last_flush_log_ns is not None  # set by _wrote
+        return self._last_flush_log_ns + self.flush_period_log_ns
 
     def _wrote(self, first: int, last: int) -> None:
         """Messages from log time ``first`` to ``last`` were added: the bag's span, and the

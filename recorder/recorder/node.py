@@ -36,13 +36,14 @@ acknowledgement when it is more than its ``recorder_lead_s`` ahead (back-pressur
 priority, on the CPU the loop leaves (what ``run_scenario`` does in lockstep).
 
 In the composed stack (``ato_stack --record FOLDER``, ``ato_bringup.composed``) the recorder is
-a node of the loop's process: the step records of its namespace are handed to it by the loop
-nodes without the middleware (``ato_ros.publishing.StepRecorder.attach``) and written at
-once, on the loop's thread, by the compiled writer (which holds Python's lock while it writes
-and compresses, so a thread of its own could not run beside the loop: it would only add the
-hand-offs). Its chunks are flushed every ``IN_PROCESS_FLUSH_PERIOD_LOG_S`` of log time unless
-``--flush-period-log`` says otherwise: a killed process loses at most the plant's lead of the
-separate processes (``LEAD_S``), with no acknowledgement.
+a node of the loop's process: each message of the step records of its namespace is written by
+the loop node that adds it, without the middleware and without a Python object per message
+(``ato_ros.publishing.StepRecorder.attach``, ``RecorderNode.log_for``), on the loop's thread,
+by the compiled writer (which holds Python's lock while it writes and compresses, so a thread
+of its own could not run beside the loop: it would only add the hand-offs). Its chunks are
+flushed every ``IN_PROCESS_FLUSH_PERIOD_LOG_S`` of log time unless ``--flush-period-log`` says
+otherwise: a killed process loses at most the plant's lead of the separate processes
+(``LEAD_S``), with no acknowledgement.
 
 SIGINT and SIGTERM close the file properly; a SIGKILL loses at most the last take and flush
 periods: chunks are flushed every ``--flush-period`` of wall time (0.5 s) and every
@@ -58,7 +59,6 @@ import argparse
 import os
 import sys
 from datetime import datetime, timezone
-from operator import itemgetter
 from pathlib import Path
 from typing import Callable
 
@@ -75,10 +75,9 @@ from ato_common.conventions import TOPICS
 from ato_common.validation import ConfigError
 from ato_ros.lifecycle import RunNodeHooks, freeze_startup_objects, run_node
 from ato_ros.messages import qos_profile
-from ato_ros.publishing import local_step_recorder
+from ato_ros.publishing import StepRecorder, local_step_recorder
 from ato_ros.step_records import (
     LEAD_S,
-    PERIOD_S,
     Written,
     namespace_of,
     read_bundle,
@@ -101,15 +100,14 @@ DEFAULT_TAKE_PERIOD_S = 0.05
 #: acknowledgements flush more often (every ``ACK_PERIOD_S`` of the step records' stamps), and a
 #: shorter period would only close chunks that an acknowledgement closes again a moment later
 RECORDER_FLUSH_PERIOD_LOG_S = LEAD_S
-#: the composed stack's recorder closes a chunk at least this often, s of log time: what a
-#: killed process loses is the loop nodes' batch in the making (under ``PERIOD_S`` of stamps,
-#: ``ato_ros.publishing.StepRecorder``) and what was written since the last flush (under this),
-#: at most the plant's lead for a recorder in another process (``LEAD_S``)
-IN_PROCESS_FLUSH_PERIOD_LOG_S = LEAD_S - PERIOD_S
+#: the composed stack's recorder closes a chunk at least this often, s of log time: the loop
+#: nodes write each message as they add it (``ato_ros.publishing.StepRecorder``), so what a
+#: killed process loses is what was written since the last flush, under this and a step: at
+#: 10 Hz, at most the plant's lead for a recorder in another process (``LEAD_S``)
+IN_PROCESS_FLUSH_PERIOD_LOG_S = round(LEAD_S - 0.1, 9)
 #: at most this many messages of one topic per take (the rest at the next)
 MAX_TAKES = 10_000
 CLOCK = TOPICS['clock'].name
-_TOPIC = itemgetter(0)
 #: how often the recorder asks again who publishes a per-step topic it takes from the step
 #: records (a publisher of its own joining mid-run), in discovery periods
 RECHECK_DISCOVERIES = 10
@@ -186,6 +184,7 @@ class RecorderNode(RunNodeHooks, Node):
         self.direct: set[str] = set()  # per-step topics subscribed to: left out of the records
         self.from_records: set[str] = set()  # per-step topics taken from the step records
         self.discoveries = 0
+        self.local_records: StepRecorder | None = None
         self.local_namespace = self.attach_in_process() if in_process else None
         self.name = self.get_fully_qualified_name()
         self.received = 0
@@ -275,6 +274,8 @@ class RecorderNode(RunNodeHooks, Node):
         written at its stamp, noted in what is written of the namespace, and acknowledged
         when that has moved on (the plant may be waiting for it, with no bundle coming)."""
         self.direct.add(topic)
+        if self.local_records is not None:
+            self.local_records.forget()  # its entries in the loop's records are left out
         written = self.written.get(namespace)
         handler = self._handler(topic, stamped=True)
 
@@ -333,7 +334,8 @@ class RecorderNode(RunNodeHooks, Node):
         if records is None:
             raise ConfigError(f'no loop node in namespace {namespace} of this process keeps step '
                               'records: the in-process recorder is built after the loop nodes')
-        records.attach(self._on_local_records)
+        records.attach(self)
+        self.local_records = records
         return namespace
 
     def _subscribe_step_records(self, topic: str, namespace: str) -> None:
@@ -447,16 +449,6 @@ class RecorderNode(RunNodeHooks, Node):
         return self.wanted is None and not self.direct and self.log_time == 'stamp' and \
             self.writer.topics.keys() >= set(topics)
 
-    def clock_from(self, entries) -> None:
-        """``--sim-time``: the recorder's time from the last /clock among the entries of step
-        records (its log time is its stamp)."""
-        if self.sim_time:
-            clock = self.clock_topic
-            for entry in reversed(entries):
-                if entry[0] == clock:
-                    self.sim_now_ns = entry[1]
-                    return
-
     def _recorded_entries(self, entries, written: Written | None = None
                           ) -> list[tuple[str, int, bytes]]:
         """The entries of step records (topic, stamp, [publish time,] bytes) this recorder
@@ -486,17 +478,58 @@ class RecorderNode(RunNodeHooks, Node):
         self.note_flushes()
         return True
 
-    def _on_local_records(self, batch: list[tuple[str, int, bytes]]) -> None:
-        """The per-step messages of the loop nodes of this process (composed stack), handed on
-        by their step recorder: written at once, on the loop's thread."""
-        if self.finished or not batch:
-            return
-        if self.plain(map(_TOPIC, batch)):
-            self.clock_from(batch)
-            messages = batch
-        else:
-            messages = self._recorded_entries(batch)
-        self._write_entries(messages)
+    # --- the step records of the loop nodes of this process (ato_ros.publishing.LocalRecorder)
+    def log_for(self, topic: str) -> Callable[[bytes, int], None] | None:
+        """How a per-step message of ``topic`` that a loop node of this process adds to its
+        step records is written, on the loop's thread: at its stamp, by the compiled writer's
+        own call (no Python object per message); at the recorder's time with ``--log-time
+        receipt``; /clock also sets the recorder's time (``--sim-time``, implied here), and
+        does only that when it is not recorded. None: not recorded (not asked for, subscribed
+        to instead, or the recording stopped)."""
+        if self.finished:
+            return None
+        sets_time = topic == self.clock_topic and self.sim_time
+        recorded = (self.wanted is None or topic in self.wanted) and topic not in self.direct \
+            and (topic in self.writer.topics or self._add_recorded_topic(topic))
+        if not recorded:
+            if not sets_time:
+                return None
+
+            def time_only(data: bytes, log_time_ns: int) -> None:
+                self.sim_now_ns = log_time_ns
+            return time_only
+        try:
+            log = self.writer.log_function(topic)
+        except BagError as error:
+            self.stop_on_error(error)
+            return None
+        if self.log_time != 'stamp':
+            now_ns = self.now_ns
+
+            def at_receipt(data: bytes, log_time_ns: int) -> None:
+                if sets_time:
+                    self.sim_now_ns = log_time_ns
+                log(data, now_ns())
+            return at_receipt
+        if sets_time:
+            def clock(data: bytes, log_time_ns: int) -> None:
+                self.sim_now_ns = log_time_ns
+                log(data, log_time_ns)
+            return clock
+        return log
+
+    def wrote(self, counts: dict[str, int], first_ns: int, last_ns: int) -> int:
+        """What ``log_for``'s writes added since the last call: counted, and the file flushed
+        when its flush period has passed; the log time of the next flush."""
+        written = {topic: n for topic, n in counts.items() if topic in self.writer.topics}
+        self.received += sum(written.values())
+        try:
+            due_ns = self.writer.wrote(written, first_ns, last_ns)
+        except BagError as error:
+            self.stop_on_error(error)
+            return 0
+        self.note_flushes()
+        return due_ns
 
     def _add_recorded_topic(self, topic: str) -> bool:
         """A topic first met in the step records: its type from the conventions, its QoS as
@@ -584,6 +617,8 @@ class RecorderNode(RunNodeHooks, Node):
 
     # --- the end --------------------------------------------------------------------------
     def flush(self) -> None:
+        if self.local_records is not None:
+            self.local_records.report()  # what the loop nodes wrote, counted before the flush
         try:
             self.writer.flush()
         except BagError as error:
@@ -606,6 +641,8 @@ class RecorderNode(RunNodeHooks, Node):
         self.get_logger().error(str(error))
         self.finished = True
         self.exit_code = 1
+        if self.local_records is not None:
+            self.local_records.forget()  # the loop nodes write nothing more
 
     def close_outputs(self) -> None:
         """Close the bag (summary, metadata.yaml); run_node calls this before the rclpy teardown,
@@ -620,6 +657,8 @@ class RecorderNode(RunNodeHooks, Node):
             except Exception as error:  # noqa: BLE001 - the bag must be closed all the same
                 self.get_logger().error(f'the last messages could not be taken: {error}')
         self.finished = True  # a message still delivered is not written to a closed file
+        if self.local_records is not None:
+            self.local_records.forget()  # what they wrote counted; nothing more written
         try:
             info = self.writer.close()
             self.get_logger().info(f'closed {info.path}: {info.message_count} messages on '
