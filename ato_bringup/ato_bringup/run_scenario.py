@@ -84,7 +84,7 @@ REAL_TIME_MARGIN_S = 300.0
 
 def parse_args(argv=None) -> argparse.Namespace:
     from ato_bringup.launch_arguments import AUTO_MODEL, SCENARIO_END
-    from ato_bringup.stack import RUN_DIAGNOSTICS_PERIOD_S
+    from ato_bringup.stack import RUN_DIAGNOSTICS_PERIOD_S, STEP_WAITED
     from ato_common.run_events import PLATFORM_TOLERANCE_M
     from ato_common.scenario import DEFAULT_SCENARIO, builtin_scenarios
     from ato_controller_node.gains import GAINS
@@ -137,6 +137,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument('--composed', action='store_true',
                         help='the plant, the profile and the controller in one process on one '
                              'executor (ato_stack) instead of three processes')
+    parser.add_argument('--watched-by', type=watched_keys, default=(), metavar='KEYS',
+                        help='the topics another process (a live view) already reads before the '
+                             f'run starts, comma-separated, of {",".join(STEP_WAITED)}: each '
+                             'node waits for those readers as well, or the run monitor could '
+                             'miss the first steps (docs/guide/recording.md)')
     parser.add_argument('--no-record', action='store_true',
                         help='do not record the run (by default: <log-dir>/bag, with a report)')
     parser.add_argument('--no-fail-on-events', action='store_true',
@@ -157,6 +162,20 @@ def parse_args(argv=None) -> argparse.Namespace:
         parser.error('--composed runs the suite\'s controller in the one process: it does not '
                      'take --controller-command')
     return args
+
+
+def watched_keys(text: str) -> tuple[str, ...]:
+    """``--watched-by``: comma-separated keys of the topics whose readers the loop waits for
+    (``ato_bringup.stack.STEP_WAITED``), each at most once."""
+    from ato_bringup.stack import STEP_WAITED
+    keys = tuple(key.strip() for key in text.split(',') if key.strip())
+    unknown = [key for key in keys if key not in STEP_WAITED]
+    if unknown:
+        raise argparse.ArgumentTypeError(f'{", ".join(unknown)}: not a topic the loop waits '
+                                         f'for readers of (one of {", ".join(STEP_WAITED)})')
+    if len(set(keys)) != len(keys):
+        raise argparse.ArgumentTypeError(f'{text}: a topic named twice')
+    return keys
 
 
 def unique_run_dir(parent: Path, name: str) -> Path:
@@ -231,6 +250,7 @@ def configure(args: argparse.Namespace):
                          record_to=None if args.no_record else log_dir / 'bag',
                          composed=args.composed, monitor='lean',
                          diagnostics_period_s=args.diagnostics_period,
+                         watched_by=args.watched_by,
                          plant_params={'control_rate_hz': launch.rate_hz,
                                        'draw_values': launch.draw_values},
                          controller_params={'rate_hz': launch.rate_hz, 'gains': launch.gains,
