@@ -155,6 +155,8 @@ class ProfileNode(RunNodeHooks, Node):
         self.time_origin_ns: int | None = 0 if self.lockstep else None
         self.last_tick_ns: int | None = None
         self.sent_ahead_ns: int | None = None
+        # (plan, stamp, point): the first point of the last reference sent (reference_at)
+        self.reference_now: tuple | None = None
         self.last_run_time_ns = -1
         self.resumes = 0
         self.subscribers_met = False
@@ -275,8 +277,20 @@ class ProfileNode(RunNodeHooks, Node):
         t = self.run_time_s(stamp_ns)
         horizon, step = self.params['preview_horizon_s'], self.params['preview_step_s']
         count = int(horizon / step + 1e-9)
-        at = self.plan_for(stamp_ns).trajectory.at
-        return Reference(stamp_ns, tuple(at(t + i * step) for i in range(count + 1)))
+        plan = self.plan_for(stamp_ns)
+        at = plan.trajectory.at
+        reference = Reference(stamp_ns, tuple(at(t + i * step) for i in range(count + 1)))
+        # the reference now of this plan: what publish_supervision reads at this stamp
+        self.reference_now = (plan, stamp_ns, reference.points[0])
+        return reference
+
+    def point_now(self, plan: Plan, stamp_ns: int):
+        """The reference point of ``plan`` at ``stamp_ns``: the first of the reference sent for
+        that stamp (in lockstep sent a tick ahead) if it was of this plan, else computed."""
+        known = self.reference_now
+        if known is not None and known[0] is plan and known[1] == stamp_ns:
+            return known[2]
+        return plan.trajectory.at(self.run_time_s(stamp_ns))
 
     def publish(self, stamp_ns: int) -> None:
         # as CDR bytes packed from a template (ato_ros.wire): a standard JointTrajectory
@@ -293,7 +307,7 @@ class ProfileNode(RunNodeHooks, Node):
         if not (dtg or permitted or recording):
             return
         plan = self.plan_for(stamp_ns)
-        now = plan.trajectory.at(self.run_time_s(stamp_ns))
+        now = self.point_now(plan, stamp_ns)
         if dtg or recording:
             self.observe(self.dtg_pub, dtg, stamp_ns,
                          plan.next_target(now.position, now.time_s).location_m - now.position)
