@@ -198,7 +198,7 @@ class StepRecorder:
         self.unrecorded: set[object] = set()  # publishers the local recorder does not record
         # what was written since the last report: each message's publisher and log time
         # (two appends per message; counted when the recorder is told)
-        self.written: list[object] = []
+        self.written: list = []
         self.log_times: list[int] = []
         self.report_due_ns = 0
 
@@ -213,6 +213,14 @@ class StepRecorder:
         """Report what was written and ask the recorder again how to write each topic (what it
         records changed: it stopped, or a topic is now taken from elsewhere)."""
         self.report()
+        self.logs.clear()
+        self.unrecorded.clear()
+
+    def detach(self) -> None:
+        """The in-process recorder stopped (its bag closed, or a write error): what was
+        written reported, and nothing more kept for it (the nodes no longer count it)."""
+        self.report()
+        self.local = None
         self.logs.clear()
         self.unrecorded.clear()
 

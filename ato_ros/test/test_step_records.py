@@ -321,4 +321,10 @@ def test_an_in_process_recorder_is_written_each_message_as_it_is_added():
     records.add(state, 1_400_000_000, b's14')
     assert local.asked == ['/clock', '/train/state', '/not_recorded', '/train/state']
     assert local.written[-1] == ('/train/state', 1_400_000_000, b's14')
+    records.detach()  # the recorder stopped: told what was written, then no longer counted
+    assert local.told[-1] == ({'/train/state': 1}, 1_400_000_000, 1_400_000_000)
+    assert records.publisher.get_subscription_count() == 0
+    assert not records.begin_step()
+    records.add(state, 1_500_000_000, b's15')
+    assert local.written[-1][1] == 1_400_000_000
     assert node.publishers[0].published == []  # nobody subscribed through the middleware

@@ -642,7 +642,7 @@ class RecorderNode(RunNodeHooks, Node):
         self.finished = True
         self.exit_code = 1
         if self.local_records is not None:
-            self.local_records.forget()  # the loop nodes write nothing more
+            self.local_records.detach()  # the loop nodes write nothing more
 
     def close_outputs(self) -> None:
         """Close the bag (summary, metadata.yaml); run_node calls this before the rclpy teardown,
@@ -658,7 +658,7 @@ class RecorderNode(RunNodeHooks, Node):
                 self.get_logger().error(f'the last messages could not be taken: {error}')
         self.finished = True  # a message still delivered is not written to a closed file
         if self.local_records is not None:
-            self.local_records.forget()  # what they wrote counted; nothing more written
+            self.local_records.detach()  # what they wrote counted; nothing more written
         try:
             info = self.writer.close()
             self.get_logger().info(f'closed {info.path}: {info.message_count} messages on '
