@@ -10,6 +10,7 @@ import time
 from collections import Counter
 from typing import Callable, Protocol
 
+from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration as RclpyDuration
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.qos import ReliabilityPolicy
@@ -18,7 +19,7 @@ from std_msgs.msg import Header, UInt8MultiArray
 from ato_common.conventions import TOPICS
 from ato_common.types import nanoseconds, seconds
 from ato_ros.messages import qos_profile, topic
-from ato_ros.step_records import Acknowledgements, Bundle
+from ato_ros.step_records import WALL_PERIOD_S, Acknowledgements, Bundle
 from ato_ros.wire import (
     MessageError,
     decode_header,
@@ -201,6 +202,16 @@ class StepRecorder:
         self.written: list = []
         self.log_times: list[int] = []
         self.report_due_ns = 0
+        # A bundle is sent when a step finds it due; one begun at a step after which no step
+        # comes (the plant held for a recorder that waits for this node's first bundle, or
+        # ticks that stopped) is sent by this timer once it is WALL_PERIOD_S old.
+        self.stale_timer = node.create_timer(WALL_PERIOD_S, self.send_stale,
+                                             clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def send_stale(self) -> None:
+        """Send the bundle in the making if no step has sent it within its wall period."""
+        if self.bundling and self.bundle.stale():
+            self.flush_bundle()
 
     def attach(self, recorder: LocalRecorder) -> None:
         """An in-process recorder: each message added is written by ``recorder.log_for`` of its

@@ -204,6 +204,12 @@ class Bundle:
             stamp_ns - self.first_ns >= self.period_ns
             or time.monotonic() - self.first_wall >= self.wall_period_s)
 
+    def stale(self) -> bool:
+        """Whether the bundle in the making is due by wall time alone (no step has come to
+        send it: a loop held, or a node whose ticks stopped)."""
+        return self.first_ns is not None and \
+            time.monotonic() - self.first_wall >= self.wall_period_s
+
     def take(self) -> bytes | None:
         """The serialised bundle (None if empty), and a new one begun."""
         if not self.names:

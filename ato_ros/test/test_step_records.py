@@ -253,6 +253,10 @@ class _Publisher:
 class _Node:
     def __init__(self):
         self.publishers = []
+        self.timers = []
+
+    def create_timer(self, period_s, callback, clock=None):
+        self.timers.append((period_s, callback, clock))
 
     def create_publisher(self, msg_type, name, qos):
         self.publishers.append(_Publisher('/' + name))
@@ -328,3 +332,29 @@ def test_an_in_process_recorder_is_written_each_message_as_it_is_added():
     records.add(state, 1_500_000_000, b's15')
     assert local.written[-1][1] == 1_400_000_000
     assert node.publishers[0].published == []  # nobody subscribed through the middleware
+
+
+def test_a_bundle_no_step_sends_is_sent_by_the_wall_timer():
+    """A bundle begun at a step after which no step comes (a profile whose first bundle a
+    recorder waits for, beside a plant held for that recorder's acknowledgement) is sent once it
+    is a wall period old, by the node's steady-clock timer; a fresh one is not."""
+    from rclpy.clock import ClockType
+
+    from ato_ros.step_records import WALL_PERIOD_S, read_bundle
+    records, node = _step_recorder()
+    (period_s, send_stale, clock), = node.timers
+    assert period_s == WALL_PERIOD_S and clock.clock_type == ClockType.STEADY_TIME
+    records.recorders = lambda: 1  # a recorder in another process subscribes
+    reference = _Publisher('/ato/reference')
+    assert records.begin_step()
+    records.add(reference, 1_700_000_000, b'r17')
+    records.end_step(1_700_000_000)  # a period of stamps not reached: kept
+    send_stale()
+    assert node.publishers[0].published == []  # not yet a wall period old
+    records.bundle.first_wall -= WALL_PERIOD_S
+    send_stale()
+    (data,) = node.publishers[0].published
+    names, entries = read_bundle(data)
+    assert names == ['/ato/reference'] and [e[1] for e in entries] == [1_700_000_000]
+    send_stale()  # nothing left to send
+    assert len(node.publishers[0].published) == 1
