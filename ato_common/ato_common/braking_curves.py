@@ -181,6 +181,28 @@ class Target:
     name: str = ''
 
 
+def interpolate(x: float, xs: list[float], ys: list[float]) -> float:
+    """``np.interp(x, xs, ys)`` for one ``x`` within ``[xs[0], xs[-1]]`` (``xs`` increasing), bit
+    for bit: the same interval (the last sample at or before ``x``), the sample itself where
+    ``x`` is one, else ``slope * (x - xs[j]) + ys[j]`` with numpy's slope and its fallbacks for
+    a NaN (an infinite slope). A supervision evaluates its curves at one position every
+    control period; numpy's call costs more to set up than the search and the line."""
+    j = bisect_right(xs, x) - 1
+    if j >= len(xs) - 1:
+        return ys[-1]
+    if j < 0:
+        return ys[0]
+    if x == xs[j]:
+        return ys[j]
+    slope = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
+    value = slope * (x - xs[j]) + ys[j]
+    if value != value:  # NaN: as numpy, from the other end, then the equal samples
+        value = slope * (x - xs[j + 1]) + ys[j + 1]
+        if value != value and ys[j] == ys[j + 1]:
+            value = ys[j]
+    return value
+
+
 class DecelerationCurve:
     """Speed against position, sampled, increasing speed towards smaller positions. Between its
     last sample and the target location it holds its final speed (a shifted curve reaches the
@@ -194,6 +216,9 @@ class DecelerationCurve:
         self.end_m = float(self.positions[-1])
         self.end_speed = float(self.speeds[-1])
         self.target_m = target_m
+        # the samples as Python floats, for one position at a time (``interpolate``)
+        self._positions: list[float] = self.positions.tolist()
+        self._speeds: list[float] = self.speeds.tolist()
 
     def __call__(self, position: float) -> float:
         """The curve's speed; infinite where it does not restrict (before its start, after
@@ -204,7 +229,7 @@ class DecelerationCurve:
             if position <= self.target_m or self.end_speed == 0.0:
                 return self.end_speed
             return math.inf
-        return float(np.interp(position, self.positions, self.speeds))
+        return interpolate(float(position), self._positions, self._speeds)
 
     def at(self, positions: np.ndarray) -> np.ndarray:
         """The curve's speed at every position of an array (the rules of ``__call__``)."""

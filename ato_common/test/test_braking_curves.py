@@ -10,12 +10,14 @@ from ato_common import units
 from ato_common.braking_curves import (
     CURVE_NAMES,
     DV_EBI_KMH,
+    DecelerationCurve,
     RunSupervision,
     SpeedSupervision,
     SupervisionSettings,
     ceiling_margin,
     constant_deceleration,
     deceleration_curve,
+    interpolate,
     most_restrictive_speed_profile,
     tabulated_deceleration,
 )
@@ -197,3 +199,25 @@ def test_the_run_supervision_is_built_once_per_content():
             xs = np.linspace(leg.start_m, leg.supervised_location_m, 200)
             assert [leg.curve('ebi', x) for x in xs] == [fresh_leg.curve('ebi', x) for x in xs]
     assert other_dwell.line.stations[1].dwell_s != scenario.line.stations[1].dwell_s
+
+
+def test_a_curve_read_at_one_position_is_numpys_interpolation_bit_for_bit():
+    """The scalar look-up (``interpolate``) gives np.interp's value exactly: between samples,
+    at every sample, at repeated samples and on flat and vertical pieces."""
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        n = int(rng.integers(1, 60))
+        xs = np.sort(rng.uniform(0.0, 5000.0, n))
+        if n > 3:
+            xs[2] = xs[1]  # a repeated position
+        ys = rng.uniform(0.0, 90.0, n)
+        if n > 5:
+            ys[4] = ys[3]  # a flat piece
+        queries = np.concatenate([rng.uniform(xs[0], xs[-1], 40), xs])
+        for x in queries:
+            assert interpolate(float(x), xs.tolist(), ys.tolist()) == float(np.interp(x, xs, ys))
+    curve = deceleration_curve(line(), 20000.0, 0.0, units.kmh_to_mps(300.0),
+                               constant_deceleration(0.5))
+    positions = np.linspace(curve.start_m - 100.0, curve.target_m + 100.0, 2001)
+    assert [curve(float(x)) for x in positions] == curve.at(positions).tolist()
+    assert isinstance(curve, DecelerationCurve)
