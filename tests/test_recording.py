@@ -521,6 +521,35 @@ def test_a_composed_stack_stopped_at_any_moment_has_within_the_lead_on_disk(tmp_
     assert stamps == list(range(0, 300_000_000_001, 100_000_000))
 
 
+def test_each_loop_node_announces_its_step_records_before_its_per_step_topics(domain_id):
+    """The graph shows a process's publishers in the order they were created. A recorder that
+    saw a per-step topic (the plant's /train/state) before the same process's step records
+    subscribed to the topic itself and missed the steps published before it matched (a make
+    test under load lost the first 4 steps that way): every loop node creates its step
+    records' publisher before any per-step one."""
+    import rclpy
+
+    from ato_common.conventions import STEP_RECORDED
+    from ato_controller_node.node import AtoControllerNode
+    from ato_ros.messages import topic
+    from profile_node.node import ProfileNode
+    from train_plant_node.node import TrainPlantNode
+    per_step = {'/' + topic(key).name.lstrip('/') for key in STEP_RECORDED}
+    rclpy.init(domain_id=domain_id)
+    try:
+        for node_class in (TrainPlantNode, ProfileNode, AtoControllerNode):
+            node = node_class()
+            try:
+                names = [publisher.topic_name for publisher in node.publishers]
+            finally:
+                node.destroy_node()
+            records = names.index('/' + topic('step_records').name.lstrip('/'))
+            first = min(i for i, name in enumerate(names) if name in per_step)
+            assert records < first, (node_class.__name__, names)
+    finally:
+        rclpy.shutdown()
+
+
 def test_an_ato_node_of_ones_own_is_recorded_beside_the_step_records(tmp_path, domain_id):
     """Issue 32: an ATO node outside the suite publishes ato/command itself, beside the plant
     and the profile, whose per-step topics come in their step records. The recorder records

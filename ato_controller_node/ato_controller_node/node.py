@@ -201,10 +201,11 @@ class AtoControllerNode(RunNodeHooks, Node):
         self.publishing = Publishing(self)
         self.status_name = status_name(self, 'law')
 
+        # The commands for the recorders, bundled (ato_ros.step_records); created before the
+        # command's publisher (``ato_ros.publishing.step_recorder``).
+        self.records = step_recorder(self, self.publishing)
         self.command_pub = self.create_publisher(JointState, topic('command').name,
                                                  qos_profile(topic('command').qos))
-        # The commands for the recorders, bundled (ato_ros.step_records).
-        self.records = step_recorder(self, self.publishing)
         self.diag_pub = self.create_publisher(DiagnosticArray, topic('diagnostics').name,
                                               qos_profile(topic('diagnostics').qos))
         # The per-step inputs are taken as bytes and read by ato_ros.wire (no rclpy message

@@ -324,7 +324,13 @@ def step_recorder(node, publishing: Publishing) -> StepRecorder:
     """The node's :class:`StepRecorder`. Nodes that ``run_nodes`` builds together in one process
     (the composed stack, ``ato_bringup.composed``) share one per namespace: one bundle, one
     publish per period and one take by the recorder instead of one of each per node (the first
-    node's publisher carries it)."""
+    node's publisher carries it).
+
+    A node asks for it before it creates its per-step publishers: the graph announces a
+    process's publishers in the order they were created, and a recorder that saw a per-step
+    topic of a process before that process's step records would subscribe to the topic itself
+    (``recorder.node.RecorderNode.taken_from_records``), missing the steps published before
+    its subscription matched."""
     shared = _shared_step_recorders
     if shared is None:
         return StepRecorder(node, publishing)

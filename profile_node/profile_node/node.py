@@ -170,15 +170,15 @@ class ProfileNode(RunNodeHooks, Node):
         self.unchecked_reported = False
         self.diag_pub = self.create_publisher(DiagnosticArray, topic('diagnostics').name,
                                               qos_profile(topic('diagnostics').qos))
-
+        # The per-step messages for the recorders, bundled (ato_ros.step_records); created before
+        # the per-step publishers (``ato_ros.publishing.step_recorder``).
+        self.records = step_recorder(self, self.publishing)
         self.reference_pub = self.create_publisher(JointTrajectory, topic('reference').name,
                                                    qos_profile(topic('reference').qos))
         self.dtg_pub = self.create_publisher(Float64, topic('distance_to_go').name,
                                              qos_profile(topic('distance_to_go').qos))
         self.permitted_pub = self.create_publisher(Float64, topic('permitted_speed').name,
                                                    qos_profile(topic('permitted_speed').qos))
-        # The per-step messages for the recorders, bundled (ato_ros.step_records).
-        self.records = step_recorder(self, self.publishing)
         self.dtg_observation = Observation(self, self.dtg_pub)
         self.permitted_observation = Observation(self, self.permitted_pub)
         curve_pub = self.create_publisher(JointTrajectory, topic('curve').name,

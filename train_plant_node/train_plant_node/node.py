@@ -256,6 +256,9 @@ class TrainPlantNode(RunNodeHooks, Node):
         actuator forces, diagnostics, the step records and the identity."""
         self.publishing = Publishing(self)
         self.status_name = status_name(self, 'simulation')
+        # The per-step messages for the recorders, bundled (ato_ros.step_records); created before
+        # the per-step publishers (``ato_ros.publishing.step_recorder``).
+        self.records = step_recorder(self, self.publishing)
         self.truth_pub = self.create_publisher(JointTrajectory, topic('state').name,
                                                qos_profile(topic('state').qos))
         self.measured_pub = self.create_publisher(JointTrajectory, topic('state_measured').name,
@@ -273,8 +276,6 @@ class TrainPlantNode(RunNodeHooks, Node):
             qos_profile(topic('actuators_applied').qos))
         self.observations = tuple(Observation(self, p) for p in (
             self.truth_pub, self.commanded_pub, self.applied_pub))
-        # The per-step messages for the recorders, bundled (ato_ros.step_records).
-        self.records = step_recorder(self, self.publishing)
         self.identity_pub = self.create_publisher(String, topic('identity').name,
                                                   qos_profile(topic('identity').qos))
 
