@@ -200,13 +200,14 @@ class Bundle:
         body += _padding(len(data), 8)
 
     def due(self, stamp_ns: int) -> bool:
+        """Whether the bundle spans ``period_s`` of stamps at ``stamp_ns``, or is stale."""
         return self.first_ns is not None and (
-            stamp_ns - self.first_ns >= self.period_ns
-            or time.monotonic() - self.first_wall >= self.wall_period_s)
+            stamp_ns - self.first_ns >= self.period_ns or self.stale())
 
     def stale(self) -> bool:
-        """Whether the bundle in the making is due by wall time alone (no step has come to
-        send it: a loop held, or a node whose ticks stopped)."""
+        """Whether the bundle in the making is due by wall time alone (what a step that
+        comes finds too; with none coming, a loop held or ticks that stopped, the node's timer
+        asks, ``ato_ros.publishing.StepRecorder.send_stale``)."""
         return self.first_ns is not None and \
             time.monotonic() - self.first_wall >= self.wall_period_s
 
