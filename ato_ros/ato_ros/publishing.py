@@ -8,7 +8,8 @@ import contextlib
 import math
 import time
 from collections import Counter
-from typing import Callable, Protocol
+from operator import itemgetter
+from typing import Callable, NamedTuple, Protocol
 
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration as RclpyDuration
@@ -152,13 +153,28 @@ class StepRecordsPublisher:
         return self.publisher.wait_for_all_acked(timeout)
 
 
+class TopicWrite(NamedTuple):
+    """How a recorder in the loop's process writes one topic of the step records."""
+
+    #: the compiled call that adds one message (its bytes, its log time ns), made when the
+    #: records are handed on; None: the topic is not written
+    write: Callable[[bytes, int], None] | None
+    #: called as the message is added, with its stamp: the log time to write it at (the
+    #: recorder's time with ``--log-time receipt``; it may also set that time, as /clock
+    #: does); None: the stamp itself
+    log_time: Callable[[int], int] | None = None
+
+
+#: a topic the in-process recorder does not write
+NOT_WRITTEN = TopicWrite(None)
+
+
 class LocalRecorder(Protocol):
     """A recorder in the loop's process (the composed stack's, ``recorder.node``), as a
     :class:`StepRecorder` hands it the per-step messages."""
 
-    def log_for(self, topic: str) -> Callable[[bytes, int], None] | None:
-        """What writes one message of ``topic`` (its bytes, its log time ns), or None if the
-        recorder does not record the topic from the step records. Asked once per topic until
+    def log_for(self, topic: str) -> TopicWrite:
+        """How a message of ``topic`` is written. Asked once per topic until
         :meth:`StepRecorder.forget`."""
 
     def wrote(self, counts: dict[str, int], first_ns: int, last_ns: int) -> int:
@@ -167,8 +183,11 @@ class LocalRecorder(Protocol):
         recorder's file is due for a flush)."""
 
 
-def _not_recorded(data: bytes, log_time_ns: int) -> None:
-    """The write of a topic the in-process recorder does not record."""
+#: a message that a recorder in the loop's process waits for: its publisher, the write of its
+#: topic (``TopicWrite.write``), its bytes or the (encode, arguments) that make them, its log
+#: time ns
+_Pending = tuple[object, Callable[[bytes, int], None], object, int]
+_PUBLISHER, _LOG_TIME = itemgetter(0), itemgetter(3)
 
 
 class StepRecorder:
@@ -179,10 +198,18 @@ class StepRecorder:
 
     A recorder in another process subscribes to ``step_records``: the messages are bundled
     (``Bundle``) and the bundle published once it is due. A recorder in the same process (the
-    composed stack's, ``recorder.node``) is attached instead (:meth:`attach`): each message is
-    written as it is added, by the function the recorder gave for its topic (the compiled
-    writer's own call, with no Python object per message), and what was written is told to the
-    recorder when its file is due for a flush (:meth:`report`)."""
+    composed stack's, ``recorder.node``) is attached instead (:meth:`attach`): each message added
+    is kept as it is (a reference to its bytes, no copy), and when the recorder's file is due
+    for a flush (:meth:`report`) all of them are written in one go, by the function the
+    recorder gave for each topic (the compiled writer's own call), and counted. One go per
+    flush period costs the loop less than a call into the writer at every step (its code and
+    data are not brought back into the processor's caches at each one: ``make bench``); a
+    process killed loses nothing more than before (the writer would have held the same
+    messages in its open chunk, closed at the same flush).
+
+    A message that only the recorders ask for and that costs to make (the profile's
+    distance to go, the plant's truth) is added with :meth:`add_later`: its bytes are made
+    when they are handed on, in the same go."""
 
     def __init__(self, node, publishing: Publishing):
         spec = TOPICS['step_records']
@@ -195,12 +222,9 @@ class StepRecorder:
         self.bundling = False  # a recorder in another process subscribes
         self.names: dict[object, str] = {}  # publisher -> its topic's full name
         self.local: LocalRecorder | None = None
-        self.logs: dict[object, Callable[[bytes, int], None]] = {}  # publisher -> its write
-        self.unrecorded: set[object] = set()  # publishers the local recorder does not record
-        # what was written since the last report: each message's publisher and log time
-        # (two appends per message; counted when the recorder is told)
-        self.written: list = []
-        self.log_times: list[int] = []
+        self.writes: dict[object, TopicWrite] = {}  # publisher -> how its topic is written
+        # what the in-process recorder has yet to write, in the order added
+        self.pending: list[_Pending] = []
         self.report_due_ns = 0
         # A bundle is sent when a step finds it due; one begun at a step after which no step
         # comes (the plant held for a recorder that waits for this node's first bundle, or
@@ -217,23 +241,21 @@ class StepRecorder:
         """An in-process recorder: each message added is written by ``recorder.log_for`` of its
         topic, and what was written is reported with ``recorder.wrote``."""
         self.local = recorder
-        self.logs.clear()
-        self.unrecorded.clear()
+        self.writes.clear()
 
     def forget(self) -> None:
-        """Report what was written and ask the recorder again how to write each topic (what it
-        records changed: it stopped, or a topic is now taken from elsewhere)."""
+        """Write and report what is pending and ask the recorder again how to write each topic
+        (what it records changed: it stopped, or a topic is now taken from elsewhere)."""
         self.report()
-        self.logs.clear()
-        self.unrecorded.clear()
+        self.writes.clear()
 
     def detach(self) -> None:
-        """The in-process recorder stopped (its bag closed, or a write error): what was
-        written reported, and nothing more kept for it (the nodes no longer count it)."""
+        """The in-process recorder stops (its bag about to close, or a write error): what is
+        pending written and reported, and nothing more kept for it (the nodes no longer count
+        it)."""
         self.report()
         self.local = None
-        self.logs.clear()
-        self.unrecorded.clear()
+        self.writes.clear()
 
     def begin_step(self) -> bool:
         """Whether a recorder records, asked when a bundle begins (a recorder that leaves while
@@ -244,47 +266,72 @@ class StepRecorder:
         return self.active
 
     def add(self, publisher, log_time_ns: int, data: bytes) -> None:
-        """A per-step message of ``publisher`` (its bytes as published), logged at
-        ``log_time_ns``; only while ``active``."""
+        """A per-step message of ``publisher`` (its bytes as published, not to be changed
+        after), logged at ``log_time_ns``; only while ``active``."""
         if self.active:
             if self.bundling:
-                name = self.names.get(publisher)
-                if name is None:
-                    name = self.names[publisher] = publisher.topic_name
-                self.bundle.add(name, log_time_ns, data)
+                self._bundle(publisher, log_time_ns, data)
             if self.local is not None:
-                log = self.logs.get(publisher)
-                if log is None:
-                    log = self._log_for(publisher)
-                log(data, log_time_ns)
-                self.written.append(publisher)
-                self.log_times.append(log_time_ns)
+                how = self.writes.get(publisher) or self._write_of(publisher)
+                if how.log_time is not None:
+                    log_time_ns = how.log_time(log_time_ns)
+                if how.write is not None:
+                    self.pending.append((publisher, how.write, data, log_time_ns))
 
-    def _log_for(self, publisher) -> Callable[[bytes, int], None]:
+    def add_later(self, publisher, log_time_ns: int, encode: Callable[..., bytes],
+                  *args) -> None:
+        """As :meth:`add`, for a message whose bytes are ``encode(*args)``, made only when a
+        recorder takes them (at once for one in another process; with the other pending
+        messages for the in-process one). ``args`` must not change after the call (tuples,
+        frozen records)."""
+        if self.active:
+            if self.bundling:
+                self._bundle(publisher, log_time_ns, encode(*args))
+            if self.local is not None:
+                how = self.writes.get(publisher) or self._write_of(publisher)
+                if how.log_time is not None:
+                    log_time_ns = how.log_time(log_time_ns)
+                if how.write is not None:
+                    self.pending.append((publisher, how.write, (encode, args), log_time_ns))
+
+    def _bundle(self, publisher, log_time_ns: int, data: bytes) -> None:
+        name = self.names.get(publisher)
+        if name is None:
+            name = self.names[publisher] = publisher.topic_name
+        self.bundle.add(name, log_time_ns, data)
+
+    def _write_of(self, publisher) -> TopicWrite:
+        """How the in-process recorder writes the topic of ``publisher`` (asked once)."""
         assert self.local is not None
-        log = self.local.log_for(publisher.topic_name)
-        if log is None:
-            self.unrecorded.add(publisher)
-            log = _not_recorded
-        self.logs[publisher] = log
-        return log
+        name = self.names.get(publisher)
+        if name is None:
+            name = self.names[publisher] = publisher.topic_name
+        how = self.writes[publisher] = self.local.log_for(name)
+        return how
 
     def end_step(self, stamp_ns: int) -> None:
         if self.bundling and self.bundle.due(stamp_ns):
             self.flush_bundle()
-        if self.log_times and self.log_times[-1] >= self.report_due_ns:
+        if self.pending and self.pending[-1][3] >= self.report_due_ns:
             self.report()
 
     def report(self) -> None:
-        """Tell the in-process recorder what was written since the last report."""
-        if not self.log_times or self.local is None:
+        """Write what is pending for the in-process recorder and tell it what was written."""
+        pending = self.pending
+        if not pending or self.local is None:
             return
-        written, times = self.written, self.log_times
-        self.written, self.log_times = [], []
+        self.pending = []
+        for _, write, data, log_time_ns in pending:
+            if data.__class__ is tuple:  # (encode, args): a message made now
+                encode, args = data  # type: ignore[misc]
+                data = encode(*args)
+            write(data, log_time_ns)  # type: ignore[arg-type]
         counts: dict[str, int] = {}
-        for publisher, count in Counter(written).items():
-            if publisher not in self.unrecorded:
-                counts[publisher.topic_name] = counts.get(publisher.topic_name, 0) + count
+        names = self.names
+        for publisher, count in Counter(map(_PUBLISHER, pending)).items():
+            name = names[publisher]  # every pending publisher's, since _write_of
+            counts[name] = counts.get(name, 0) + count
+        times = list(map(_LOG_TIME, pending))
         self.report_due_ns = self.local.wrote(counts, min(times), max(times))
 
     def flush_bundle(self) -> None:

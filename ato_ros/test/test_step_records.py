@@ -271,67 +271,121 @@ def _step_recorder():
 
 class _LocalRecorder:
     """A recorder in the loop's process as the step recorder sees it (LocalRecorder): writes
-    each topic but ``/not_recorded``, and wants to be told every ``every_ns`` of log time."""
+    each topic but ``/not_recorded`` at its stamp, ``/receipt`` at its own time (the last
+    ``/clock`` stamp plus 1 ns), reads its time from ``/clock``, and wants to be told every
+    ``every_ns`` of log time."""
 
     def __init__(self, every_ns: int):
         self.every_ns, self.written, self.told, self.asked = every_ns, [], [], []
+        self.now_ns = 0
 
     def log_for(self, topic):
+        from ato_ros.publishing import NOT_WRITTEN, TopicWrite
         self.asked.append(topic)
         if topic == '/not_recorded':
-            return None
-        return lambda data, log_time_ns: self.written.append((topic, log_time_ns, data))
+            return NOT_WRITTEN
+
+        def write(data, log_time_ns):
+            self.written.append((topic, log_time_ns, data))
+        if topic == '/clock':
+            def sets_time(stamp_ns):
+                self.now_ns = stamp_ns
+                return stamp_ns
+            return TopicWrite(write, sets_time)
+        if topic == '/receipt':
+            return TopicWrite(write, lambda stamp_ns: self.now_ns + 1)
+        return TopicWrite(write)
 
     def wrote(self, counts, first_ns, last_ns):
-        self.told.append((dict(counts), first_ns, last_ns))
+        self.told.append((dict(counts), first_ns, last_ns, len(self.written)))
         return last_ns + self.every_ns
 
 
-def test_an_in_process_recorder_is_written_each_message_as_it_is_added():
-    """The composed stack's recorder (StepRecorder.attach): no bundle, no publish; each message
-    written as it is added, by the function the recorder gave for its topic (asked once per
-    topic until forget), in order; what was written told when the recorder asked to be, and
-    at a flush; the nodes count it as a recorder on the step records."""
+def test_an_in_process_recorder_is_written_in_one_go_when_its_file_is_due():
+    """The composed stack's recorder (StepRecorder.attach): no bundle, no publish; the messages
+    kept as they are added (the time-setting part of a topic's write done at once) and written
+    in one go, in order, when the recorder asked to be told, at a flush, a forget and a detach,
+    by the function it gave for each topic (asked once per topic until forget); a message added
+    with add_later made only then, from the arguments given at the add; the nodes count it as
+    a recorder on the step records."""
     records, node = _step_recorder()
     assert not records.begin_step() and records.publisher.get_subscription_count() == 0
     every_ns = 1_000_000_000
     local = _LocalRecorder(every_ns)
     records.attach(local)
     assert records.publisher.get_subscription_count() == 1
-    state, clock, other = (_Publisher('/train/state'), _Publisher('/clock'),
-                           _Publisher('/not_recorded'))
+    state, clock, other, receipt, later = (
+        _Publisher('/train/state'), _Publisher('/clock'), _Publisher('/not_recorded'),
+        _Publisher('/receipt'), _Publisher('/later'))
+    made = []
+
+    def encode(k, tag):
+        made.append(k)
+        return b'%s%d' % (tag, k)
     total = 14
     for k in range(total):
         stamp = k * 100_000_000
         assert records.begin_step()
         records.add(clock, stamp, b'c%d' % k)
+        assert local.now_ns == stamp  # the recorder's time set as the message is added
         records.add(state, stamp, b's%d' % k)
         records.add(other, stamp, b'o%d' % k)
-        assert local.written[-1] == ('/train/state', stamp, b's%d' % k)  # at once
+        records.add(receipt, stamp + 7, b'r%d' % k)
+        records.add_later(later, stamp, encode, k, b'l')
+        if k == 1:
+            assert local.written[-1] == ('/later', 0, b'l0')  # the first step told at once
+            assert made == [0]
+        elif 1 < k < 11:
+            assert len(local.written) == 4 and made == [0]  # kept, not yet made
         records.end_step(stamp)
     records.flush()
-    assert local.asked == ['/clock', '/train/state', '/not_recorded']
-    assert local.written == [(name, k * 100_000_000, b'%s%d' % (tag, k)) for k in range(total)
-                             for name, tag in (('/clock', b'c'), ('/train/state', b's'))]
-    # told at the first step (no due time yet), then once what was written reached the time
-    # the recorder gave, then at the flush
-    assert local.told == [({'/clock': 1, '/train/state': 1}, 0, 0),
-                          ({'/clock': 10, '/train/state': 10}, 100_000_000, 1_000_000_000),
-                          ({'/clock': 3, '/train/state': 3}, 1_100_000_000, 1_300_000_000)]
+    assert local.asked == ['/clock', '/train/state', '/not_recorded', '/receipt', '/later']
+    assert local.written == [(name, k * 100_000_000 + offset, b'%s%d' % (tag, k))
+                             for k in range(total)
+                             for name, offset, tag in (('/clock', 0, b'c'),
+                                                       ('/train/state', 0, b's'),
+                                                       ('/receipt', 1, b'r'),
+                                                       ('/later', 0, b'l'))]
+    assert made == list(range(total))
+    # told at the first step (no due time yet), then once what was kept reached the log time
+    # the recorder gave (1_000_000_001: the step after, the last message of a step being at
+    # its stamp), then at the flush; each time after everything kept was written
+    counts = {'/clock': 1, '/train/state': 1, '/receipt': 1, '/later': 1}
+    assert local.told == [(counts, 0, 1, 4),
+                          ({k: 11 for k in counts}, 100_000_000, 1_100_000_001, 48),
+                          ({k: 2 for k in counts}, 1_200_000_000, 1_300_000_001, 56)]
     told = len(local.told)
     records.forget()  # what the recorder records changed: each topic asked for again
-    assert len(local.told) == told  # nothing written since the flush: nothing to tell
+    assert len(local.told) == told  # nothing kept since the flush: nothing to tell
     assert records.begin_step()
     records.add(state, 1_400_000_000, b's14')
-    assert local.asked == ['/clock', '/train/state', '/not_recorded', '/train/state']
+    assert local.asked[-1] == '/train/state' and len(local.asked) == 6
+    assert len(local.written) == 56  # kept
+    records.detach()  # the recorder stops: what was kept written and told, then not counted
     assert local.written[-1] == ('/train/state', 1_400_000_000, b's14')
-    records.detach()  # the recorder stopped: told what was written, then no longer counted
-    assert local.told[-1] == ({'/train/state': 1}, 1_400_000_000, 1_400_000_000)
+    assert local.told[-1] == ({'/train/state': 1}, 1_400_000_000, 1_400_000_000, 57)
     assert records.publisher.get_subscription_count() == 0
     assert not records.begin_step()
     records.add(state, 1_500_000_000, b's15')
-    assert local.written[-1][1] == 1_400_000_000
+    records.add_later(later, 1_500_000_000, encode, 15, b'l')
+    records.flush()
+    assert len(local.written) == 57 and made == list(range(total))
     assert node.publishers[0].published == []  # nobody subscribed through the middleware
+
+
+def test_a_message_added_later_is_made_at_once_for_a_recorder_in_another_process():
+    """add_later beside a recorder in another process: the bytes made as the message is added
+    (they go into the bundle), and the bundle as with add."""
+    from ato_ros.step_records import read_bundle
+    records, node = _step_recorder()
+    records.recorders = lambda: 1  # a recorder in another process subscribes
+    later = _Publisher('/later')
+    assert records.begin_step()
+    records.add_later(later, 1_000_000_000, lambda k: b'x%d' % k, 3)
+    records.flush()
+    (data,) = node.publishers[0].published
+    names, entries = read_bundle(data)
+    assert names == ['/later'] and [(e[1], e[-1]) for e in entries] == [(1_000_000_000, b'x3')]
 
 
 def test_a_bundle_no_step_sends_is_sent_by_the_wall_timer():

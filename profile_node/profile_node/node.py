@@ -61,7 +61,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from ato_common.identity import scenario_identity
 from ato_common.scenario import DEFAULT_SCENARIO, load_scenario
-from ato_common.types import Reference, nanoseconds, seconds
+from ato_common.types import Reference, ReferencePoint, nanoseconds, seconds
 from ato_common.validation import ConfigError
 from ato_ros import wire
 from ato_ros.lifecycle import RunNodeHooks, freeze_startup_objects, node_usage, run_node
@@ -103,6 +103,17 @@ MAX_PREVIEW_POINTS = 100
 # periods after it (it waits for the reference the check decides), so a few suffice; the
 # states between checks are overwritten in the middleware, never taken.
 MEASURED_DEPTH = 8
+
+
+def encode_distance_to_go(plan: Plan, now: ReferencePoint) -> bytes:
+    """/ato/distance_to_go of a reference point of ``plan``: to the next target, m."""
+    return wire.encode_float64(plan.next_target(now.position, now.time_s).location_m
+                               - now.position)
+
+
+def encode_permitted_speed(plan: Plan, now: ReferencePoint) -> bytes:
+    """/ato/permitted_speed of a reference point of ``plan``: the supervision's, m/s."""
+    return wire.encode_float64(plan.permitted_speed(now.position, now.time_s))
 
 
 def preview_problem(horizon_s: float, step_s: float) -> str | None:
@@ -300,28 +311,23 @@ class ProfileNode(RunNodeHooks, Node):
 
     def publish_supervision(self, stamp_ns: int) -> None:
         """Distance to go and permitted speed now (unstamped: only ever for the current tick),
-        each computed only while it has a subscriber (``ros.Observation``) or a recorder records
-        (``records``), published only while it has a subscriber."""
+        each computed and published while it has a subscriber (``ros.Observation``), and
+        otherwise, while a recorder records (``records``), computed only when the recorder
+        takes the step records (``StepRecorder.add_later``)."""
         dtg, permitted = self.dtg_observation.due(), self.permitted_observation.due()
         recording = self.records.active
         if not (dtg or permitted or recording):
             return
         plan = self.plan_for(stamp_ns)
         now = self.point_now(plan, stamp_ns)
-        if dtg or recording:
-            self.observe(self.dtg_pub, dtg, stamp_ns,
-                         plan.next_target(now.position, now.time_s).location_m - now.position)
-        if permitted or recording:
-            self.observe(self.permitted_pub, permitted, stamp_ns,
-                         plan.permitted_speed(now.position, now.time_s))
-
-    def observe(self, publisher, due: bool, stamp_ns: int, value: float) -> None:
-        """An observation's value: published if ``due``, in the step records (which keep it
-        only while a recorder records)."""
-        data = wire.encode_float64(value)
-        if due:
-            self.publishing(publisher, data)
-        self.records.add(publisher, stamp_ns, data)
+        for publisher, due, encode in ((self.dtg_pub, dtg, encode_distance_to_go),
+                                       (self.permitted_pub, permitted, encode_permitted_speed)):
+            if due:
+                data = encode(plan, now)
+                self.publishing(publisher, data)
+                self.records.add(publisher, stamp_ns, data)
+            else:
+                self.records.add_later(publisher, stamp_ns, encode, plan, now)
 
     def publish_plan(self, stamp_ns: int, why: str, plan: Plan | None = None) -> None:
         """The plan on diagnostics: only when it changes (start, replan, resume)."""

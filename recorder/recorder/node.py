@@ -36,11 +36,11 @@ acknowledgement when it is more than its ``recorder_lead_s`` ahead (back-pressur
 priority, on the CPU the loop leaves (what ``run_scenario`` does in lockstep).
 
 In the composed stack (``ato_stack --record FOLDER``, ``ato_bringup.composed``) the recorder is
-a node of the loop's process: each message of the step records of its namespace is written by
-the loop node that adds it, without the middleware and without a Python object per message
-(``ato_ros.publishing.StepRecorder.attach``, ``RecorderNode.log_for``), on the loop's thread,
-by the compiled writer (which holds Python's lock while it writes and compresses, so a thread
-of its own could not run beside the loop: it would only add the hand-offs). Its chunks are
+a node of the loop's process: the messages of the step records of its namespace are kept by
+the loop nodes that add them, without the middleware, and written once per flush period in
+one go (``ato_ros.publishing.StepRecorder.attach``, ``RecorderNode.log_for``), on the loop's
+thread, by the compiled writer (which holds Python's lock while it writes and compresses, so a
+thread of its own could not run beside the loop: it would only add the hand-offs). Its chunks are
 flushed every ``IN_PROCESS_FLUSH_PERIOD_LOG_S`` of log time unless ``--flush-period-log`` says
 otherwise: a killed process loses at most the plant's lead of the separate processes
 (``LEAD_S``), with no acknowledgement.
@@ -75,7 +75,7 @@ from ato_common.conventions import TOPICS
 from ato_common.validation import ConfigError
 from ato_ros.lifecycle import RunNodeHooks, freeze_startup_objects, run_node
 from ato_ros.messages import qos_profile
-from ato_ros.publishing import StepRecorder, local_step_recorder
+from ato_ros.publishing import NOT_WRITTEN, StepRecorder, TopicWrite, local_step_recorder
 from ato_ros.step_records import (
     LEAD_S,
     Written,
@@ -101,8 +101,9 @@ DEFAULT_TAKE_PERIOD_S = 0.05
 #: shorter period would only close chunks that an acknowledgement closes again a moment later
 RECORDER_FLUSH_PERIOD_LOG_S = LEAD_S
 #: the composed stack's recorder closes a chunk at least this often, s of log time: the loop
-#: nodes write each message as they add it (``ato_ros.publishing.StepRecorder``), so what a
-#: killed process loses is what was written since the last flush, under this and a step: at
+#: nodes keep what they add and write it all just before the flush
+#: (``ato_ros.publishing.StepRecorder``), so what a killed process loses is what was kept since
+#: the last flush, under this and a step: at
 #: 10 Hz, at most the plant's lead for a recorder in another process (``LEAD_S``)
 IN_PROCESS_FLUSH_PERIOD_LOG_S = round(LEAD_S - 0.1, 9)
 #: at most this many messages of one topic per take (the rest at the next)
@@ -479,44 +480,36 @@ class RecorderNode(RunNodeHooks, Node):
         return True
 
     # --- the step records of the loop nodes of this process (ato_ros.publishing.LocalRecorder)
-    def log_for(self, topic: str) -> Callable[[bytes, int], None] | None:
+    def log_for(self, topic: str) -> TopicWrite:
         """How a per-step message of ``topic`` that a loop node of this process adds to its
-        step records is written, on the loop's thread: at its stamp, by the compiled writer's
-        own call (no Python object per message); at the recorder's time with ``--log-time
-        receipt``; /clock also sets the recorder's time (``--sim-time``, implied here), and
-        does only that when it is not recorded. None: not recorded (not asked for, subscribed
-        to instead, or the recording stopped)."""
+        step records is written (``ato_ros.publishing.StepRecorder``, on the loop's thread):
+        by the compiled writer's own call (no Python object per message), at its stamp, or at
+        the recorder's time as it is added with ``--log-time receipt``. /clock also sets the
+        recorder's time as it is added (``--sim-time``, implied here), and does only that when
+        it is not recorded. Not written: not asked for, subscribed to instead, or the
+        recording stopped."""
         if self.finished:
-            return None
+            return NOT_WRITTEN
         sets_time = topic == self.clock_topic and self.sim_time
         recorded = (self.wanted is None or topic in self.wanted) and topic not in self.direct \
             and (topic in self.writer.topics or self._add_recorded_topic(topic))
-        if not recorded:
-            if not sets_time:
-                return None
+        write = None
+        if recorded:
+            try:
+                write = self.writer.log_function(topic)
+            except BagError as error:
+                self.stop_on_error(error)
+                return NOT_WRITTEN
+        at_receipt = recorded and self.log_time != 'stamp'
+        if not (sets_time or at_receipt):
+            return TopicWrite(write)
+        now_ns = self.now_ns
 
-            def time_only(data: bytes, log_time_ns: int) -> None:
-                self.sim_now_ns = log_time_ns
-            return time_only
-        try:
-            log = self.writer.log_function(topic)
-        except BagError as error:
-            self.stop_on_error(error)
-            return None
-        if self.log_time != 'stamp':
-            now_ns = self.now_ns
-
-            def at_receipt(data: bytes, log_time_ns: int) -> None:
-                if sets_time:
-                    self.sim_now_ns = log_time_ns
-                log(data, now_ns())
-            return at_receipt
-        if sets_time:
-            def clock(data: bytes, log_time_ns: int) -> None:
-                self.sim_now_ns = log_time_ns
-                log(data, log_time_ns)
-            return clock
-        return log
+        def log_time(stamp_ns: int) -> int:
+            if sets_time:
+                self.sim_now_ns = stamp_ns
+            return now_ns() if at_receipt else stamp_ns
+        return TopicWrite(write, log_time)
 
     def wrote(self, counts: dict[str, int], first_ns: int, last_ns: int) -> int:
         """What ``log_for``'s writes added since the last call: counted, and the file flushed

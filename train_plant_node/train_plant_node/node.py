@@ -332,23 +332,23 @@ class TrainPlantNode(RunNodeHooks, Node):
             records.add(self.clock_pub, stamp, messages[1])
         publish(self.measured_pub, messages[3])
         records.add(self.measured_pub, stamp, messages[3])
-        # The observation topics (conventions.OBSERVED_STEP): built only while someone
-        # subscribes or a recorder records, published only while someone subscribes; the loop
-        # itself needs only the measured state and /clock.
+        # The observation topics (conventions.OBSERVED_STEP): built and published while
+        # someone subscribes; while only a recorder records, built when it takes the step
+        # records (``StepRecorder.add_later``); the loop itself needs only the measured state
+        # and /clock.
         names = self.sim.actuator_names
         truth, commanded, applied = self.observations
-        for index, observation, build in (
-                (4, truth, lambda: self._msg(messages[2], stamp)),
-                (5, commanded, lambda: wire.encode_joint_forces(stamp, names, self.sim.commanded)),
-                (6, applied, lambda: wire.encode_joint_forces(stamp, names, self.sim.applied))):
-            publisher = observation.publisher
-            due = observation.due()
-            if due or recording:
+        for index, observation, encode, args in (
+                (4, truth, self._msg, (messages[2], stamp)),
+                (5, commanded, wire.encode_joint_forces, (stamp, names, self.sim.commanded)),
+                (6, applied, wire.encode_joint_forces, (stamp, names, self.sim.applied))):
+            if observation.due():
                 if messages[index] is None:
-                    messages[index] = build()
-                if due:
-                    publish(publisher, messages[index])
-                records.add(publisher, stamp, messages[index])
+                    messages[index] = encode(*args)
+                publish(observation.publisher, messages[index])
+                records.add(observation.publisher, stamp, messages[index])
+            elif recording:
+                records.add_later(observation.publisher, stamp, encode, *args)
         records.end_step(stamp)
         self.steps_published += 1
         self.last_publish_wall = time.monotonic()
