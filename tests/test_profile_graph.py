@@ -139,6 +139,41 @@ def test_a_tick_that_came_before_the_plant_identity_is_answered_when_it_comes(tm
         assert stack.stop(['profile'])['profile'] == 0
 
 
+def test_a_tick_held_for_a_missing_subscriber_is_answered_when_it_matches(tmp_path, domain_id):
+    """A tick that comes after the plant's identity but before every subscriber the first
+    reference waits for has matched (here a second one, wait_for_subscribers 2) is held, not
+    dropped, and answered once that subscriber matches, without the plant sending it again
+    (an ATO node of one's own that does not wait for the reference lets the plant run on, so a
+    dropped tick held such a loop for good; seen on a loaded machine, where matching lags)."""
+    from std_msgs.msg import UInt8MultiArray
+
+    config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path)
+    with Stack(config) as stack:
+        records = []
+        subscribe(stack, 'step_records', UInt8MultiArray, records)
+        stack.start_process('profile', {'scenario': 'short_line', 'lockstep': True,
+                                        'use_sim_time': True, 'wait_for_subscribers': 2})
+        clock = stack.node.create_publisher(Clock, topic('clock').name,
+                                            qos_profile(topic('clock').qos))
+        identity = stack.node.create_publisher(String, topic('identity').name,
+                                               qos_profile(topic('identity').qos))
+        identity.publish(String(data=scenario_identity(load_scenario('short_line'))))
+        assert stack.spin_until(lambda: clock.get_subscription_count() > 0 and
+                                identity.get_subscription_count() > 0 and all(
+            stack.node.count_publishers(topic(name).name) > 0
+            for name in ('reference', 'step_records')), 60.0), stack.log_tail('profile')
+        stack.spin_for(1.0)  # the identity read
+        tick = 7 * PERIOD_NS
+        clock.publish(Clock(clock=to_time(tick)))  # reliable, matched: it reaches the profile
+        stack.spin_for(2.0)
+        assert tick not in stack.monitor.samples, 'answered with one subscriber of two'
+        references = []
+        subscribe(stack, 'reference', JointTrajectory, references)  # the second one
+        assert stack.spin_until(lambda: tick in stack.monitor.samples and records, 30.0), \
+            stack.log_tail('profile')
+        assert stack.stop(['profile'])['profile'] == 0
+
+
 def test_a_malformed_ttobench_line_stops_the_profile_before_it_starts(tmp_path, domain_id):
     track = tmp_path / 'track.json'
     track.write_text(json.dumps({

@@ -53,6 +53,8 @@ at each measurement, in lockstep at the check instants.
 from __future__ import annotations
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.clock import Clock as WallClock
+from rclpy.clock import ClockType
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -103,6 +105,10 @@ MAX_PREVIEW_POINTS = 100
 # periods after it (it waits for the reference the check decides), so a few suffice; the
 # states between checks are overwritten in the middleware, never taken.
 MEASURED_DEPTH = 8
+
+
+#: how often a tick held for the first output's subscribers is tried again, s of wall time
+TICK_RETRY_PERIOD_S = 0.1
 
 
 def encode_distance_to_go(plan: Plan, now: ReferencePoint) -> bytes:
@@ -198,7 +204,10 @@ class ProfileNode(RunNodeHooks, Node):
         self._curve_pub = curve_pub  # keep the latched publisher alive
         # the plant's identity read, and ours (watch_plant_identity): no reference before it
         self.identified = False
-        self.unanswered_tick: bytes | None = None  # the latest tick that came before it
+        # the latest tick that came before it, or while the first output's subscribers were
+        # not all matched (answered by ``retry_timer`` once they are)
+        self.unanswered_tick: bytes | None = None
+        self.retry_timer = None
         watch_plant_identity(self, self.identity, 'refusing to stream the target curve',
                              self.on_identified)
         if self.lockstep:
@@ -352,6 +361,29 @@ class ProfileNode(RunNodeHooks, Node):
             self.on_clock(data)
             self.records.flush()
 
+    def hold_tick(self, data: bytes) -> None:
+        """A tick that came before the first output's subscribers were all matched: answered
+        once they are. The plant re-sends a tick while it waits for a command, but an ATO node
+        of one's own that does not wait for the reference lets it run on without one, so a
+        tick dropped here (the last before such a node's run, or the one ``on_identified``
+        answers) could hold the loop for good; checked every ``TICK_RETRY_PERIOD_S`` of wall
+        time until answered."""
+        self.unanswered_tick = data
+        if self.retry_timer is None:
+            self.retry_timer = self.create_timer(
+                TICK_RETRY_PERIOD_S, self.retry_tick,
+                clock=WallClock(clock_type=ClockType.STEADY_TIME))
+
+    def retry_tick(self) -> None:
+        data, self.unanswered_tick = self.unanswered_tick, None
+        if data is not None:
+            self.on_clock(data)  # held again if a subscriber is still missing
+        if self.unanswered_tick is None:
+            self.destroy_timer(self.retry_timer)
+            self.retry_timer = None
+            if data is not None:
+                self.records.flush()  # its step records at once, as on_identified sends them
+
     def on_clock(self, data: bytes) -> None:
         if not self.identified:
             # nothing to a plant it may refuse: answered once its identity comes (on_identified)
@@ -363,8 +395,10 @@ class ProfileNode(RunNodeHooks, Node):
                                 (self.records.publisher, recorders),
                                 (self.diag_pub,
                                  recorders + self.params['wait_for_diagnostics_readers']))):
-                return  # the plant re-sends the tick until the reference comes
+                self.hold_tick(data)
+                return
             self.subscribers_met = True
+        self.unanswered_tick = None  # this tick is as late as any held
         try:
             tick = decoded(data, wire.decode_clock, Clock, lambda msg: from_time(msg.clock))
         except MessageError as error:
