@@ -83,10 +83,13 @@ def test_controller_killed_and_restarted_in_real_time(tmp_path, domain_id):
         commands_before = monitor.counts['command']
         stack.start_process('controller', stack.node_params()['controller'])
         assert stack.spin_until(lambda: monitor.counts['command'] > commands_before + 30, 120.0)
-        stack.spin_for(1.0)
-        assert plant_status(monitor)[-1][1] == 'running'  # released, the ATO drives again
-        latest = monitor.complete_samples()[-1][1]
-        assert latest.forces[0] > -0.9 * 510e3
+        # released, the ATO drives again (on a loaded machine the restarted controller may
+        # still miss a few control periods, each a watchdog reaction of its own: the release
+        # is awaited, not sampled at one moment)
+        assert stack.spin_until(
+            lambda: plant_status(monitor)[-1][1] == 'running'
+            and monitor.complete_samples()[-1][1].forces[0] > -0.9 * 510e3, 60.0), \
+            (plant_status(monitor)[-3:], stack.log_tail('plant'))
         assert all(math.isfinite(v) for _, s in monitor.complete_samples()
                    for v in s.positions + s.speeds)
         codes = stack.stop()

@@ -597,9 +597,13 @@ def test_an_ato_node_of_ones_own_is_recorded_beside_the_step_records(tmp_path, d
     messages = list(read_messages(tmp_path / 'bag', ['/ato/command', '/train/state']))
     sent = [wire.decode_joint_state(m.data) for m in messages if m.topic == '/ato/command']
     states = [state_stamp(m) for m in messages if m.topic == '/train/state']
-    assert len(states) == len(set(states)) >= 301, len(states)  # every step, once
+    # every step, in order; a step the plant published again while it waited for the node's
+    # command (resend_period_s, on a loaded machine) is there twice, one after the other, as
+    # a recorder of the topic gets it, and so may be the node's answer to it
+    assert states == sorted(states) and len(set(states)) >= 301, len(states)
     assert {law for _, law, *_ in sent} == {'own_ato'}
     stamps = [stamp for stamp, *_ in sent]
-    assert len(stamps) == len(set(stamps)) and set(states) - set(stamps) <= {max(states)}
+    assert len(stamps) - len(set(stamps)) <= len(states) - len(set(states))
+    assert set(states) - set(stamps) <= {max(states)}
     assert 'ato/command has a publisher that publishes no step records' not in log  # from start
     assert 'recording /ato/command [sensor_msgs/msg/JointState], logged at its stamp' in log
