@@ -106,6 +106,33 @@ def test_profile_follows_the_clock_and_a_late_subscriber_gets_the_whole_curve(tm
         assert stack.stop(['profile'])['profile'] == 0
 
 
+def start_lockstep_profile(stack, wait_for_subscribers: int):
+    """The profile alone in lockstep beside the test's subscription to its step records, once
+    it has subscribed to /clock and its reference and step records are seen: (the records
+    received, the test's /clock publisher)."""
+    from std_msgs.msg import UInt8MultiArray
+
+    records: list = []
+    subscribe(stack, 'step_records', UInt8MultiArray, records)
+    stack.start_process('profile', {'scenario': 'short_line', 'lockstep': True,
+                                    'use_sim_time': True,
+                                    'wait_for_subscribers': wait_for_subscribers})
+    clock = stack.node.create_publisher(Clock, topic('clock').name,
+                                        qos_profile(topic('clock').qos))
+    assert stack.spin_until(lambda: clock.get_subscription_count() > 0 and all(
+        stack.node.count_publishers(topic(name).name) > 0
+        for name in ('reference', 'step_records')), 60.0), stack.log_tail('profile')
+    return records, clock
+
+
+def publish_identity(stack):
+    """The plant's identity of short_line, latched, as the plant publishes it."""
+    identity = stack.node.create_publisher(String, topic('identity').name,
+                                           qos_profile(topic('identity').qos))
+    identity.publish(String(data=scenario_identity(load_scenario('short_line'))))
+    return identity
+
+
 def test_a_tick_that_came_before_the_plant_identity_is_answered_when_it_comes(tmp_path,
                                                                              domain_id):
     """The profile answers no tick before the plant's identity, and answers the latest one it
@@ -113,26 +140,14 @@ def test_a_tick_that_came_before_the_plant_identity_is_answered_when_it_comes(tm
     for the reference lets the plant run on without re-sending a tick, and a recorder (here the
     test's subscription to the step records) vouches for nothing before the profile's records,
     so an unanswered tick held such a loop for good (CI, a loaded machine)."""
-    from std_msgs.msg import UInt8MultiArray
-
     config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path)
     with Stack(config) as stack:
-        records = []
-        subscribe(stack, 'step_records', UInt8MultiArray, records)
-        stack.start_process('profile', {'scenario': 'short_line', 'lockstep': True,
-                                        'use_sim_time': True, 'wait_for_subscribers': 1})
-        clock = stack.node.create_publisher(Clock, topic('clock').name,
-                                            qos_profile(topic('clock').qos))
-        assert stack.spin_until(lambda: clock.get_subscription_count() > 0 and all(
-            stack.node.count_publishers(topic(name).name) > 0
-            for name in ('reference', 'step_records')), 60.0), stack.log_tail('profile')
+        records, clock = start_lockstep_profile(stack, 1)
         tick = 7 * PERIOD_NS
         clock.publish(Clock(clock=to_time(tick)))  # reliable, matched: it reaches the profile
         stack.spin_for(2.0)
         assert tick not in stack.monitor.samples and not records, 'answered before the identity'
-        identity = stack.node.create_publisher(String, topic('identity').name,
-                                               qos_profile(topic('identity').qos))
-        identity.publish(String(data=scenario_identity(load_scenario('short_line'))))
+        publish_identity(stack)
         # the tick is not sent again: the profile answers the one it had
         assert stack.spin_until(lambda: tick in stack.monitor.samples and records, 30.0), \
             stack.log_tail('profile')
@@ -145,29 +160,17 @@ def test_a_tick_held_for_a_missing_subscriber_is_answered_when_it_matches(tmp_pa
     dropped, and answered once that subscriber matches, without the plant sending it again
     (an ATO node of one's own that does not wait for the reference lets the plant run on, so a
     dropped tick held such a loop for good; seen on a loaded machine, where matching lags)."""
-    from std_msgs.msg import UInt8MultiArray
-
     config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path)
     with Stack(config) as stack:
-        records = []
-        subscribe(stack, 'step_records', UInt8MultiArray, records)
-        stack.start_process('profile', {'scenario': 'short_line', 'lockstep': True,
-                                        'use_sim_time': True, 'wait_for_subscribers': 2})
-        clock = stack.node.create_publisher(Clock, topic('clock').name,
-                                            qos_profile(topic('clock').qos))
-        identity = stack.node.create_publisher(String, topic('identity').name,
-                                               qos_profile(topic('identity').qos))
-        identity.publish(String(data=scenario_identity(load_scenario('short_line'))))
-        assert stack.spin_until(lambda: clock.get_subscription_count() > 0 and
-                                identity.get_subscription_count() > 0 and all(
-            stack.node.count_publishers(topic(name).name) > 0
-            for name in ('reference', 'step_records')), 60.0), stack.log_tail('profile')
+        records, clock = start_lockstep_profile(stack, 2)
+        identity = publish_identity(stack)
+        assert stack.spin_until(lambda: identity.get_subscription_count() > 0, 60.0)
         stack.spin_for(1.0)  # the identity read
         tick = 7 * PERIOD_NS
         clock.publish(Clock(clock=to_time(tick)))  # reliable, matched: it reaches the profile
         stack.spin_for(2.0)
         assert tick not in stack.monitor.samples, 'answered with one subscriber of two'
-        references = []
+        references: list = []
         subscribe(stack, 'reference', JointTrajectory, references)  # the second one
         assert stack.spin_until(lambda: tick in stack.monitor.samples and records, 30.0), \
             stack.log_tail('profile')
