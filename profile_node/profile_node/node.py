@@ -356,10 +356,10 @@ class ProfileNode(RunNodeHooks, Node):
         lets it run on without one, up to a recorder's lead, and a recorder vouches for nothing
         before it has the profile's records (``ato_ros.step_records.Written``): a tick left
         unanswered here would hold the loop for good."""
-        data, self.unanswered_tick = self.unanswered_tick, None
-        if data is not None and self.lockstep:
-            self.on_clock(data)
-            self.records.flush()
+        if self.lockstep:
+            self.answer_held_tick()
+        else:
+            self.unanswered_tick = None
 
     def hold_tick(self, data: bytes) -> None:
         """A tick that came before the first output's subscribers were all matched: answered
@@ -375,14 +375,19 @@ class ProfileNode(RunNodeHooks, Node):
                 clock=WallClock(clock_type=ClockType.STEADY_TIME))
 
     def retry_tick(self) -> None:
+        if not self.answer_held_tick() and self.retry_timer is not None:
+            self.destroy_timer(self.retry_timer)
+            self.retry_timer = None
+
+    def answer_held_tick(self) -> bool:
+        """Answer the tick held (``unanswered_tick``), its step records sent at once; whether
+        a tick is still held (a subscriber still missing)."""
         data, self.unanswered_tick = self.unanswered_tick, None
         if data is not None:
             self.on_clock(data)  # held again if a subscriber is still missing
-        if self.unanswered_tick is None:
-            self.destroy_timer(self.retry_timer)
-            self.retry_timer = None
-            if data is not None:
-                self.records.flush()  # its step records at once, as on_identified sends them
+            if self.unanswered_tick is None:
+                self.records.flush()
+        return self.unanswered_tick is not None
 
     def on_clock(self, data: bytes) -> None:
         if not self.identified:
