@@ -395,6 +395,10 @@ def local_step_recorder(namespace: str) -> StepRecorder | None:
     return None if shared is None else shared.get(namespace)
 
 
+#: the name rmw gives a node whose endpoints are known but not yet its participant's node names
+UNKNOWN_NODE_NAME = '_NODE_NAME_UNKNOWN_'
+
+
 def node_full_name(namespace: str, name: str) -> str:
     """A node's fully qualified name, as ``Node.get_fully_qualified_name`` gives it, from the
     namespace and name the graph reports."""
@@ -464,9 +468,8 @@ class RecorderLead:
         if now - self.asked >= self.refresh_s:
             self.asked = now
             count = self.subscription.get_publisher_count()
-            if count != self.publishers:
-                self.publishers = count
-                self.name_recorders(stamp_ns)
+            if count != self.publishers and self.name_recorders(stamp_ns):
+                self.publishers = count  # else named again at the next refresh
         if self.acknowledgements.behind(stamp_ns) is None:
             self.held = None
             return False
@@ -475,15 +478,24 @@ class RecorderLead:
             self.steps_held += 1
         return True
 
-    def name_recorders(self, stamp_ns: int) -> None:
+    def name_recorders(self, stamp_ns: int) -> bool:
         """Forget the recorders no longer in the graph; one new to it is taken as having
-        acknowledged ``stamp_ns``."""
-        live = {node_full_name(i.node_namespace, i.node_name)
-                for i in self.node.get_publishers_info_by_topic(self.subscription.topic_name)}
+        acknowledged ``stamp_ns``. False if the graph does not name every one yet: a
+        participant's node names come in a discovery message of their own, which a loaded
+        machine can deliver well after its endpoints (rmw then names the node
+        ``UNKNOWN_NODE_NAME``). Such a publisher is not taken for a recorder of its own, which
+        would never acknowledge and so hold the loop (the recorder's acknowledgements carry its
+        real name), and nobody is forgotten while one may be any of them."""
+        infos = self.node.get_publishers_info_by_topic(self.subscription.topic_name)
+        named = all(i.node_name != UNKNOWN_NODE_NAME for i in infos)
+        live = {node_full_name(i.node_namespace, i.node_name) for i in infos
+                if i.node_name != UNKNOWN_NODE_NAME}
         acknowledgements = self.acknowledgements
-        acknowledgements.keep(live)
+        if named:
+            acknowledgements.keep(live)
         for recorder in live:
             acknowledgements.appeared(recorder, stamp_ns)
+        return named
 
     def check(self) -> None:
         if self.held is not None:

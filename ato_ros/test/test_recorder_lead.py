@@ -72,3 +72,33 @@ def test_the_last_step_waits_for_nothing_and_its_acknowledgement_counts():
     assert not recorder_lead.holds(30 * S, last=True)
     node.acknowledge(30 * S)
     assert not any('earlier run' in text for text in node.logged)
+
+
+def test_a_recorder_the_graph_cannot_name_yet_is_not_taken_for_one_that_never_acknowledges():
+    """A loaded machine can deliver a participant's node names well after its endpoints: the
+    graph then names the recorder's publisher _NODE_NAME_UNKNOWN_. That publisher is not
+    counted as a recorder of its own (it would never acknowledge under that name and hold the
+    loop a lead after it appeared, as a stress run showed with the recorder stopped), nor does
+    it make the plant forget the recorder that acknowledges under its real name; once named, the
+    recorder is counted as usual."""
+    node = FakeNode()
+    unknown = SimpleNamespace(node_namespace='_NODE_NAMESPACE_UNKNOWN_',
+                              node_name='_NODE_NAME_UNKNOWN_')
+    graph = [unknown]
+    node.get_publishers_info_by_topic = lambda name: list(graph)
+    recorder_lead, released = lead(node)
+    assert not recorder_lead.holds(0)
+    assert not recorder_lead.holds(S // 10)
+    node.acknowledge(S // 10)
+    assert not recorder_lead.holds(18 * S // 10)  # 1.7 s past what /recorder vouches for
+    assert recorder_lead.holds(19 * S // 10)
+    recorder_lead.check()  # the timer while held: the graph names nobody yet
+    assert recorder_lead.holds(19 * S // 10)
+    assert f'for recorder {RECORDER}, whose file holds the step records up to 0.100 s' in \
+        recorder_lead.waiting()
+    node.acknowledge(S)
+    assert released and not recorder_lead.holds(19 * S // 10)
+    graph[:] = [SimpleNamespace(node_namespace='/', node_name='recorder')]  # named now
+    assert not recorder_lead.holds(27 * S // 10)
+    assert recorder_lead.holds(28 * S // 10)  # the same recorder, as it acknowledged
+    assert RECORDER in recorder_lead.waiting()
