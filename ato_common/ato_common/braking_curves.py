@@ -243,6 +243,13 @@ class DecelerationCurve:
         """The positions where the curve has a kink or a step."""
         return self.start_m, self.end_m, self.target_m
 
+    def span(self) -> tuple[float, float]:
+        """(first, last): the positions between which the curve restricts; infinite outside
+        (the rules of ``__call__``: from its start; beyond its end, up to the target, or for
+        good if its final speed is zero)."""
+        return self.start_m, math.inf if self.end_speed == 0.0 else max(self.end_m,
+                                                                         self.target_m)
+
     def shifted(self, time_s: float) -> 'DecelerationCurve':
         """The curve a train must be on ``time_s`` earlier (SUBSET-026 3.13.9.3: each point moves
         back by the distance run at its speed in that time)."""
@@ -300,6 +307,10 @@ class ReleasedCurve:
         """The positions where the curve has a kink or a step."""
         return self.start_m, self.end_m, self.release_end_m, self.target_m
 
+    def span(self) -> tuple[float, float]:
+        """As :meth:`DecelerationCurve.span`: the curve's own, and zero from the EOA on."""
+        return min(self.curve.span()[0], self.target_m), math.inf
+
     def __call__(self, position: float) -> float:
         if position >= self.target_m:
             return 0.0
@@ -345,6 +356,7 @@ class SpeedSupervision:
         self.curves: dict[str, list] = {name: [] for name in CURVE_NAMES}
         self.release_speed_mps = 0.0
         self._sampled: dict[str, SampledLimit] = {}
+        self._restricting: dict[str, tuple[list[float], list[tuple[tuple, float]]]] = {}
         for target in self.targets:
             if target.kind == 'speed_decrease':
                 ebd_from = (target.location_m,
@@ -373,13 +385,37 @@ class SpeedSupervision:
 
     def curve(self, name: str, position_m: float) -> float:
         """The named supervision limit at a position: the lowest of its curves and of the
-        ceiling (the MRSP plus the name's dV; the EBD and SBD have no ceiling)."""
-        lowest = min((c(position_m) for c in self.curves[name]), default=math.inf)
+        ceiling (the MRSP plus the name's dV; the EBD and SBD have no ceiling). Only the
+        curves that restrict near the position are asked, and the ceiling is read from a
+        table (:meth:`restricting`): the same values, bit for bit."""
+        if position_m == position_m:
+            bounds, near = self._restricting.get(name) or self.restricting(name)
+            curves, ceiling = near[bisect_right(bounds, position_m)]
+        else:  # NaN: every curve, as they answer it
+            curves, ceiling = tuple(self.curves[name]), self.ceiling_at(name, position_m)
+        lowest = min((c(position_m) for c in curves), default=math.inf)
         if name == 'sbi':
             lowest = min(lowest, self.curve('ebi', position_m))
         if position_m > self.supervised_location_m:
             return 0.0
-        return max(min(lowest, self.ceiling_at(name, position_m)), 0.0)
+        return max(min(lowest, ceiling), 0.0)
+
+    def restricting(self, name: str) -> tuple[list[float], list[tuple[tuple, float]]]:
+        """(bounds, near): the ends of the spans of the named curves and the starts of the MRSP's
+        sections, sorted, and for each interval between two of them (``near[bisect_right(bounds,
+        x)]`` for a position x) the curves whose span meets it, in their order, and the ceiling
+        there (``ceiling_at``, the same in the whole interval). Built on first use and kept: a
+        supervision asks a limit at one position every control period, and most curves (the
+        targets far ahead or behind) are infinite there."""
+        curves = self.curves[name]
+        spans = [c.span() for c in curves]
+        bounds = sorted({x for span in spans for x in span if math.isfinite(x)}
+                        | set(self.mrsp.starts))
+        edges = [-math.inf] + bounds + [math.inf]
+        near = [(tuple(c for c, (first, last) in zip(curves, spans) if first <= b and last >= a),
+                 self.ceiling_at(name, a)) for a, b in zip(edges, edges[1:])]
+        self._restricting[name] = bounds, near
+        return bounds, near
 
     def ceiling_at(self, name: str, position_m: float) -> float:
         """The ceiling of a named limit at a position: the MRSP plus the name's dV (``ebi``,

@@ -172,6 +172,41 @@ def test_the_sampled_limits_match_the_exact_curves_and_never_exceed_them(name):
                 assert sampled(x) == pytest.approx(leg.curve(curve, x), abs=1e-9)
 
 
+@pytest.mark.parametrize('name', ['short_line', 'jinan_xuzhou', 'mao_2017_modes'])
+def test_a_limit_asks_only_the_curves_that_restrict_near_and_is_the_same_bit_for_bit(name):
+    """``curve`` asks the curves whose span meets the position's interval and reads the ceiling
+    from a table (``restricting``): equal, sign and all, to the lowest of every curve and the
+    ceiling, at random positions, at every bound and a hair either side, off the line and at
+    NaN."""
+    import struct
+    scenario = load_scenario(name)
+    supervision = RunSupervision.for_scenario(scenario)
+    rng = np.random.default_rng(11)
+    for leg in supervision.legs:
+        for curve_name in CURVE_NAMES:
+            bounds, near = leg.restricting(curve_name)
+            assert len(near) == len(bounds) + 1
+            positions = list(rng.uniform(-500.0, scenario.line.length_m + 500.0, 1500))
+            positions.append(math.nan)  # not placed: every curve is asked, as before
+            for x in bounds + [-math.inf, math.inf, 0.0, leg.supervised_location_m]:
+                positions += [x, math.nextafter(x, -math.inf), math.nextafter(x, math.inf)]
+            for x in positions:
+                every = min((c(x) for c in leg.curves[curve_name]), default=math.inf)
+                if curve_name == 'sbi':
+                    every = min(every, leg.curve('ebi', x))
+                whole = 0.0 if x > leg.supervised_location_m else max(
+                    min(every, leg.ceiling_at(curve_name, x)), 0.0)
+                assert struct.pack('<d', leg.curve(curve_name, x)) == struct.pack('<d', whole), \
+                    (curve_name, x)
+            # a curve left out of an interval is infinite everywhere in it
+            for (curves, _), a, b in zip(near, [-math.inf] + bounds, bounds + [math.inf]):
+                for c in leg.curves[curve_name]:
+                    if c not in curves:
+                        for x in (a, math.nextafter(b, a), 0.5 * (a + b)):
+                            if math.isfinite(x):
+                                assert c(x) == math.inf
+
+
 def test_the_run_supervision_is_built_once_per_content():
     """A campaign's runs of one scenario share one supervision; any change of what it is built
     from (here a dwell, the train's length) builds another, equal to one built afresh."""
