@@ -109,14 +109,19 @@ def test_profile_follows_the_clock_and_a_late_subscriber_gets_the_whole_curve(tm
 def start_lockstep_profile(stack, wait_for_subscribers: int):
     """The profile alone in lockstep beside the test's subscription to its step records, once
     it has subscribed to /clock and its reference and step records are seen: (the records
-    received, the test's /clock publisher)."""
+    received, the test's /clock publisher). That subscription stands for a recorder, which
+    the profile is told to wait for (``wait_for_recorders``): matching is not symmetric, and
+    the test seeing the profile's step records does not mean the profile has matched the
+    test's subscription; records sent before it has are sent to nobody (a loaded stress run
+    answered the tick without them)."""
     from std_msgs.msg import UInt8MultiArray
 
     records: list = []
     subscribe(stack, 'step_records', UInt8MultiArray, records)
     stack.start_process('profile', {'scenario': 'short_line', 'lockstep': True,
                                     'use_sim_time': True,
-                                    'wait_for_subscribers': wait_for_subscribers})
+                                    'wait_for_subscribers': wait_for_subscribers,
+                                    'wait_for_recorders': 1})
     clock = stack.node.create_publisher(Clock, topic('clock').name,
                                         qos_profile(topic('clock').qos))
     assert stack.spin_until(lambda: clock.get_subscription_count() > 0 and all(
