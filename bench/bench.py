@@ -65,7 +65,7 @@ from ato_simulation.loop import run_offline
 from ato_simulation.plans import clear_plan_cache
 from profile_node.oracle import LegOracle, Physics
 from profile_node.planner import leg_limits
-from recorder.bag import bag_info
+from recorder.bag import DEFAULT_COMPRESSION, bag_file, bag_info
 from train_plant_node.accuracy import accuracy_scenario, worst_speed_error
 from train_plant_node.simulation import TrainSimulation
 
@@ -80,6 +80,7 @@ class GraphRun:
     cpu_ms_per_step: dict[str, float]  # per process, in the steady window
     count: int            # messages recorded, or received by the live view's client
     steps_held: int = 0   # steps the plant held for the recorder (back-pressure)
+    bag_bytes: int = 0    # the size of the bag's file
 
 
 def graph_rtf(scenario: str, executor: str, domain_id: int, record: bool = False,
@@ -98,6 +99,7 @@ def graph_rtf(scenario: str, executor: str, domain_id: int, record: bool = False
                              record_to=bag, composed=composed, monitor='lean',
                              diagnostics_period_s=RUN_DIAGNOSTICS_PERIOD_S,
                              watched_by=live_view_keys() if live else ())
+        size = 0
         if live:
             with watched_live_view(domain_id, Path(logs)) as (watch, received, pid):
                 _, end_s = prepare(config)
@@ -111,6 +113,7 @@ def graph_rtf(scenario: str, executor: str, domain_id: int, record: bool = False
         else:
             outcome = run_lockstep(config)
             count = bag_info(bag).message_count if record else 0
+            size = bag_file(bag).stat().st_size if record else 0
     cpu = {name: 1e3 * used / max(outcome.window_steps, 1)
            for name, used in outcome.window_cpu_s.items()}
     held = [values.get('steps_held_for_recorders', 0) for _, name, values, _ in
@@ -122,7 +125,7 @@ def graph_rtf(scenario: str, executor: str, domain_id: int, record: bool = False
     return GraphRun(outcome.metrics.simulated_time_s / outcome.wall_time_s,
                     outcome.steady_real_time_factor(), outcome.metrics.samples,
                     outcome.startup_s, outcome.teardown_s, cpu, count,
-                    int(held[-1]) if held else 0)
+                    int(held[-1]) if held else 0, size)
 
 
 PROCESS_ORDER = ('plant', 'profile', 'controller', 'loop', 'recorder', 'live view', 'monitor')
@@ -153,9 +156,10 @@ def lockstep_section(scenario: str, domain_id: int) -> list[str]:
              'and teardown included) and steady (10 % to 90 % of the run); start-up = starting '
              'the processes to the first step; teardown = the last step to the plant\'s exit; '
              'CPU per step of each process (user + system, /proc/<pid>/stat) in the steady '
-             'window. The recorder records every topic, the per-step ones from the loop '
-             'nodes\' step records: beside separate processes in a process of its own, at the '
-             'lowest CPU priority (the plant waits for it when it falls more than '
+             'window. The recorder records every topic (chunk compression: '
+             f'{DEFAULT_COMPRESSION}, the default, as rosbag2 Jazzy\'s), the per-step ones '
+             'from the loop nodes\' step records: beside separate processes in a process of '
+             'its own, at the lowest CPU priority (the plant waits for it when it falls more than '
              'recorder_lead_s behind: the steps held say how often), in the composed stack in '
              'the loop\'s process (`ato_stack --record`: the messages kept by the loop nodes '
              'as they add them and written in one go once per flush period, on the loop\'s '
@@ -254,7 +258,7 @@ def recorder_row(label: str, base: list[GraphRun], runs: list[GraphRun]) -> str:
     separate = 'recorder' in run.cpu_ms_per_step
     own = (f'the recorder\'s own CPU {recorder_cpu_ms(runs):.3f} ms per step (median; '
            f'goal at most {RECORDER_CPU_GOAL_MS:g}); ' if separate else '')
-    return graph_row(label, run, f'{run.count} messages, '
+    return graph_row(label, run, f'{run.count} messages, {run.bag_bytes / 1e6:.1f} MB, '
                      f'{run.count * run.steady / (run.steps / 10):.0f} per second, '
                      f'{run.steps_held} steps held for the recorder; {own}'
                      f'{slower(zip(base, runs)):+.0f} % slower steady (median of the pairs'

@@ -15,7 +15,8 @@ counts each channel's messages from 1 (rosbag2 writes 0) and the publish time is
 A topic without a message has no channel in the file (the writer registers a channel with its
 first message), so it is left out of the bag's metadata too (rosbag2 lists it with no message).
 
-Chunks are zstd-compressed and closed at least every ``flush_period_s`` of wall time and every
+Chunks are not compressed unless asked (``zstd`` or ``lz4``), as Jazzy's plugin writes them by
+default, and are closed at least every ``flush_period_s`` of wall time and every
 ``flush_period_log_s`` of log time (simulated time in a lockstep run), so a killed recorder loses
 at most about the smaller of the two; ``recover`` turns what a killed recording holds back into a
 valid bag, and leaves an intact one alone.
@@ -110,9 +111,16 @@ DEFAULT_FLUSH_PERIOD_S = 0.5
 DEFAULT_FLUSH_PERIOD_LOG_S = 0.5
 _TOPIC, _LOG_TIME = itemgetter(0), itemgetter(1)
 COMPRESSIONS = {'zstd': MCAPCompression.Zstd, 'lz4': MCAPCompression.Lz4, 'none': None}
-#: the compressor's level of each compression (0: the compressor's own default): zstd at level
-#: 1, as rosbag2 Jazzy's MCAP plugin writes by default (the mcap library's
-#: ``CompressionLevel::Default``, which it maps to zstd level 1), where zstd's own default is 3
+#: the chunks' compression unless one is asked for: none, as rosbag2 Jazzy's MCAP plugin writes
+#: them when neither a storage preset nor a storage config file says otherwise (its writer
+#: options start from no compression; ``ros2 bag record --storage-preset-profile zstd_fast``
+#: asks for zstd). It is also what costs the loop least: the chunk is written as it is.
+#: The chunks' CRCs are kept, where the plugin leaves them out by default: the readers here
+#: validate them (``read_messages``), so that damage is an error and not data.
+DEFAULT_COMPRESSION = 'none'
+#: the compressor's level of each compression (0: the compressor's own default): zstd, when
+#: asked for, at level 1 (the mcap library's ``CompressionLevel::Default``, which it maps to
+#: zstd level 1), where zstd's own default is 3
 COMPRESSION_LEVELS = {'zstd': 1, 'lz4': 0, 'none': 0}
 
 
@@ -188,7 +196,7 @@ class BagWriter:
     One thread at a time: the recorder writes from its node's thread (in the composed stack,
     the loop's thread). The SDK's writer holds Python's lock while it writes and compresses."""
 
-    def __init__(self, folder: Path, compression: str = 'zstd',
+    def __init__(self, folder: Path, compression: str = DEFAULT_COMPRESSION,
                  chunk_size: int = DEFAULT_CHUNK_SIZE,
                  flush_period_s: float = DEFAULT_FLUSH_PERIOD_S,
                  flush_period_log_s: float = DEFAULT_FLUSH_PERIOD_LOG_S,

@@ -85,6 +85,8 @@ from ato_ros.step_records import (
 )
 from ato_ros.wire import MessageError, encode_header
 from recorder.bag import (
+    COMPRESSIONS,
+    DEFAULT_COMPRESSION,
     DEFAULT_FLUSH_PERIOD_S,
     BagError,
     BagWriter,
@@ -671,7 +673,9 @@ def parse_args(argv: list[str], prog: str = 'recorder') -> argparse.Namespace:
     parser.add_argument('topics', nargs='*', help='topics to record (default: all)')
     parser.add_argument('-o', '--output', type=Path, default=None,
                         help='bag folder to create (default: runs/rec-<time>)')
-    parser.add_argument('--compression', default='zstd', choices=('zstd', 'lz4', 'none'))
+    parser.add_argument('--compression', default=DEFAULT_COMPRESSION, choices=tuple(COMPRESSIONS),
+                        help="the chunks' compression (default: none, as rosbag2 Jazzy's MCAP "
+                             'plugin writes them unless told otherwise)')
     parser.add_argument('--flush-period', type=float, default=DEFAULT_FLUSH_PERIOD_S,
                         help='close a chunk at least this often, s of wall time (what a '
                              'SIGKILL can lose)')

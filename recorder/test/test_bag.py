@@ -93,6 +93,16 @@ def test_a_bundle_of_step_records_is_written_as_its_messages_one_by_one(tmp_path
     assert bags[0][1] == {'/train/state': 20, '/train/state/measured': 20}
 
 
+@pytest.mark.parametrize('compression', ['zstd', 'lz4'])
+def test_chunks_are_compressed_when_asked_and_read_back(tmp_path, compression):
+    write_bag(tmp_path / 'run', compression=compression).close()
+    with open(bag_file(tmp_path / 'run'), 'rb') as stream:
+        chunks = make_reader(stream).get_summary().chunk_indexes
+    assert chunks and {c.compression for c in chunks} == {compression}
+    assert [m.data for m in read_messages(tmp_path / 'run')] == [state_bytes(k)
+                                                                  for k in range(100)]
+
+
 def test_the_folder_is_a_rosbag2_bag_that_rosbags_reads(tmp_path):
     write_bag(tmp_path / 'run').close()
     metadata = yaml.safe_load((tmp_path / 'run' / 'metadata.yaml').read_text())

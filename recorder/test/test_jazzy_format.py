@@ -138,6 +138,8 @@ def test_mcap_records_are_those_of_jazzys_storage_plugin(bag):
             assert channel.metadata['topic_type_hash'] == expected['type_description_hash']
             assert yaml.safe_load(channel.metadata['offered_qos_profiles']) == \
                 expected['offered_qos_profiles']
+        assert summary.chunk_indexes and {c.compression for c in summary.chunk_indexes} == \
+            {JAZZY_MCAP['chunk_compression']}
         messages = [(c.topic, m) for _, c, m in reader.iter_messages()]
         # The two fields of a message that are the SDK writer's, not rosbag2's (recorder.bag):
         # the sequence counts each channel's messages (Jazzy: 0), the publish time is the log
