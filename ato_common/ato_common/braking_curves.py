@@ -393,7 +393,15 @@ class SpeedSupervision:
             curves, ceiling = near[bisect_right(bounds, position_m)]
         else:  # NaN: every curve, as they answer it
             curves, ceiling = tuple(self.curves[name]), self.ceiling_at(name, position_m)
-        lowest = min((c(position_m) for c in curves), default=math.inf)
+        # the lowest of the curves' values, as min() of them in their order would give it; most
+        # positions have none or one curve near (a generator for those would cost more than
+        # the look-up)
+        if not curves:
+            lowest = math.inf
+        elif len(curves) == 1:
+            lowest = curves[0](position_m)
+        else:
+            lowest = min([c(position_m) for c in curves])
         if name == 'sbi':
             lowest = min(lowest, self.curve('ebi', position_m))
         if position_m > self.supervised_location_m:

@@ -89,15 +89,21 @@ class Plan:
 
     def next_stop(self, time_s: float) -> StopEvent:
         """The stop the reference is heading for or dwelling at; the last one at the end."""
+        return self.stops[self.next_stop_index(time_s)]
+
+    def next_stop_index(self, time_s: float) -> int:
+        """The index in ``stops`` of :meth:`next_stop`."""
+        index = 0
         for stop in self.stops:
             if time_s < stop.departure_s:
-                return stop
-        return self.stops[-1]
+                return index
+            index += 1
+        return index - 1
 
     def next_target(self, position_m: float, time_s: float) -> Target:
         """The nearest target ahead of a reference at (time, position): a speed decrease
         strictly ahead, or the stop being approached or dwelt at."""
-        stop = self.next_stop(time_s)
+        stop = self.stops[self.next_stop_index(time_s)]
         for target in self.targets:
             if target.kind == 'speed_decrease' and position_m < target.location_m \
                     < stop.station.position_m:
@@ -111,7 +117,7 @@ class Plan:
         return self.supervision.permitted_speed(position_m, self.leg(time_s))
 
     def leg(self, time_s: float) -> int:
-        index = self.stops.index(self.next_stop(time_s))
+        index = self.next_stop_index(time_s)
         # Before the first departure the train stands at the origin under the first leg.
         return min(index, len(self.supervision.legs) - 1)
 
