@@ -167,7 +167,8 @@ def lockstep_section(scenario: str, domain_id: int) -> list[str]:
              'burns as much CPU as the separate recorder did, at its priority, shows what any '
              'second process of that size costs the loop on this machine before it records '
              f'anything. The recorder and the live view are measured in turns with the runs '
-             f'without them ({PAIRS} of each), their cost as the median of the pairs\' ratios. '
+             f'without them ({PAIRS} of each, {COMPOSED_PAIRS} for the composed stack\'s '
+             'recorder), their cost as the median of the pairs\' ratios. '
              'Goals: separate at least 150x steady, composed at least 250x; composed with the '
              'recorder at most 10 % slower than without; the separate recorder\'s own CPU at '
              f'most {RECORDER_CPU_GOAL_MS:g} ms per step (half of what it was before issue 31).',
@@ -189,13 +190,13 @@ def lockstep_section(scenario: str, domain_id: int) -> list[str]:
         live.append(graph_rtf(scenario, 'events', domain_id, live=True))
         recorded.append(graph_rtf(scenario, 'events', domain_id, True))
     composed, composed_recorded = [], []
-    for _ in range(PAIRS):
+    for _ in range(COMPOSED_PAIRS):
         composed.append(graph_rtf(scenario, 'events', domain_id, composed=True))
         composed_recorded.append(graph_rtf(scenario, 'events', domain_id, True, composed=True))
     add(graph_row('separate processes, EventsExecutor', median_run(plain),
                   f'- (median of {PAIRS} runs)'))
     add(graph_row('composed (one process, one EventsExecutor)', median_run(composed),
-                  f'- (median of {PAIRS} runs)'))
+                  f'- (median of {COMPOSED_PAIRS} runs)'))
     add(recorder_row('separate, with the recorder', plain, recorded))
     add(recorder_row('composed, with the recorder in its process', composed, composed_recorded))
     # The floor of an observer's cost on this machine: a process that burns as much CPU as the
@@ -229,25 +230,31 @@ COMPOSED_RECORDER_GOAL_PERCENT = 10.0
 def recording_verdicts(composed: list[GraphRun], composed_recorded: list[GraphRun],
                        recorded: list[GraphRun]) -> list[str]:
     """The two figures recording is accepted by, each against its goal."""
-    cost = slower(zip(composed, composed_recorded))
+    ratios = sorted(pair_costs(zip(composed, composed_recorded)))
+    cost = statistics.median(ratios)
     own = recorder_cpu_ms(recorded)
 
     def met(ok: bool) -> str:
         return 'met' if ok else 'NOT met'
     return ['', 'What recording costs, against its goals:', '',
             f'- composed with the recorder in its process: {cost:+.1f} % slower steady than '
-            f'without (median of {len(composed)} pairs; goal at most '
-            f'{COMPOSED_RECORDER_GOAL_PERCENT:g} %): '
+            f'without (median of {len(composed)} pairs, which range from {ratios[0]:+.1f} to '
+            f'{ratios[-1]:+.1f} %; goal at most {COMPOSED_RECORDER_GOAL_PERCENT:g} %): '
             f'{met(cost <= COMPOSED_RECORDER_GOAL_PERCENT)}',
             f'- separate processes: the recorder\'s own CPU {own:.3f} ms per step (median of '
             f'{len(recorded)} runs; goal at most {RECORDER_CPU_GOAL_MS:g} ms): '
             f'{met(own <= RECORDER_CPU_GOAL_MS)}']
 
 
+def pair_costs(pairs) -> list[float]:
+    """For each pair of runs (without, with an observer), how much slower (steady) the second
+    is, %."""
+    return [100 * (1 - b.steady / a.steady) for a, b in pairs]
+
+
 def slower(pairs) -> float:
-    """The median over pairs of runs (without, with an observer) of how much slower (steady) the
-    second is, %."""
-    return statistics.median(100 * (1 - b.steady / a.steady) for a, b in pairs)
+    """The median of :func:`pair_costs`."""
+    return statistics.median(pair_costs(pairs))
 
 
 def recorder_row(label: str, base: list[GraphRun], runs: list[GraphRun]) -> str:
@@ -267,6 +274,9 @@ def recorder_row(label: str, base: list[GraphRun], runs: list[GraphRun]) -> str:
 
 #: runs without and with each observer (the recorder, the live view), in turns
 PAIRS = 5
+#: the same for the composed stack's recorder, whose cost is a goal of its own near the noise
+#: of one pair (a few %): more pairs for a steadier median
+COMPOSED_PAIRS = 9
 #: the separate recorder's own CPU per step, ms: half the 0.23 ms it took before issue 31
 #: (mcap's Python writer, an acknowledgement every 0.2 s, a take every 5 ms)
 RECORDER_CPU_GOAL_MS = 0.115

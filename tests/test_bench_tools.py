@@ -44,3 +44,21 @@ def test_the_tuning_section_replaces_its_own_section_only(tmp_path):
     page.write_text('# B\n\n## Tuning\n\nold\n\n## Planning\n\nplans\n')
     bench.replace_section(page, bench.TUNING_HEADING, [bench.TUNING_HEADING, '', 'new'])
     assert page.read_text() == '# B\n\n## Tuning\n\nnew\n\n## Planning\n\nplans\n'
+
+
+def run_at(steady: float, recorder_ms: float = 0.0) -> 'bench.GraphRun':
+    return bench.GraphRun(overall=steady, steady=steady, steps=9294, startup_s=1.0,
+                          teardown_s=0.2, cpu_ms_per_step={'recorder': recorder_ms}, count=0)
+
+
+def test_the_recording_verdict_gives_the_median_pair_and_the_range_of_the_pairs():
+    without = [run_at(250.0)] * 3
+    # 5 %, 8 % and 12 % slower: the median pair is 8 %, within the goal
+    recorded = [run_at(237.5), run_at(230.0), run_at(220.0)]
+    verdicts = bench.recording_verdicts(without, recorded, [run_at(150.0, 0.08)])
+    (composed,) = [v for v in verdicts if v.startswith('- composed')]
+    assert '+8.0 % slower' in composed and 'from +5.0 to +12.0 %' in composed
+    assert composed.endswith(': met')
+    verdicts = bench.recording_verdicts(without, [run_at(220.0)] * 3, [run_at(150.0, 0.08)])
+    (composed,) = [v for v in verdicts if v.startswith('- composed')]
+    assert '+12.0 % slower' in composed and composed.endswith(': NOT met')
