@@ -103,7 +103,7 @@ class Plan:
     def next_target(self, position_m: float, time_s: float) -> Target:
         """The nearest target ahead of a reference at (time, position): a speed decrease
         strictly ahead, or the stop being approached or dwelt at."""
-        stop = self.stops[self.next_stop_index(time_s)]
+        stop = self.next_stop(time_s)
         for target in self.targets:
             if target.kind == 'speed_decrease' and position_m < target.location_m \
                     < stop.station.position_m:

@@ -103,6 +103,12 @@ def test_chunks_are_compressed_when_asked_and_read_back(tmp_path, compression):
                                                                   for k in range(100)]
 
 
+def test_an_unknown_compression_is_refused_naming_the_ones_there_are(tmp_path):
+    with pytest.raises(BagError, match="compression 'gzip' is not one of zstd, lz4, none"):
+        BagWriter(tmp_path / 'run', compression='gzip')
+    assert not (tmp_path / 'run').exists()
+
+
 def test_the_folder_is_a_rosbag2_bag_that_rosbags_reads(tmp_path):
     write_bag(tmp_path / 'run').close()
     metadata = yaml.safe_load((tmp_path / 'run' / 'metadata.yaml').read_text())
