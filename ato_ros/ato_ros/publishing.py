@@ -183,6 +183,9 @@ class LocalRecorder(Protocol):
         recorder's file is due for a flush)."""
 
 
+#: a TopicWrite's fields as a plain tuple, which every add unpacks (a tuple subclass, such as a
+#: NamedTuple, unpacks more slowly)
+_How = tuple[Callable[[bytes, int], None] | None, Callable[[int], int] | None]
 #: a message that a recorder in the loop's process waits for: its publisher, the write of its
 #: topic (``TopicWrite.write``), its bytes or the (encode, arguments) that make them, its log
 #: time ns
@@ -222,7 +225,7 @@ class StepRecorder:
         self.bundling = False  # a recorder in another process subscribes
         self.names: dict[object, str] = {}  # publisher -> its topic's full name
         self.local: LocalRecorder | None = None
-        self.writes: dict[object, TopicWrite] = {}  # publisher -> how its topic is written
+        self.writes: dict[object, _How] = {}  # publisher -> how its topic is written
         # what the in-process recorder has yet to write, in the order added
         self.pending: list[_Pending] = []
         self.report_due_ns = 0
@@ -272,11 +275,12 @@ class StepRecorder:
             if self.bundling:
                 self._bundle(publisher, log_time_ns, data)
             if self.local is not None:
-                how = self.writes.get(publisher) or self._write_of(publisher)
-                if how.log_time is not None:
-                    log_time_ns = how.log_time(log_time_ns)
-                if how.write is not None:
-                    self.pending.append((publisher, how.write, data, log_time_ns))
+                write, log_time = self.writes.get(publisher) or self._write_of(publisher)
+                if write is not None:
+                    self.pending.append((publisher, write, data, log_time_ns
+                                         if log_time is None else log_time(log_time_ns)))
+                elif log_time is not None:
+                    log_time(log_time_ns)
 
     def add_later(self, publisher, log_time_ns: int, encode: Callable[..., bytes],
                   *args) -> None:
@@ -288,11 +292,12 @@ class StepRecorder:
             if self.bundling:
                 self._bundle(publisher, log_time_ns, encode(*args))
             if self.local is not None:
-                how = self.writes.get(publisher) or self._write_of(publisher)
-                if how.log_time is not None:
-                    log_time_ns = how.log_time(log_time_ns)
-                if how.write is not None:
-                    self.pending.append((publisher, how.write, (encode, args), log_time_ns))
+                write, log_time = self.writes.get(publisher) or self._write_of(publisher)
+                if write is not None:
+                    self.pending.append((publisher, write, (encode, args), log_time_ns
+                                         if log_time is None else log_time(log_time_ns)))
+                elif log_time is not None:
+                    log_time(log_time_ns)
 
     def _bundle(self, publisher, log_time_ns: int, data: bytes) -> None:
         name = self.names.get(publisher)
@@ -300,13 +305,14 @@ class StepRecorder:
             name = self.names[publisher] = publisher.topic_name
         self.bundle.add(name, log_time_ns, data)
 
-    def _write_of(self, publisher) -> TopicWrite:
+    def _write_of(self, publisher) -> _How:
         """How the in-process recorder writes the topic of ``publisher`` (asked once)."""
         assert self.local is not None
         name = self.names.get(publisher)
         if name is None:
             name = self.names[publisher] = publisher.topic_name
-        how = self.writes[publisher] = self.local.log_for(name)
+        write, log_time = self.local.log_for(name)
+        how = self.writes[publisher] = (write, log_time)
         return how
 
     def end_step(self, stamp_ns: int) -> None:
@@ -331,8 +337,8 @@ class StepRecorder:
         for publisher, count in Counter(map(_PUBLISHER, pending)).items():
             name = names[publisher]  # every pending publisher's, since _write_of
             counts[name] = counts.get(name, 0) + count
-        times = list(map(_LOG_TIME, pending))
-        self.report_due_ns = self.local.wrote(counts, min(times), max(times))
+        self.report_due_ns = self.local.wrote(counts, min(map(_LOG_TIME, pending)),
+                                              max(map(_LOG_TIME, pending)))
 
     def flush_bundle(self) -> None:
         data = self.bundle.take()

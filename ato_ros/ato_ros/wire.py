@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 import struct
 from functools import lru_cache
-from typing import Sequence
+from typing import Callable, Sequence
 
 from ato_common.conventions import REFERENCE_JOINT
 from ato_common.types import NS_PER_S, Command, Reference, ReferencePoint, TrainState
@@ -271,6 +271,18 @@ def encode_joint_forces(stamp_ns: int, names: Sequence[str], forces: Sequence[fl
     (``ato_ros.messages.command_to_msg``, ``actuator_forces_to_msg``)."""
     layout = _joint_state_layout(frame_id, tuple(names))
     return layout.pack_values(*divmod(stamp_ns, NS_PER_S), *map(float, forces))
+
+
+def joint_forces_encoder(names: Sequence[str],
+                         frame_id: str = '') -> Callable[[int, Sequence[float]], bytes]:
+    """:func:`encode_joint_forces` for one set of names, as a function of the stamp and the
+    forces (real numbers): the layout looked up once, for a node that encodes the same
+    actuators at every step (the plant's actuator forces)."""
+    pack_values = _joint_state_layout(frame_id, tuple(names)).pack_values
+
+    def encode(stamp_ns: int, forces: Sequence[float]) -> bytes:
+        return pack_values(*divmod(stamp_ns, NS_PER_S), *forces)
+    return encode
 
 
 @lru_cache(maxsize=16)

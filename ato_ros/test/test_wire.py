@@ -98,6 +98,13 @@ def test_commands_and_actuator_forces_are_the_standard_message_both_ways(actuato
         forces = actuator_forces_to_msg(command.stamp_ns, command.actuator_names, command.forces)
         assert deserialize_message(wire.encode_joint_forces(
             command.stamp_ns, command.actuator_names, command.forces), JointState) == forces
+        # the plant's encoder of its actuators: the same bytes, for every stamp and forces
+        encode = wire.joint_forces_encoder(command.actuator_names)
+        assert encode(command.stamp_ns, command.forces) == wire.encode_joint_forces(
+            command.stamp_ns, command.actuator_names, command.forces)
+        whole = [int(f) for f in command.forces]  # any real number, as encode_joint_forces
+        assert encode(command.stamp_ns, whole) == wire.encode_joint_forces(
+            command.stamp_ns, command.actuator_names, whole)
 
 
 def test_clock_and_float64():

@@ -276,6 +276,8 @@ class TrainPlantNode(RunNodeHooks, Node):
             qos_profile(topic('actuators_applied').qos))
         self.observations = tuple(Observation(self, p) for p in (
             self.truth_pub, self.commanded_pub, self.applied_pub))
+        # the actuator forces' messages (commanded and applied): one force per actuator
+        self.encode_forces = wire.joint_forces_encoder(self.sim.actuator_names)
         self.identity_pub = self.create_publisher(String, topic('identity').name,
                                                   qos_profile(topic('identity').qos))
 
@@ -336,12 +338,12 @@ class TrainPlantNode(RunNodeHooks, Node):
         # someone subscribes; while only a recorder records, built when it takes the step
         # records (``StepRecorder.add_later``); the loop itself needs only the measured state
         # and /clock.
-        names = self.sim.actuator_names
         truth, commanded, applied = self.observations
+        forces = self.encode_forces
         for index, observation, encode, args in (
                 (4, truth, self._msg, (messages[2], stamp)),
-                (5, commanded, wire.encode_joint_forces, (stamp, names, self.sim.commanded)),
-                (6, applied, wire.encode_joint_forces, (stamp, names, self.sim.applied))):
+                (5, commanded, forces, (stamp, self.sim.commanded)),
+                (6, applied, forces, (stamp, self.sim.applied))):
             if observation.due():
                 if messages[index] is None:
                     messages[index] = encode(*args)
