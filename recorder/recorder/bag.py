@@ -44,7 +44,7 @@ import zstandard
 from foxglove.mcap import MCAPCompression, MCAPWriteOptions, MCAPWriter
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap.records import Channel, Message, Metadata, Schema
+from mcap.records import Channel, Chunk, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
@@ -111,6 +111,8 @@ DEFAULT_FLUSH_PERIOD_S = 0.5
 DEFAULT_FLUSH_PERIOD_LOG_S = 0.5
 _TOPIC, _LOG_TIME = itemgetter(0), itemgetter(1)
 COMPRESSIONS = {'zstd': MCAPCompression.Zstd, 'lz4': MCAPCompression.Lz4, 'none': None}
+#: each compression as a chunk record of the file names it
+COMPRESSIONS_IN_FILE = {'zstd': 'zstd', 'lz4': 'lz4', 'none': ''}
 #: the chunks' compression unless one is asked for: none, as rosbag2 Jazzy's MCAP plugin writes
 #: them when neither a storage preset nor a storage config file says otherwise (its writer
 #: options start from no compression; ``ros2 bag record --storage-preset-profile zstd_fast``
@@ -646,14 +648,36 @@ def _read_damaged(file: Path) -> tuple[dict, dict, list, list, int]:
     return schemas, channels, messages, records, consumed
 
 
+#: a chunk record's compression (as the file names it) -> the mcap writer's
+_CHUNK_COMPRESSIONS = {'': CompressionType.NONE, 'zstd': CompressionType.ZSTD,
+                       'lz4': CompressionType.LZ4}
+
+
+def _chunk_compression(file: Path) -> CompressionType:
+    """The compression of the first chunk of ``file`` that can be read; the default
+    compression's if none can (the recovered file then holds no message anyway)."""
+    try:
+        with open(file, 'rb') as stream:
+            reader = StreamReader(stream, skip_magic=False, emit_chunks=True)
+            for record in reader.records:
+                if isinstance(record, Chunk):
+                    return _CHUNK_COMPRESSIONS.get(record.compression, CompressionType.NONE)
+    except READ_ERRORS as error:
+        log.info('no chunk of %s could be read: %s', file, error)
+    except OSError as error:
+        raise BagError(f'{file}: cannot read: {error.strerror}') from None
+    return _CHUNK_COMPRESSIONS[COMPRESSIONS_IN_FILE[DEFAULT_COMPRESSION]]
+
+
 def recover(path: Path) -> Recovered:
     """Rewrite what a damaged (e.g. SIGKILLed) MCAP holds into a valid bag at the same place;
     an intact bag is left alone (its metadata.yaml written if it has none).
 
-    Reads records in file order until the data ends or breaks, writes them to a new file, and
-    only then moves the damaged file aside (as ``.damaged``) and the new one into its place, so a
-    failure half-way leaves the original untouched. The custom data (``log_time`` among them)
-    comes from the ``rosbag2`` record the recorder wrote at the open.
+    Reads records in file order until the data ends or breaks, writes them to a new file (its
+    chunks compressed as the damaged file's: ``_chunk_compression``), and only then moves the
+    damaged file aside (as ``.damaged``) and the new one into its place, so a failure half-way
+    leaves the original untouched. The custom data (``log_time`` among them) comes from the
+    ``rosbag2`` record the recorder wrote at the open.
     """
     file = resolve(path)
     try:
@@ -677,15 +701,16 @@ def recover(path: Path) -> Recovered:
         lost = file.stat().st_size - consumed
     except OSError as error:
         raise BagError(f'{file}: cannot read: {error.strerror}') from None
-    info = _rewrite(file, schemas, channels, messages, _custom_data(file, records))
+    info = _rewrite(file, schemas, channels, messages, _custom_data(file, records),
+                    _chunk_compression(file))
     write_metadata(info)
     return Recovered(info, lost, False)
 
 
 def _rewrite(file: Path, schemas: dict, channels: dict, messages: list,
-             custom_data: dict[str, str]) -> BagInfo:
-    """The records read from a damaged file written to a new one, which then takes its place
-    (the damaged one kept as ``.damaged``)."""
+             custom_data: dict[str, str], compression: CompressionType) -> BagInfo:
+    """The records read from a damaged file written to a new one in chunks of the same
+    ``compression``, which then takes its place (the damaged one kept as ``.damaged``)."""
     temporary = file.with_name(file.name + '.recovering')
     counts: dict[int, int] = {}
     times = [m.log_time for m in messages] or [0]
@@ -697,7 +722,7 @@ def _rewrite(file: Path, schemas: dict, channels: dict, messages: list,
                                      schemas else '') for c in channels.values()}
     try:
         with open(temporary, 'wb') as out:
-            writer = Writer(out, compression=CompressionType.ZSTD)
+            writer = Writer(out, compression=compression)
             writer.start(profile='ros2', library='ato-emulator recorder (recovered)')
             writer.add_metadata(METADATA_RECORD, {'serialized_metadata': dump_yaml(
                 opening_metadata(file.name, custom_data))})

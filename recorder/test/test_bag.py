@@ -16,7 +16,15 @@ from rosbags.typesys import Stores, get_typestore
 
 from ato_common.types import TrainState
 from ato_ros.messages import state_to_msg
-from recorder.bag import BagError, BagWriter, bag_file, bag_info, read_messages, recover
+from recorder.bag import (
+    COMPRESSIONS_IN_FILE,
+    BagError,
+    BagWriter,
+    bag_file,
+    bag_info,
+    read_messages,
+    recover,
+)
 from recorder.cli import info_main, recover_main
 from recorder.definitions import full_definition
 from recorder.ros_io import offered_profiles, replay_qos
@@ -172,6 +180,20 @@ def test_truncated_file_names_the_problem_and_recover_restores_what_it_holds(tmp
     assert recovered == [state_bytes(k) for k in range(len(recovered))]  # a prefix, in order
     assert (file.parent / (file.name + '.damaged')).exists()
     assert bag_info(tmp_path / 'run').message_count == len(recovered)
+
+
+@pytest.mark.parametrize('compression', ['none', 'zstd', 'lz4'])
+def test_recover_writes_the_chunks_compressed_as_the_damaged_file_had_them(tmp_path,
+                                                                            compression):
+    write_bag(tmp_path / 'run', count=2000, chunk_size=4096, compression=compression).close()
+    file = bag_file(tmp_path / 'run')
+    file.write_bytes(file.read_bytes()[:file.stat().st_size // 2])
+    assert not recover(tmp_path / 'run').intact
+    with open(file, 'rb') as stream:
+        chunks = make_reader(stream).get_summary().chunk_indexes
+    assert chunks and {c.compression for c in chunks} == {COMPRESSIONS_IN_FILE[compression]}
+    recovered = [m.data for m in read_messages(tmp_path / 'run')]
+    assert recovered == [state_bytes(k) for k in range(len(recovered))] and recovered
 
 
 def test_recover_leaves_an_intact_bag_alone_and_says_so(tmp_path, capsys):
