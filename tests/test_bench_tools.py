@@ -58,7 +58,29 @@ def test_the_recording_verdict_gives_the_median_pair_and_the_range_of_the_pairs(
     verdicts = bench.recording_verdicts(without, recorded, [run_at(150.0, 0.08)])
     (composed,) = [v for v in verdicts if v.startswith('- composed')]
     assert '+8.0 % slower' in composed and 'from +5.0 to +12.0 %' in composed
-    assert composed.endswith(': met')
+    # three pairs, one beyond the goal: the median's interval reaches across it
+    assert composed.endswith(': met (the interval of the median reaches across 10 %)')
     verdicts = bench.recording_verdicts(without, [run_at(220.0)] * 3, [run_at(150.0, 0.08)])
     (composed,) = [v for v in verdicts if v.startswith('- composed')]
     assert '+12.0 % slower' in composed and composed.endswith(': NOT met')
+    assert 'interval of the median +12.0 to +12.0 %' in composed  # every pair the same
+
+
+def test_the_recording_verdict_says_when_the_interval_of_the_median_reaches_past_the_goal():
+    """The goal is the median's; its bootstrap interval says how surely: a median within the
+    goal from pairs spread across it is met, and the verdict says the interval reaches past it."""
+    without = [run_at(250.0)] * 9
+    spread = [run_at(250.0 * (1 - c / 100)) for c in (2, 4, 6, 8, 9, 11, 13, 15, 17)]
+    (composed,) = [v for v in bench.recording_verdicts(without, spread, [run_at(150.0, 0.08)])
+                   if v.startswith('- composed')]
+    assert '+9.0 % slower' in composed
+    low, high = bench.median_interval([2, 4, 6, 8, 9, 11, 13, 15, 17])
+    assert low < 9.0 < high and low >= 2 and high <= 17
+    assert f'interval of the median {low:+.1f} to {high:+.1f} %' in composed
+    assert composed.endswith(': met (the interval of the median reaches across 10 %)')
+    tight = [run_at(250.0 * (1 - c / 100)) for c in (5.0, 5.2, 5.4, 5.5, 5.6, 5.8, 6.0, 6.1, 6.3)]
+    (composed,) = [v for v in bench.recording_verdicts(without, tight, [run_at(150.0, 0.08)])
+                   if v.startswith('- composed')]
+    assert composed.endswith(': met')
+    assert bench.median_interval([3.0, 3.0, 3.0]) == (3.0, 3.0)
+    assert bench.median_interval([1.0, 2.0]) == (1.5, 1.5)  # too few for an interval
