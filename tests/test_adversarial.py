@@ -205,13 +205,25 @@ def test_a_burst_of_wrongly_stamped_commands_leaves_the_loop_in_step(tmp_path, d
     """Issue 29 item 2 with the real profile and controller: three commands stamped 1e6 s
     ahead in the middle of a run used to leave the controller steps behind, every later
     command dropped, the watchdog braking to the end, and the plant exiting 0. The run now
-    goes on in step to its end."""
+    goes on in step to its end.
+
+    The burst must reach the plant while it runs: the test's publisher is created before the
+    stack starts (the plant has matched it long before the run is under way: a sample written
+    before the plant's subscription matched it would be lost), and the run goes on long
+    enough after the burst (190 s of simulated time) for a loaded machine to deliver it; with
+    40 s, the run could end before it came."""
     config = StackConfig(scenario='short_line', domain_id=domain_id, log_dir=tmp_path / 'logs',
-                         end_time_s=40.0)
+                         end_time_s=200.0)
     with Stack(config) as stack:
-        stack.start()
         controller = ControllerStandIn(stack)
+        stack.start()
         monitor = stack.monitor
+
+        def plant_listens() -> bool:  # the plant's subscription among those matched
+            infos = stack.node.get_subscriptions_info_by_topic(controller.publisher.topic_name)
+            return any(i.node_name == 'train_plant_node' for i in infos) and \
+                controller.publisher.get_subscription_count() >= len(infos)
+        assert stack.spin_until(plant_listens, 60.0)
         assert stack.spin_until(lambda: monitor.last_stamp_ns >= 10 * 10**9, 180.0)
         for _ in range(3):
             publish_stamped(controller, ['traction'], [1e9], monitor.last_stamp_ns + 10**15)
@@ -223,7 +235,7 @@ def test_a_burst_of_wrongly_stamped_commands_leaves_the_loop_in_step(tmp_path, d
         assert int(status[-1][2]['wrong_stamp_commands']) == 3
         assert not any('watchdog' in m for _, m, _ in status)
         final = monitor.complete_samples()[-1]
-        assert final[0] == 400 * PERIOD_NS and final[1].speeds[0] > 10.0  # on the way
+        assert final[0] == 2000 * PERIOD_NS and final[1].speeds[0] > 10.0  # on the way
 
 
 def test_the_profile_killed_in_real_time_stops_the_train(line, tmp_path, domain_id):
