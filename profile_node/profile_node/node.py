@@ -329,11 +329,6 @@ class ProfileNode(RunNodeHooks, Node):
             return
         plan = self.plan_for(stamp_ns)
         now = self.point_now(plan, stamp_ns)
-        if not (dtg or permitted):  # only a recorder takes them: most steps of a recorded run
-            self.records.add_later(self.dtg_pub, stamp_ns, encode_distance_to_go, plan, now)
-            self.records.add_later(self.permitted_pub, stamp_ns, encode_permitted_speed, plan,
-                                   now)
-            return
         for publisher, due, encode in ((self.dtg_pub, dtg, encode_distance_to_go),
                                        (self.permitted_pub, permitted, encode_permitted_speed)):
             if due:

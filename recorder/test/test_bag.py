@@ -196,6 +196,15 @@ def test_recover_writes_the_chunks_compressed_as_the_damaged_file_had_them(tmp_p
     assert recovered == [state_bytes(k) for k in range(len(recovered))] and recovered
 
 
+def test_recover_of_a_file_cut_before_its_first_chunk_gives_an_empty_valid_bag(tmp_path):
+    write_bag(tmp_path / 'run', count=50, compression='lz4').close()
+    file = bag_file(tmp_path / 'run')
+    file.write_bytes(file.read_bytes()[:60])  # inside the header: no chunk to read
+    result = recover(tmp_path / 'run')
+    assert not result.intact and result.info.message_count == 0
+    assert list(read_messages(tmp_path / 'run')) == []
+
+
 def test_recover_leaves_an_intact_bag_alone_and_says_so(tmp_path, capsys):
     write_bag(tmp_path / 'run', count=50).close()
     file = bag_file(tmp_path / 'run')
