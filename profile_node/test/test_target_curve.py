@@ -104,6 +104,45 @@ def test_distance_to_go_names_the_next_target(planned):
             assert arrival.speed <= target.speed_mps + 1e-9
 
 
+def test_distance_and_permitted_speed_are_those_of_the_targets_and_the_leg(planned):
+    """The pair the profile records at every tick is, bit for bit, the distance to the first
+    target ahead (a speed decrease before the next stop's station, else that stop's own target,
+    found here by a scan of every target) and the permitted speed of the next stop's leg; a pair
+    asked again, or asked between two others, is the same."""
+    scenario, plan = planned
+    legs = plan.supervision.legs
+    t, points = samples(plan, 1.3)
+    answers = []
+    for time_s, p in zip(t, points):
+        stop_index = next((i for i, stop in enumerate(plan.stops) if time_s < stop.departure_s),
+                          len(plan.stops) - 1)
+        station_m = plan.stops[stop_index].station.position_m
+        target = next((x for x in plan.targets if x.kind == 'speed_decrease'
+                       and p.position < x.location_m < station_m), None) or next(
+            x for x in plan.targets if x.kind != 'speed_decrease' and x.location_m == station_m)
+        expected = (target.location_m - p.position,
+                    legs[min(stop_index, len(legs) - 1)].permitted_speed(p.position))
+        assert plan.distance_and_permitted_speed(p.position, time_s) == expected, time_s
+        assert plan.distance_and_permitted_speed(p.position, time_s) == expected
+        assert plan.next_target(p.position, time_s) is target
+        assert plan.permitted_speed(p.position, time_s) == expected[1]
+        answers.append(expected)
+    # asked in another order (the last pair kept must be of the position and time asked)
+    for (time_s, p), expected in reversed(list(zip(zip(t, points), answers))):
+        assert plan.distance_and_permitted_speed(p.position, time_s) == expected
+
+
+def test_a_speed_decrease_is_the_next_target_until_it_is_passed():
+    plan = plan_reference(load_scenario('mao_4car'))  # a speed decrease before each stop
+    decreases = [x for x in plan.targets if x.kind == 'speed_decrease']
+    for decrease in decreases:
+        time_s = next(p.time_s for p in samples(plan, 0.5)[1]
+                      if p.position >= decrease.location_m - 100.0)
+        assert plan.next_target(decrease.location_m - 1.0, time_s) is decrease
+        assert plan.next_target(decrease.location_m, time_s) is not decrease
+    assert len(decreases) == 2
+
+
 def test_jinan_xuzhou_covers_228_km_in_3160_s_at_up_to_310_kmh():
     scenario = load_scenario('jinan_xuzhou')
     plan = plan_reference(scenario)
