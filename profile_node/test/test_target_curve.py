@@ -135,12 +135,12 @@ def test_distance_and_permitted_speed_are_those_of_the_targets_and_the_leg(plann
 def test_a_speed_decrease_is_the_next_target_until_it_is_passed():
     plan = plan_reference(load_scenario('mao_4car'))  # a speed decrease before each stop
     decreases = [x for x in plan.targets if x.kind == 'speed_decrease']
+    assert len(decreases) == 2
     for decrease in decreases:
         time_s = next(p.time_s for p in samples(plan, 0.5)[1]
                       if p.position >= decrease.location_m - 100.0)
         assert plan.next_target(decrease.location_m - 1.0, time_s) is decrease
         assert plan.next_target(decrease.location_m, time_s) is not decrease
-    assert len(decreases) == 2
 
 
 def test_jinan_xuzhou_covers_228_km_in_3160_s_at_up_to_310_kmh():
