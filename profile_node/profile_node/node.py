@@ -113,12 +113,13 @@ TICK_RETRY_PERIOD_S = 0.1
 
 def encode_distance_to_go(plan: Plan, now: ReferencePoint) -> bytes:
     """/ato/distance_to_go of a reference point of ``plan``: to the next target, m."""
-    return wire.encode_float64(plan.distance_and_permitted_speed(now.position, now.time_s)[0])
+    return wire.encode_float64(plan.next_target(now.position, now.time_s).location_m
+                               - now.position)
 
 
 def encode_permitted_speed(plan: Plan, now: ReferencePoint) -> bytes:
     """/ato/permitted_speed of a reference point of ``plan``: the supervision's, m/s."""
-    return wire.encode_float64(plan.distance_and_permitted_speed(now.position, now.time_s)[1])
+    return wire.encode_float64(plan.permitted_speed(now.position, now.time_s))
 
 
 def preview_problem(horizon_s: float, step_s: float) -> str | None:

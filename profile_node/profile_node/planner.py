@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -87,9 +87,6 @@ class Plan:
     legs: tuple = ()              # profile_node.timetable.LegTiming of each leg (timetable)
     forecast: WheelEnergy | None = None  # energies at the wheel to follow it, nominal train
     expected_delay_s: float = 0.0  # at the last stop, against the timetable (after a replan)
-    # [((position, time), values)]: distance_and_permitted_speed's last answer ([None]: none)
-    _last_supervision: list = field(default_factory=lambda: [None], init=False, repr=False,
-                                    compare=False)
 
     def next_stop(self, time_s: float) -> StopEvent:
         """The stop the reference is heading for or dwelling at; the last one at the end."""
@@ -107,11 +104,7 @@ class Plan:
     def next_target(self, position_m: float, time_s: float) -> Target:
         """The nearest target ahead of a reference at (time, position): a speed decrease
         strictly ahead, or the stop being approached or dwelt at."""
-        return self._target_ahead(self.next_stop_index(time_s), position_m)
-
-    def _target_ahead(self, stop_index: int, position_m: float) -> Target:
-        """:meth:`next_target` while ``stops[stop_index]`` is the next stop."""
-        decreases, stop_target = self._targets_of_stop[stop_index]
+        decreases, stop_target = self._targets_of_stop[self.next_stop_index(time_s)]
         for target in decreases:
             if position_m < target.location_m:
                 return target
@@ -139,28 +132,10 @@ class Plan:
         is the leg of the stop being approached."""
         return self.supervision.permitted_speed(position_m, self.leg(time_s))
 
-    def distance_and_permitted_speed(self, position_m: float,
-                                     time_s: float) -> tuple[float, float]:
-        """(distance to :meth:`next_target`, m; :meth:`permitted_speed`, m/s) of a reference at
-        (time, position), the next stop found once for both. The last pair asked is kept: the
-        profile makes its two supervision messages of a tick one after the other."""
-        key = (position_m, time_s)
-        last = self._last_supervision[0]  # one read: the pair and its key together
-        if last is not None and last[0] == key:
-            return last[1]
-        index = self.next_stop_index(time_s)
-        values = (self._target_ahead(index, position_m).location_m - position_m,
-                  self.supervision.legs[self._leg_of_stop(index)].permitted_speed(position_m))
-        self._last_supervision[0] = (key, values)
-        return values
-
     def leg(self, time_s: float) -> int:
-        return self._leg_of_stop(self.next_stop_index(time_s))
-
-    def _leg_of_stop(self, stop_index: int) -> int:
-        """The supervision's leg while ``stops[stop_index]`` is the next stop."""
+        index = self.next_stop_index(time_s)
         # Before the first departure the train stands at the origin under the first leg.
-        return min(stop_index, len(self.supervision.legs) - 1)
+        return min(index, len(self.supervision.legs) - 1)
 
 
 # Below this planned acceleration the approach to a speed takes too long to be useful: a

@@ -1,6 +1,8 @@
 """The target curve of every built-in scenario: under the permitted speed, exact stops, limits,
 consistent derivatives; limit changes inside a leg; the jinan_xuzhou figures."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -104,15 +106,12 @@ def test_distance_to_go_names_the_next_target(planned):
             assert arrival.speed <= target.speed_mps + 1e-9
 
 
-def test_distance_and_permitted_speed_are_those_of_the_targets_and_the_leg(planned):
-    """The pair the profile records at every tick is, bit for bit, the distance to the first
-    target ahead (a speed decrease before the next stop's station, else that stop's own target,
-    found here by a scan of every target) and the permitted speed of the next stop's leg; a pair
-    asked again, or asked between two others, is the same."""
+def test_the_next_target_is_the_first_ahead_of_a_scan_of_every_target(planned):
+    """The target the profile's distance to go is measured to is, at every tick, the first speed
+    decrease ahead before the next stop's station, else that stop's own target, as a scan of
+    every target of the run finds them (the plan looks them up per stop)."""
     scenario, plan = planned
-    legs = plan.supervision.legs
     t, points = samples(plan, 1.3)
-    answers = []
     for time_s, p in zip(t, points):
         stop_index = next((i for i, stop in enumerate(plan.stops) if time_s < stop.departure_s),
                           len(plan.stops) - 1)
@@ -120,16 +119,7 @@ def test_distance_and_permitted_speed_are_those_of_the_targets_and_the_leg(plann
         target = next((x for x in plan.targets if x.kind == 'speed_decrease'
                        and p.position < x.location_m < station_m), None) or next(
             x for x in plan.targets if x.kind != 'speed_decrease' and x.location_m == station_m)
-        expected = (target.location_m - p.position,
-                    legs[min(stop_index, len(legs) - 1)].permitted_speed(p.position))
-        assert plan.distance_and_permitted_speed(p.position, time_s) == expected, time_s
-        assert plan.distance_and_permitted_speed(p.position, time_s) == expected
-        assert plan.next_target(p.position, time_s) is target
-        assert plan.permitted_speed(p.position, time_s) == expected[1]
-        answers.append(expected)
-    # asked in another order (the last pair kept must be of the position and time asked)
-    for (time_s, p), expected in reversed(list(zip(zip(t, points), answers))):
-        assert plan.distance_and_permitted_speed(p.position, time_s) == expected
+        assert plan.next_target(p.position, time_s) is target, time_s
 
 
 def test_a_speed_decrease_is_the_next_target_until_it_is_passed():
@@ -141,6 +131,13 @@ def test_a_speed_decrease_is_the_next_target_until_it_is_passed():
                       if p.position >= decrease.location_m - 100.0)
         assert plan.next_target(decrease.location_m - 1.0, time_s) is decrease
         assert plan.next_target(decrease.location_m, time_s) is not decrease
+
+
+def test_a_plan_without_a_target_at_a_stop_names_the_stop():
+    plan = plan_reference(load_scenario('short_line'))
+    broken = replace(plan, targets=tuple(t for t in plan.targets if t.kind == 'speed_decrease'))
+    with pytest.raises(ValueError, match=f'no target at the stop {plan.stops[0].station.name}'):
+        broken.next_target(0.0, 0.0)
 
 
 def test_jinan_xuzhou_covers_228_km_in_3160_s_at_up_to_310_kmh():
